@@ -1,0 +1,1 @@
+"""Warp device code for rodwarp, grouped by stage (elastics, broadphase, narrowphase, friction)."""

@@ -1,0 +1,21 @@
+"""Errors that rodwarp reports to users as one line (the CLI prints them without a traceback)."""
+
+from __future__ import annotations
+
+
+class RodwarpError(ValueError):
+    """Bad input or an impossible request: the message says what is wrong and how to fix it."""
+
+
+class SimulationBlowUp(RuntimeError):
+    """A run became unphysical (NaN, runaway speed, deep penetration).
+
+    The message names the step, the time and the likely cause. The state the solver was
+    given is left untouched, so nothing non-finite reaches results.
+    """
+
+    def __init__(self, message: str, step: int = -1, time: float = float("nan"), cause: str = ""):
+        super().__init__(message)
+        self.step = step
+        self.time = time
+        self.cause = cause
