@@ -1,0 +1,282 @@
+"""The paper's numerical experiment: random packing, entangling, vibration stability test.
+
+Stages (seed paper, "Numerical simulations of rod packings"; REFERENCE.md section 1):
+
+1. random packing of N = round(5.4 alpha) straight steel rods in a 1 x 1 x 2.5 l box;
+2. entangling: the closed container vibrated vertically (10 Hz, 0.05 m) for 5 s;
+3. stability: side walls and lid removed, the floor vibrated at ``freq`` with ``amplitude``
+   for ``duration``; f = largest contact cluster / all rods measured over time.
+
+Stability verdict: ``stable`` when f >= ``STABLE_F`` (0.5) at every sample of the last
+half of the stability test, i.e. a single cluster holds the majority of the rods.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import platform
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from rodwarp.atomic import atomic_path, write_json
+from rodwarp.errors import RodwarpError
+
+STABLE_F = 0.5
+Z_TARGET = 5.4
+
+
+@dataclass
+class ProtocolParams:
+    """Parameters of :func:`run_protocol` (SI units; box in rod lengths)."""
+
+    alpha: float = 100.0
+    freq: float = 10.0
+    amplitude: float = 0.001
+    gravity: float = 0.5
+    duration: float = 5.0
+    entangle_duration: float = 5.0
+    entangle_freq: float = 10.0
+    entangle_amplitude: float = 0.05
+    static_load: float = 0.0
+    n_rods: int | None = None
+    length: float = 1.0
+    vertices: int = 10
+    box: tuple = (1.0, 1.0, 2.5)
+    mu: float = 0.2
+    young: float = 200e9
+    density: float = 7850.0
+    dt: float | None = None
+    iterations: int = 10
+    save_every: float = 0.1
+    seed: int = 0
+    device: str = "auto"
+    initial: str | None = None
+
+    def validate(self) -> None:
+        """Raise :class:`RodwarpError` (one line) for any impossible parameter."""
+        def bad(msg):
+            raise RodwarpError(msg)
+
+        if not (self.alpha > 1 and math.isfinite(self.alpha)):
+            bad(f"--alpha must be > 1 (rod length over diameter), got {self.alpha:g}")
+        for name in ("freq", "entangle_freq"):
+            v = getattr(self, name)
+            if not (v >= 0 and math.isfinite(v)):
+                bad(f"--{name.replace('_', '-')} must be >= 0 Hz, got {v:g}")
+        for name in ("amplitude", "entangle_amplitude", "duration", "entangle_duration", "static_load"):
+            v = getattr(self, name)
+            if not (v >= 0 and math.isfinite(v)):
+                bad(f"--{name.replace('_', '-')} must be >= 0, got {v:g}")
+        if not (self.gravity > 0):
+            bad(f"--gravity must be > 0 m/s^2, got {self.gravity:g}")
+        if self.length <= 0:
+            bad(f"--length must be > 0 m, got {self.length:g}")
+        if self.vertices < 2:
+            bad(f"--vertices must be >= 2, got {self.vertices}")
+        if self.n_rods is not None and self.n_rods < 1:
+            bad(f"--n-rods must be >= 1, got {self.n_rods}")
+        if self.mu < 0:
+            bad(f"--mu must be >= 0, got {self.mu:g}")
+        if self.iterations < 1:
+            bad(f"--iterations must be >= 1, got {self.iterations}")
+        if self.save_every <= 0:
+            bad(f"--save-every must be > 0 s, got {self.save_every:g}")
+        if self.dt is not None and not self.dt > 0:
+            bad(f"--dt must be > 0 s, got {self.dt:g}")
+        height = self.box[2] * self.length
+        if 2 * self.entangle_amplitude >= 0.5 * height or 2 * self.amplitude >= 0.5 * height:
+            bad(f"vibration amplitude does not fit the box (height {height:g} m); lower --amplitude")
+        if self.initial is not None and not Path(self.initial).exists():
+            bad(f"initial rod set not found: {self.initial}")
+
+    @property
+    def diameter(self) -> float:
+        return self.length / self.alpha
+
+    @property
+    def rods(self) -> int:
+        return self.n_rods if self.n_rods is not None else int(round(Z_TARGET * self.alpha))
+
+    @property
+    def a_over_g(self) -> float:
+        return 4 * math.pi**2 * self.freq**2 * self.amplitude / self.gravity
+
+
+def _versions() -> dict:
+    import warp
+
+    import rodwarp
+
+    return {"rodwarp": rodwarp.__version__, "warp": warp.config.version, "numpy": np.__version__,
+            "python": platform.python_version(), "platform": platform.platform()}
+
+
+def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True) -> dict:
+    """Run the whole experiment and write its outputs to ``outdir``.
+
+    Writes ``summary.json`` (every parameter, seed, versions, device, dt, steps, wall time and
+    the results), ``metrics.csv`` (time series), ``initial.npz`` and ``final.npz`` (rod sets,
+    the final one with contacts) and ``metrics.png``.  Every file is written atomically.
+
+    Returns
+    -------
+    dict
+        The summary.
+    """
+    from rodwarp import _warp
+    from rodwarp.metrics import centroid_height, contacts_per_rod, largest_cluster_fraction, rod_contacts
+    from rodwarp.model import Material, Model, State
+    from rodwarp.packing import orientation_statistics, random_packing
+    from rodwarp.rodset import load
+    from rodwarp.solver import RodSolver
+
+    params.validate()
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    device = _warp.resolve_device(params.device)
+    t_wall = time.perf_counter()
+    box = np.asarray(params.box, float) * params.length
+
+    if params.initial:
+        rods = load(params.initial, diameter=params.diameter)
+        if rods.box is not None:
+            box = rods.box[1] - rods.box[0]
+    else:
+        rods = random_packing(params.rods, params.length, params.diameter, box, n_vertices=params.vertices,
+                              seed=params.seed, device=device)
+    rods.save(outdir / "initial.npz")
+    orient = orientation_statistics(rods)
+
+    g_eff = params.gravity * (1.0 + 4.0 * params.static_load / math.pi)
+    model = Model(rods, Material(params.young, params.density), gravity=(0.0, 0.0, -g_eff), mu=params.mu,
+                  device=device)
+    lo = rods.box[0] if rods.box is not None else np.zeros(3)
+    hi = lo + box
+    model.add_box(lo, hi + np.array([0, 0, 0.5 * params.length]), walls=("floor", "ceiling", "x-", "x+", "y-", "y+"),
+                  moving=True)
+    solver = RodSolver(model, iterations=params.iterations)
+
+    stages = []
+    if params.entangle_duration > 0 and not params.initial:
+        stages.append(("entangle", params.entangle_duration, params.entangle_amplitude, params.entangle_freq))
+    stages.append(("stability", params.duration, params.amplitude, params.freq))
+
+    rows = []
+    state = model.state()
+    other = State(model)
+    y0 = centroid_height(model, state)
+    total = sum(s[1] for s in stages)
+    steps = 0
+    info = None
+    dts = {}
+
+    def sample(stage, st, inf):
+        c = rod_contacts(model, st)
+        rows.append({
+            "time": st.time, "stage": stage,
+            "contacts_per_rod": contacts_per_rod(model.n_rods, c),
+            "largest_cluster_fraction": largest_cluster_fraction(model.n_rods, c),
+            "centroid_height_ratio": centroid_height(model, st) / y0,
+            "kinetic_energy": solver.energy(st)["kinetic"],
+            "max_penetration_over_d": max(0.0, -float(c.gap.min()) if len(c) else 0.0) / model.min_diameter,
+            "friction_residual": inf.contact_residual if inf else 0.0,
+            "n_contact_pairs": inf.n_contacts if inf else 0,
+        })
+
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("t={task.completed:.2f}/{task.total:.2f} s"),
+                  TextColumn("{task.fields[rate]}"), TimeRemainingColumn(), disable=not progress) as bar:
+        task = bar.add_task("simulate", total=total, rate="")
+        t_stage0 = 0.0
+        for name, dur, amp, freq in stages:
+            if name == "stability":
+                model.remove_planes(["ceiling", "x-", "x+", "y-", "y+"])
+                for p in model.planes:
+                    p.moving = True
+                state.ensure_plane_storage()
+                state.plane_impulse.zero_()
+                other.ensure_plane_storage()
+            model.set_drive(amp, freq, phase_time=state.time)
+            dt = params.dt or solver.default_dt()
+            dts[name] = dt
+            n = int(round(dur / dt))
+            every = max(1, int(round(params.save_every / dt)))
+            bar.update(task, description=name)
+            if name == stages[0][0]:
+                sample(name, state, None)
+            t0 = time.perf_counter()
+            for k in range(n):
+                info = solver.step(state, other, dt)
+                state, other = other, state
+                steps += 1
+                if (k + 1) % every == 0 or k == n - 1:
+                    sample(name, state, info)
+                    rate = (k + 1) / max(time.perf_counter() - t0, 1e-9)
+                    bar.update(task, completed=t_stage0 + (k + 1) * dt, rate=f"{rate:.0f} steps/s")
+            t_stage0 += dur
+
+    wall = time.perf_counter() - t_wall
+    c = rod_contacts(model, state)
+    final = rods.with_points(state.positions(), velocities=state.velocities())
+    final.contacts = c
+    final.attrs.update({"time": state.time})
+    final.save(outdir / "final.npz")
+
+    stab = [r for r in rows if r["stage"] == "stability"]
+    tail = [r["largest_cluster_fraction"] for r in stab if r["time"] >= stab[0]["time"] + 0.5 * params.duration] or \
+        [stab[-1]["largest_cluster_fraction"]]
+    summary = {
+        "alpha": params.alpha, "n_rods": model.n_rods, "freq": params.freq, "amplitude": params.amplitude,
+        "gravity": params.gravity, "a_over_g": params.a_over_g, "static_load": params.static_load,
+        "contacts_per_rod": contacts_per_rod(model.n_rods, c),
+        "largest_cluster_fraction": largest_cluster_fraction(model.n_rods, c),
+        "centroid_height_ratio": centroid_height(model, state) / y0,
+        "stable": bool(min(tail) >= STABLE_F), "stable_threshold_f": STABLE_F,
+        "seed": params.seed, "device": device, "dt": dts, "steps": steps, "wall_time_s": wall,
+        "steps_per_second": steps / wall if wall > 0 else None,
+        "initial_orientation": orient,
+        "parameters": asdict(params), "versions": _versions(),
+    }
+    _write_metrics(outdir / "metrics.csv", rows)
+    write_json(outdir / "summary.json", summary)
+    _plot_metrics(outdir / "metrics.png", rows, summary)
+    return summary
+
+
+def _write_metrics(path, rows):
+    with atomic_path(path) as tmp:
+        with open(tmp, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
+            w.writeheader()
+            w.writerows(rows)
+
+
+def _plot_metrics(path, rows, summary):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = np.array([r["time"] for r in rows])
+    fig, ax = plt.subplots(2, 2, figsize=(9, 6), sharex=True)
+    for a, key, label in ((ax[0, 0], "contacts_per_rod", "Z (contacts per rod)"),
+                          (ax[0, 1], "largest_cluster_fraction", "f (largest cluster)"),
+                          (ax[1, 0], "centroid_height_ratio", "y_c(t) / y_c(0)"),
+                          (ax[1, 1], "kinetic_energy", "kinetic energy (J)")):
+        a.plot(t, [r[key] for r in rows], lw=1)
+        a.set_ylabel(label)
+        a.grid(alpha=0.3)
+    ax[1, 1].set_yscale("symlog", linthresh=1e-6)
+    for a in ax[1]:
+        a.set_xlabel("t (s)")
+    fig.suptitle(f"alpha = {summary['alpha']:g}, a/g = {summary['a_over_g']:.3g}, stable = {summary['stable']}")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)

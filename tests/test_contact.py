@@ -1,0 +1,178 @@
+"""Contact and Coulomb friction against analytic answers; failure detection."""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from rodwarp.errors import RodwarpError, SimulationBlowUp
+from rodwarp.model import STEEL, Material, Model
+from rodwarp.rodset import RodSet
+from rodwarp.scenes import log_cabin, straight_rod, tilted_gravity
+from rodwarp.solver import RodSolver, run
+
+G = 9.81
+
+
+def rod_on_incline(theta_deg, mu=0.4, duration=1.0):
+    r = 0.01
+    rods = RodSet.from_polylines([straight_rod((0, 0, r), (0, 1, 0), 1.0, r)], r)
+    model = Model(rods, STEEL, gravity=tilted_gravity(G, theta_deg), mu=mu, rod_contacts=False)
+    model.add_plane((0, 0, 1), 0.0, mu=mu, name="floor")
+    solver = RodSolver(model, iterations=10)
+    dt = 1e-3
+    ts, xs = [], []
+    run(solver, model.state(), duration, dt, callback=lambda s, i: (ts.append(s.time), xs.append(s.x.numpy()[:, 0].mean())))
+    return np.array(ts), np.array(xs)
+
+
+def test_incline_sticks_below_friction_angle():
+    t, x = rod_on_incline(20.0)
+    assert np.max(np.abs(x - x[0])) < 1e-6
+
+
+def test_incline_slides_with_coulomb_acceleration():
+    t, x = rod_on_incline(30.0)
+    a = 2 * np.polyfit(t, x, 2)[0]
+    th = math.radians(30)
+    exact = G * (math.sin(th) - 0.4 * math.cos(th))
+    assert abs(exact - 1.507) < 1e-3
+    assert abs(a - exact) / exact < 0.02
+
+
+def rod_on_rails(theta_deg, mu=0.3, duration=0.5):
+    """Rod C along y resting across two fixed rails along x; gravity tilted along the rails."""
+    r = 0.01
+    rails = [straight_rod((0, -0.3, 0), (1, 0, 0), 1.0, r), straight_rod((0, 0.3, 0), (1, 0, 0), 1.0, r)]
+    top = straight_rod((0, 0, 2 * r), (0, 1, 0), 1.0, r)
+    rods = RodSet.from_polylines(rails + [top], r)
+    model = Model(rods, STEEL, gravity=tilted_gravity(G, theta_deg), mu=mu, pinned=np.arange(20))
+    solver = RodSolver(model, iterations=20)
+    dt = 1e-3
+    ts, xs = [], []
+    run(solver, model.state(), duration, dt, callback=lambda s, i: (ts.append(s.time), xs.append(s.x.numpy()[20:, 0].mean())))
+    return np.array(ts), np.array(xs)
+
+
+@pytest.mark.parametrize("theta", [10.0, 15.0])
+def test_rod_across_tilted_rails_sticks_below_mu(theta):
+    assert math.tan(math.radians(theta)) < 0.3
+    t, x = rod_on_rails(theta)
+    assert np.max(np.abs(x - x[0])) < 1e-6
+
+
+@pytest.mark.parametrize("theta", [20.0, 30.0])
+def test_rod_across_tilted_rails_slides_above_mu(theta):
+    t, x = rod_on_rails(theta)
+    th = math.radians(theta)
+    exact = G * (math.sin(th) - 0.3 * math.cos(th))
+    a = 2 * np.polyfit(t, x, 2)[0]
+    assert abs(a - exact) / exact < 0.03
+
+
+def cabin_drift(mu, duration=2.0):
+    rods = log_cabin(layers=4, rods_per_layer=2)
+    model = Model(rods, STEEL, gravity=tilted_gravity(G, 5.0, downhill=(1, 1, 0)), mu=mu)
+    model.add_plane((0, 0, 1), 0.0, mu=mu, name="floor")
+    solver = RodSolver(model, iterations=20)
+    x0 = rods.points.copy()
+    state = run(solver, model.state(), duration, solver.default_dt())
+    return np.max(np.linalg.norm(state.positions() - x0, axis=1))
+
+
+def test_log_cabin_stands_with_friction():
+    assert cabin_drift(0.2) < 1e-4
+
+
+def test_log_cabin_collapses_without_friction():
+    assert cabin_drift(0.0, duration=1.0) > 0.1
+
+
+def test_frictionless_collision_conserves_momentum():
+    r = 0.01
+    a = straight_rod((0, 0, 0), (0, 1, 0), 1.0, r)
+    b = straight_rod((0.3, 0.1, 0.005), (0, 0, 1), 1.0, r)
+    rods = RodSet.from_polylines([a, b], r)
+    v = np.zeros_like(rods.points)
+    v[:10, 0] = 2.0
+    v[10:, 1] = -0.3
+    model = Model(rods.with_points(rods.points, velocities=v), STEEL, gravity=(0, 0, 0), mu=0.0)
+    solver = RodSolver(model, iterations=20)
+    p0 = (model.mass_np[:, None] * v).sum(axis=0)
+    hits = []
+    state = run(solver, model.state(), 0.3, 1e-4, callback=lambda s, i: hits.append(i.n_contacts))
+    assert max(hits) > 0  # they did collide
+    p1 = (model.mass_np[:, None] * state.velocities()).sum(axis=0)
+    assert np.linalg.norm(p1 - p0) <= 1e-9 * np.linalg.norm(p0)
+    # and the collision changed rod A's momentum
+    pa = (model.mass_np[:10, None] * state.velocities()[:10]).sum(axis=0)
+    assert pa[0] < 0.99 * (model.mass_np[:10].sum() * 2.0)
+
+
+def test_no_tunnelling_of_thin_fast_rod():
+    d = 1.0 / 300
+    r = d / 2
+    fixed = straight_rod((0, 0, 0), (1, 0, 0), 1.0, r)
+    falling = straight_rod((0, 0, 0.05), (0, 1, 0), 1.0, r)
+    rods = RodSet.from_polylines([fixed, falling], r)
+    v = np.zeros_like(rods.points)
+    v[10:, 2] = -5.0
+    model = Model(rods.with_points(rods.points, velocities=v), STEEL, gravity=(0, 0, -G), mu=0.2,
+                  pinned=np.arange(10))
+    solver = RodSolver(model)
+    dt = solver.default_dt()
+    assert dt * 5.0 > 0.5 * d  # a step moves the rod a sizeable part of its diameter
+    lowest = []
+    run(solver, model.state(), 0.1, dt, callback=lambda s, i: lowest.append(s.x.numpy()[10:, 2].min()))
+    # the falling rod's centreline never goes below the surface of the fixed one (minus 10% d)
+    assert min(lowest) > d - 0.1 * d
+
+
+def test_step_above_bound_is_refused_or_flagged():
+    r = 0.01
+    rods = RodSet.from_polylines([straight_rod((0, 0, r), (1, 0, 0), 1.0, r)], r)
+    model = Model(rods, STEEL, gravity=(0, 0, -G))
+    model.add_plane((0, 0, 1), 0.0)
+    solver = RodSolver(model)
+    bound = solver.max_stable_dt()
+    with pytest.raises(RodwarpError, match="stability bound"):
+        solver.check_dt(2 * bound)
+    loose = RodSolver(model, allow_unstable=True)
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        loose.check_dt(2 * bound)
+    assert any("stability bound" in str(x.message) for x in w)
+
+
+def test_unstable_explicit_bending_stops_with_clear_message():
+    r = 0.02
+    n = 10
+    s = np.linspace(0, 1, n)
+    pts = np.stack([s, 0.02 * np.sin(3 * np.pi * s), np.zeros(n)], axis=1)
+    model = Model(RodSet.from_polylines([pts], r), STEEL, gravity=(0, 0, 0), rod_contacts=False)
+    solver = RodSolver(model, bending="explicit", allow_unstable=True, iterations=2)
+    dt = 3.0 * solver.explicit_bending_dt()
+    state = model.state()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(SimulationBlowUp) as err:
+            run(solver, state, 2000 * dt, dt)
+    msg = str(err.value)
+    assert "step" in msg and "explicit bending" in msg
+    assert np.all(np.isfinite(state.positions()))  # nothing non-finite escaped
+
+
+def test_implicit_bending_is_stable_where_explicit_fails():
+    r = 0.02
+    n = 10
+    s = np.linspace(0, 1, n)
+    pts = np.stack([s, 0.02 * np.sin(3 * np.pi * s), np.zeros(n)], axis=1)
+    model = Model(RodSet.from_polylines([pts], r), STEEL, gravity=(0, 0, 0), rod_contacts=False)
+    solver = RodSolver(model, bending="implicit", iterations=2)
+    dt = 10.0 * solver.explicit_bending_dt()
+    state = model.state()
+    e0 = solver.energy(state)["total"]
+    state = run(solver, state, 500 * dt, dt)
+    assert np.all(np.isfinite(state.positions()))
+    assert solver.energy(state)["total"] <= e0  # implicit Euler only removes energy
