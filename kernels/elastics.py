@@ -37,75 +37,21 @@ def bend_coeffs(rest_length: wp.array(dtype=wp.float64), i: int):
     return cm, -(cm + cp), cp, wp.float64(2.0) / (hm + hp)
 
 
-@wp.kernel
-def bending_predictor(
-    rod_start: wp.array(dtype=wp.int32),
-    x: wp.array(dtype=wp.vec3d),
-    v: wp.array(dtype=wp.vec3d),
-    mass: wp.array(dtype=wp.float64),
-    inv_mass: wp.array(dtype=wp.float64),
-    rest_length: wp.array(dtype=wp.float64),
-    bend_stiffness: wp.array(dtype=wp.float64),
-    body_accel: wp.vec3d,
-    damping: wp.float64,
-    dt: wp.float64,
-    theta: wp.float64,
-    # scratch, one entry per vertex
+@wp.func
+def pentadiagonal_solve(
+    a: int,
+    b: int,
     diag: wp.array(dtype=wp.float64),
     off1: wp.array(dtype=wp.float64),
     off2: wp.array(dtype=wp.float64),
     rhs: wp.array(dtype=wp.vec3d),
-    v_out: wp.array(dtype=wp.vec3d),
+    out: wp.array(dtype=wp.vec3d),
 ):
-    """One thread per rod: unconstrained velocity after gravity, damping and bending.
+    """Solve the SPD pentadiagonal system on rows [a, b) for three right-hand sides.
 
-    Pinned vertices (inv_mass = 0) keep their velocity: their row carries a mass 1e20 times
-    larger, which decouples them to round-off.
+    diag, off1 (row i with i+1) and off2 (row i with i+2) are overwritten by the LDL^T
+    factors; rhs is overwritten by the forward substitution.
     """
-    r = wp.tid()
-    a = rod_start[r]
-    b = rod_start[r + 1]
-    n = b - a
-    EI = bend_stiffness[r]
-    c = theta * dt * dt
-
-    for i in range(a, b):
-        m = mass[i]
-        if inv_mass[i] == F0:
-            m = m * wp.float64(1.0e20)
-        md = m * (F1 + damping * dt)
-        diag[i] = md
-        off1[i] = F0
-        off2[i] = F0
-        fg = body_accel * mass[i]
-        if inv_mass[i] == F0:
-            fg = wp.vec3d(F0, F0, F0)
-        rhs[i] = v[i] * m + fg * dt
-
-    if n >= 3:
-        for i in range(a + 1, b - 1):
-            cm, c0, cp, wl = bend_coeffs(rest_length, i)
-            k = EI * wl
-            kap = x[i - 1] * cm + x[i] * c0 + x[i + 1] * cp
-            f = kap * (k * dt)
-            rhs[i - 1] = rhs[i - 1] - f * cm
-            rhs[i] = rhs[i] - f * c0
-            rhs[i + 1] = rhs[i + 1] - f * cp
-            if c > F0:
-                kc = k * c
-                diag[i - 1] = diag[i - 1] + kc * cm * cm
-                diag[i] = diag[i] + kc * c0 * c0
-                diag[i + 1] = diag[i + 1] + kc * cp * cp
-                off1[i - 1] = off1[i - 1] + kc * cm * c0
-                off1[i] = off1[i] + kc * c0 * cp
-                off2[i - 1] = off2[i - 1] + kc * cm * cp
-
-    if c == F0 or n < 3:
-        for i in range(a, b):
-            v_out[i] = rhs[i] / diag[i]
-        return
-
-    # In-place LDL^T of the symmetric pentadiagonal matrix: diag <- d, off1 <- l1, off2 <- l2.
     for i in range(a, b):
         d = diag[i]
         if i - 1 >= a:
@@ -129,14 +75,117 @@ def bending_predictor(
         if i - 2 >= a:
             z = z - rhs[i - 2] * off2[i - 2]
         rhs[i] = z
-    for k in range(n):
+    for k in range(b - a):
         i = b - 1 - k
         y = rhs[i] / diag[i]
         if i + 1 < b:
-            y = y - v_out[i + 1] * off1[i]
+            y = y - out[i + 1] * off1[i]
         if i + 2 < b:
-            y = y - v_out[i + 2] * off2[i]
-        v_out[i] = y
+            y = y - out[i + 2] * off2[i]
+        out[i] = y
+    return 0
+
+
+@wp.kernel
+def velocity_predictor(
+    rod_start: wp.array(dtype=wp.int32),
+    x: wp.array(dtype=wp.vec3d),
+    v: wp.array(dtype=wp.vec3d),
+    mass: wp.array(dtype=wp.float64),
+    inv_mass: wp.array(dtype=wp.float64),
+    rest_length: wp.array(dtype=wp.float64),
+    bend_stiffness: wp.array(dtype=wp.float64),
+    body_accel: wp.vec3d,
+    damping: wp.float64,
+    dt: wp.float64,
+    explicit_bending: int,
+    v_out: wp.array(dtype=wp.vec3d),
+):
+    """One thread per rod: velocity after damping, body force and (explicit) bending.
+
+    Damping first decays the old velocity, v / (1 + gamma dt), so that static forces, and
+    the constraint forces that balance them, are not scaled by it.  Implicit bending is
+    not applied here but as compliant constraints inside the Gauss-Seidel sweep
+    (``bending_projection``), so that every block of the sweep uses the same mass metric and
+    the fixed point of the step is the true static equilibrium.
+    """
+    r = wp.tid()
+    a = rod_start[r]
+    b = rod_start[r + 1]
+    decay = F1 / (F1 + damping * dt)
+    for i in range(a, b):
+        if inv_mass[i] == F0:
+            v_out[i] = v[i]
+        else:
+            v_out[i] = v[i] * decay + body_accel * dt
+    if explicit_bending != 0 and b - a >= 3:
+        EI = bend_stiffness[r]
+        for i in range(a + 1, b - 1):
+            cm, c0, cp, wl = bend_coeffs(rest_length, i)
+            kap = x[i - 1] * cm + x[i] * c0 + x[i + 1] * cp
+            f = kap * (EI * wl * dt)
+            v_out[i - 1] = v_out[i - 1] - f * (cm * inv_mass[i - 1])
+            v_out[i] = v_out[i] - f * (c0 * inv_mass[i])
+            v_out[i + 1] = v_out[i + 1] - f * (cp * inv_mass[i + 1])
+
+
+@wp.kernel
+def bending_projection(
+    rod_start: wp.array(dtype=wp.int32),
+    x: wp.array(dtype=wp.vec3d),
+    inv_mass: wp.array(dtype=wp.float64),
+    rest_length: wp.array(dtype=wp.float64),
+    bend_stiffness: wp.array(dtype=wp.float64),
+    dt: wp.float64,
+    lam: wp.array(dtype=wp.vec3d),
+    # scratch
+    diag: wp.array(dtype=wp.float64),
+    off1: wp.array(dtype=wp.float64),
+    off2: wp.array(dtype=wp.float64),
+    rhs: wp.array(dtype=wp.vec3d),
+    dlam: wp.array(dtype=wp.vec3d),
+    v: wp.array(dtype=wp.vec3d),
+):
+    """One thread per rod: one exact XPBD iteration on all bending constraints (implicit Euler).
+
+    Constraint i (interior vertex) is the discrete curvature vector kappa_i, linear in x,
+    with compliance l_i / (E I); the x, y and z components share one pentadiagonal matrix
+    J W J^T + alpha / dt^2, factored once and solved for three right-hand sides.
+    """
+    r = wp.tid()
+    a = rod_start[r]
+    b = rod_start[r + 1]
+    if b - a < 3:
+        return
+    EI = bend_stiffness[r]
+    inv_dt2 = F1 / (dt * dt)
+    for i in range(a + 1, b - 1):
+        cm, c0, cp, wl = bend_coeffs(rest_length, i)
+        wm = inv_mass[i - 1]
+        w0 = inv_mass[i]
+        wq = inv_mass[i + 1]
+        at = inv_dt2 / (EI * wl)
+        C = (x[i - 1] + v[i - 1] * dt) * cm + (x[i] + v[i] * dt) * c0 + (x[i + 1] + v[i + 1] * dt) * cp
+        diag[i] = cm * cm * wm + c0 * c0 * w0 + cp * cp * wq + at
+        rhs[i] = -C - lam[i] * at
+        off1[i] = F0
+        off2[i] = F0
+        if i + 1 < b - 1:
+            dm, d0, dp, wl1 = bend_coeffs(rest_length, i + 1)
+            off1[i] = c0 * dm * w0 + cp * d0 * wq
+        if i + 2 < b - 1:
+            em, e0, ep, wl2 = bend_coeffs(rest_length, i + 2)
+            off2[i] = cp * em * wq
+    pentadiagonal_solve(a + 1, b - 1, diag, off1, off2, rhs, dlam)
+    inv_dt = F1 / dt
+    for i in range(a + 1, b - 1):
+        cm, c0, cp, wl = bend_coeffs(rest_length, i)
+        dl = dlam[i]
+        lam[i] = lam[i] + dl
+        g = dl * inv_dt
+        v[i - 1] = v[i - 1] + g * (cm * inv_mass[i - 1])
+        v[i] = v[i] + g * (c0 * inv_mass[i])
+        v[i + 1] = v[i + 1] + g * (cp * inv_mass[i + 1])
 
 
 @wp.kernel
@@ -171,9 +220,13 @@ def stretch_projection(
     for j in range(a, b - 1):
         e = (x[j + 1] + v[j + 1] * dt) - (x[j] + v[j] * dt)
         le = wp.length(e)
+        # SHAKE: the correction acts along the start-of-step edge, not the predicted one;
+        # that keeps the scheme symplectic (no energy drift), where PBD's choice dissipates.
+        e0 = x[j + 1] - x[j]
+        l0 = wp.length(e0)
         nj = wp.vec3d(F0, F0, F0)
-        if le > F0:
-            nj = e / le
+        if l0 > F0:
+            nj = e0 / l0
         sdir[j] = nj
         at = compliance[j] * inv_dt2
         cval = le - rest_length[j]

@@ -128,6 +128,11 @@ class Model:
         Surface gap below which two rods count as touching (m); default d_min / 10.
     rod_contacts : bool
         Detect rod-rod contacts (off for single-rod validation scenes).
+    extensible : bool
+        Give edges the axial compliance h / (E A). Off by default: for stiff rods the
+        axial strain is ~1e-8 and axial waves (kHz) are not resolved by the step, so exact
+        inextensibility is the cheaper model and, unlike implicitly damped stretching, it
+        conserves energy. Turn on to measure axial deformation.
     device : str
         ``cpu``, ``cuda``, ``cuda:N`` or ``auto``.
     """
@@ -143,6 +148,7 @@ class Model:
         pinned=None,
         contact_distance: float | None = None,
         rod_contacts: bool = True,
+        extensible: bool = False,
         device: str = "cpu",
     ):
         _warp.init()
@@ -191,7 +197,7 @@ class Model:
                 raise RodwarpError(f"pinned vertex index out of range 0..{V - 1}")
             self.pinned[idx] = True
             inv_mass[idx] = 0.0
-        compliance = np.where(last, 0.0, rest_length / (material.young * area[vertex_rod]))
+        compliance = np.where(last | (not extensible), 0.0, rest_length / (material.young * area[vertex_rod]))
 
         self.n_rods, self.n_vertices = N, V
         self.seg_vertex_np = np.flatnonzero(~last).astype(np.int32)

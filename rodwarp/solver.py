@@ -2,14 +2,16 @@
 
 One step of :meth:`RodSolver.step` (all on the model's device):
 
-1. bending predictor, one thread per rod: gravity, damping and bending, implicit Euler
-   (theta = 1) or symplectic Euler (theta = 0) on the constant bending Hessian;
+1. velocity predictor, one thread per rod: damping, gravity and, for symplectic (explicit)
+   bending, the bending force;
 2. contact detection at the start-of-step positions: hash grid over segment midpoints, exact
    segment-segment closest points, speculative margin = contact distance + travel in one step;
    contacts sorted by segment pair so the order (and hence the result) is deterministic;
 3. warm start: impulses of the same segment pairs (and vertex-plane pairs) from the last step;
-4. ``iterations`` Gauss-Seidel sweeps over rod-rod contacts, rod-plane contacts and one exact
-   per-rod solve of all edge-length constraints;
+4. ``iterations`` Gauss-Seidel sweeps over rod-rod contacts, rod-plane contacts and exact
+   per-rod solves of all bending constraints (implicit bending) and edge-length constraints;
+   every block uses the same mass metric, so the converged step is implicit Euler with
+   exact Coulomb contact and its fixed point is the static equilibrium;
 5. x' = x + dt v'.
 
 ``state_in`` is never modified, so a step that fails its checks leaves the last good state.
@@ -77,9 +79,12 @@ class RodSolver:
         raises :class:`SimulationBlowUp`.
     speed_limit : float, optional
         Speeds above this (m/s) are treated as a blow-up; default 20 x the scene's
-        characteristic speed (free fall over the scene height plus drive speed).
+        characteristic speed (free fall over the scene height, drive speed, initial speeds
+        and the speed the initial elastic energy could give all rods).
     allow_unstable : bool
         Accept a step above the stability bound with a warning instead of an error.
+    energy_check_every : int
+        Steps between energy-jump checks (0 disables them).
     """
 
     def __init__(
@@ -94,6 +99,7 @@ class RodSolver:
         penetration_limit: float = 0.25,
         speed_limit: float | None = None,
         allow_unstable: bool = False,
+        energy_check_every: int = 10,
     ):
         if iterations < 1:
             raise RodwarpError(f"iterations must be >= 1, got {iterations}")
@@ -110,6 +116,9 @@ class RodSolver:
         self.penetration_limit = float(penetration_limit)
         self.allow_unstable = bool(allow_unstable)
         self._speed_limit = speed_limit
+        self._v_elastic = None
+        self._last_mech = None
+        self.energy_check_every = int(energy_check_every)
         d = model.device
         V, S = model.n_vertices, model.n_segments
         self._diag = wp.zeros(V, dtype=wp.float64, device=d)
@@ -118,6 +127,8 @@ class RodSolver:
         self._rhs = wp.zeros(V, dtype=wp.vec3d, device=d)
         self._sdir = wp.zeros(V, dtype=wp.vec3d, device=d)
         self._lam = wp.zeros(V, dtype=wp.float64, device=d)
+        self._blam = wp.zeros(V, dtype=wp.vec3d, device=d)
+        self._dlam = wp.zeros(V, dtype=wp.vec3d, device=d)
         self._mid = wp.zeros(max(S, 1), dtype=wp.vec3, device=d)
         self._scalar = wp.zeros(4, dtype=wp.float64, device=d)
         self._residual = wp.zeros(1, dtype=wp.float64, device=d)
@@ -251,6 +262,9 @@ class RodSolver:
         dev = m.device
         if check:
             self.check_dt(dt)
+            if self._v_elastic is None:
+                e = self.energy(state_in)
+                self._v_elastic = math.sqrt(2.0 * (e["bending"] + e["stretching"]) / m.total_mass())
         theta = self.theta_for(dt)
         fdt = wp.float64(dt)
         V, N = m.n_vertices, m.n_rods
@@ -259,10 +273,9 @@ class RodSolver:
         if self._plane_gap.shape[0] != V * max(nplanes, 1):
             self._plane_gap = wp.zeros(V * max(nplanes, 1), dtype=wp.float64, device=dev)
 
-        wp.launch(elastics.bending_predictor, dim=N, device=dev, inputs=[
+        wp.launch(elastics.velocity_predictor, dim=N, device=dev, inputs=[
             m.rod_start, state_in.x, state_in.v, m.mass, m.inv_mass, m.rest_length, m.bend_stiffness,
-            wp.vec3d(*m.gravity), wp.float64(m.damping), fdt, wp.float64(theta),
-            self._diag, self._off1, self._off2, self._rhs, state_out.v])
+            wp.vec3d(*m.gravity), wp.float64(m.damping), fdt, int(theta == 0.0), state_out.v])
 
         self._scalar.zero_()
         wp.launch(broadphase.max_speed, dim=V, device=dev, inputs=[state_out.v, self._scalar])
@@ -297,6 +310,7 @@ class RodSolver:
                 wp.float64(m.contact_distance), fdt, ws, self._plane_gap, state_out.plane_impulse, state_out.v])
 
         self._lam.zero_()
+        self._blam.zero_()
         beta = wp.float64(self.baumgarte)
         max_push = wp.float64(max(self.characteristic_speed(), 1e-3))
         for it in range(self.iterations):
@@ -319,6 +333,10 @@ class RodSolver:
                 wp.launch(friction.solve_plane_contacts, dim=V, device=dev, inputs=[
                     m.inv_mass, pn, pv, pm, nplanes, self._plane_gap, fdt, beta, max_push,
                     state_out.plane_impulse, state_out.v, self._residual])
+            if theta != 0.0:
+                wp.launch(elastics.bending_projection, dim=N, device=dev, inputs=[
+                    m.rod_start, state_in.x, m.inv_mass, m.rest_length, m.bend_stiffness, fdt, self._blam,
+                    self._diag, self._off1, self._off2, self._rhs, self._dlam, state_out.v])
             wp.launch(elastics.stretch_projection, dim=N, device=dev, inputs=[
                 m.rod_start, state_in.x, m.inv_mass, m.rest_length, m.compliance, fdt, self._lam,
                 self._diag, self._off1, self._rhs_scalar(), self._sdir, state_out.v, self._sresidual])
@@ -343,12 +361,28 @@ class RodSolver:
             depth = float(sc[2])
             if depth > self.penetration_limit * m.min_diameter:
                 raise self._blowup(state_in, dt, theta, f"rods overlap by {depth / m.min_diameter:.2f} d")
+            if self.energy_check_every and state_out.step_index % self.energy_check_every == 0:
+                self._check_energy(state_in, state_out, dt, theta)
         res = self._residual.numpy()[0]
         sres = self._sresidual.numpy()[0]
         info = StepInfo(state_out.step_index, state_out.time, dt, self.iterations, n_contacts,
                         float(res), float(sres), vmax_out, theta)
         self.last_info = info
         return info
+
+    def _check_energy(self, state_in: State, state_out: State, dt: float, theta: float) -> None:
+        """Energy-jump test: kinetic + elastic energy may not grow 4x between checks beyond
+        what the scene can supply (all mass at the characteristic speed)."""
+        e = self.energy(state_out)
+        mech = e["kinetic"] + e["bending"] + e["stretching"]
+        floor = 0.5 * self.model.total_mass() * self.characteristic_speed() ** 2
+        prev = self._last_mech
+        self._last_mech = mech
+        if not math.isfinite(mech):
+            raise self._blowup(state_in, dt, theta, "non-finite energy")
+        if prev is not None and mech > 4.0 * prev + floor:
+            raise self._blowup(state_in, dt, theta,
+                               f"energy jump from {prev:.3g} J to {mech:.3g} J within {self.energy_check_every} steps")
 
     def _rhs_scalar(self):
         if not hasattr(self, "_srhs") or self._srhs.shape[0] != self.model.n_vertices:
@@ -359,7 +393,7 @@ class RodSolver:
     def speed_limit(self) -> float:
         if self._speed_limit is not None:
             return self._speed_limit
-        return 20.0 * self.characteristic_speed()
+        return 20.0 * (self.characteristic_speed() + (self._v_elastic or 0.0))
 
     def _blowup(self, state_in: State, dt: float, theta: float, what: str) -> SimulationBlowUp:
         step = state_in.step_index + 1
@@ -405,7 +439,7 @@ class RodSolver:
             return 0
         wp.launch(contacts.iota, dim=n, device=dev, inputs=[self._order])
         wp.utils.radix_sort_pairs(self._raw_key, self._order, n)
-        state_out.contact_key.assign(self._raw_key)  # sorted keys first n entries
+        wp.copy(state_out.contact_key, self._raw_key, count=n)
         wp.launch(contacts.gather_contacts, dim=n, device=dev, inputs=[
             self._order, n, self._raw_seg, self._raw_st, self._raw_normal, self._raw_gap,
             state_out.contact_seg, state_out.contact_st, state_out.contact_normal, state_out.contact_gap])

@@ -69,7 +69,7 @@ def test_axial_static_stretch_matches_FL_over_EA():
     pts = np.stack([np.zeros(n), np.zeros(n), -np.linspace(0, L, n)], axis=1)
     rods = RodSet.from_polylines([pts], TEST_RADIUS)
     soft = Material(young=1e6, density=TEST_DENSITY)
-    model = Model(rods, soft, gravity=(0, 0, -9.81), damping=30.0, pinned=[0], rod_contacts=False)
+    model = Model(rods, soft, gravity=(0, 0, -9.81), damping=30.0, pinned=[0], rod_contacts=False, extensible=True)
     solver = RodSolver(model, iterations=30)
     state = run(solver, model.state(), 2.0, 1e-3)
     z = state.positions()[:, 2]
