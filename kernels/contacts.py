@@ -17,15 +17,60 @@ F1 = wp.float64(1.0)
 
 
 @wp.kernel
-def find_rod_contacts(
+def find_candidate_pairs(
     grid: wp.uint64,
     mid: wp.array(dtype=wp.vec3),
     seg_vertex: wp.array(dtype=wp.int32),
     vertex_rod: wp.array(dtype=wp.int32),
     rod_radius: wp.array(dtype=wp.float64),
     x: wp.array(dtype=wp.vec3d),
-    v: wp.array(dtype=wp.vec3d),
     query_radius: float,
+    margin: wp.float64,
+    capacity: int,
+    count: wp.array(dtype=wp.int32),
+    pairs: wp.array(dtype=wp.vec2i),
+):
+    """Broadphase (Verlet list): every pair sa < sb whose capsule gap is below ``margin``
+    (contact margin + skin), found through the hash grid (midpoints within
+    ``query_radius`` = h_max + 2 r_max + margin).  The list stays valid until some vertex has
+    moved by half the skin."""
+    sa = wp.tid()
+    ia = seg_vertex[sa]
+    ra = vertex_rod[ia]
+    ma = mid[sa]
+    r2 = query_radius * query_radius
+    query = wp.hash_grid_query(grid, ma, query_radius)
+    sb = int(0)
+    while wp.hash_grid_query_next(query, sb):
+        if sb <= sa:
+            continue
+        # the grid returns whole cells, most of them out of reach
+        dm = mid[sb] - ma
+        if wp.dot(dm, dm) > r2:
+            continue
+        ib = seg_vertex[sb]
+        rb = vertex_rod[ib]
+        if rb == ra and (ib == ia + 1 or ia == ib + 1):
+            continue
+        # exact capsule gap at build time: only pairs that can come within reach are kept
+        pair = closest_points_segments(x[ia], x[ia + 1], x[ib], x[ib + 1])
+        if pair.dist - rod_radius[ra] - rod_radius[rb] > margin:
+            continue
+        k = wp.atomic_add(count, 0, 1)
+        if k < capacity:
+            pairs[k] = wp.vec2i(sa, sb)
+
+
+@wp.kernel
+def narrowphase_pairs(
+    pairs: wp.array(dtype=wp.vec2i),
+    n_pairs: int,
+    nseg: int,
+    seg_vertex: wp.array(dtype=wp.int32),
+    vertex_rod: wp.array(dtype=wp.int32),
+    rod_radius: wp.array(dtype=wp.float64),
+    x: wp.array(dtype=wp.vec3d),
+    v: wp.array(dtype=wp.vec3d),
     base_margin: wp.float64,
     dt: wp.float64,
     capacity: int,
@@ -36,36 +81,33 @@ def find_rod_contacts(
     c_normal: wp.array(dtype=wp.vec3d),
     c_gap: wp.array(dtype=wp.float64),
 ):
-    """One thread per segment ``sa``: every partner ``sb > sa`` closer than its margin."""
-    sa = wp.tid()
+    """Narrowphase: exact capsule gap of each candidate pair; a contact when it is below
+    the contact distance plus what both segments can close in one step (speculative)."""
+    k = wp.tid()
+    if k >= n_pairs:
+        return
+    sa = pairs[k][0]
+    sb = pairs[k][1]
     ia = seg_vertex[sa]
-    ra = vertex_rod[ia]
-    pa0 = x[ia]
-    pa1 = x[ia + 1]
+    ib = seg_vertex[sb]
+    pair = closest_points_segments(x[ia], x[ia + 1], x[ib], x[ib + 1])
+    gap = pair.dist - rod_radius[vertex_rod[ia]] - rod_radius[vertex_rod[ib]]
     va = wp.max(wp.length(v[ia]), wp.length(v[ia + 1]))
-    rada = rod_radius[ra]
-    nseg = mid.shape[0]
-    query = wp.hash_grid_query(grid, mid[sa], query_radius)
-    sb = int(0)
-    while wp.hash_grid_query_next(query, sb):
-        if sb <= sa:
-            continue
-        ib = seg_vertex[sb]
-        rb = vertex_rod[ib]
-        if rb == ra and (ib == ia + 1 or ia == ib + 1):
-            continue
-        pair = closest_points_segments(pa0, pa1, x[ib], x[ib + 1])
-        gap = pair.dist - rada - rod_radius[rb]
-        vb = wp.max(wp.length(v[ib]), wp.length(v[ib + 1]))
-        margin = base_margin + (va + vb) * dt
-        if gap < margin:
-            k = wp.atomic_add(count, 0, 1)
-            if k < capacity:
-                c_seg[k] = wp.vec2i(sa, sb)
-                c_key[k] = wp.int64(sa) * wp.int64(nseg) + wp.int64(sb)
-                c_st[k] = wp.vec2d(pair.s, pair.t)
-                c_normal[k] = pair.normal
-                c_gap[k] = gap
+    vb = wp.max(wp.length(v[ib]), wp.length(v[ib + 1]))
+    if gap < base_margin + (va + vb) * dt:
+        c = wp.atomic_add(count, 0, 1)
+        if c < capacity:
+            c_seg[c] = wp.vec2i(sa, sb)
+            c_key[c] = wp.int64(sa) * wp.int64(nseg) + wp.int64(sb)
+            c_st[c] = wp.vec2d(pair.s, pair.t)
+            c_normal[c] = pair.normal
+            c_gap[c] = gap
+
+
+@wp.kernel
+def max_displacement(x: wp.array(dtype=wp.vec3d), x_ref: wp.array(dtype=wp.vec3d), out: wp.array(dtype=wp.float64)):
+    i = wp.tid()
+    wp.atomic_max(out, 0, wp.length(x[i] - x_ref[i]))
 
 
 @wp.kernel

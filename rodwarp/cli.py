@@ -35,8 +35,33 @@ def _friendly(fn):
         except KeyboardInterrupt:
             typer.echo("interrupted; earlier results and checkpoints are kept", err=True)
             raise typer.Exit(130)
+        except (typer.Exit, typer.Abort, SystemExit):
+            raise
+        except Exception as e:  # a bug, not bad input: one line unless RODWARP_DEBUG is set
+            import os
+
+            if os.environ.get("RODWARP_DEBUG"):
+                raise
+            typer.echo(f"internal error: {type(e).__name__}: {e} (set RODWARP_DEBUG=1 for the traceback)", err=True)
+            raise typer.Exit(1)
 
     return wrapper
+
+
+@app.callback()
+def _root():
+    """Simulate and analyse packings of elastic rods (NVIDIA Warp)."""
+
+
+@app.command()
+def version():
+    """Print the versions of rodwarp, Warp and NumPy."""
+    import numpy
+    import warp
+
+    from rodwarp import __version__
+
+    typer.echo(f"rodwarp {__version__}, warp {warp.config.version}, numpy {numpy.__version__}")
 
 
 @app.command()
