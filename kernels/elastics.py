@@ -38,19 +38,16 @@ def bend_coeffs(rest_length: wp.array(dtype=wp.float64), i: int):
 
 
 @wp.func
-def pentadiagonal_solve(
+def pentadiagonal_factor(
     a: int,
     b: int,
     diag: wp.array(dtype=wp.float64),
     off1: wp.array(dtype=wp.float64),
     off2: wp.array(dtype=wp.float64),
-    rhs: wp.array(dtype=wp.vec3d),
-    out: wp.array(dtype=wp.vec3d),
 ):
-    """Solve the SPD pentadiagonal system on rows [a, b) for three right-hand sides.
+    """In-place LDL^T of the SPD pentadiagonal matrix on rows [a, b).
 
-    diag, off1 (row i with i+1) and off2 (row i with i+2) are overwritten by the LDL^T
-    factors; rhs is overwritten by the forward substitution.
+    diag -> D, off1 (row i with i+1) -> L[i+1, i], off2 (row i with i+2) -> L[i+2, i].
     """
     for i in range(a, b):
         d = diag[i]
@@ -68,6 +65,21 @@ def pentadiagonal_solve(
             off1[i] = t / d
         if i + 2 < b:
             off2[i] = off2[i] / d
+    return 0
+
+
+@wp.func
+def pentadiagonal_substitute(
+    a: int,
+    b: int,
+    diag: wp.array(dtype=wp.float64),
+    off1: wp.array(dtype=wp.float64),
+    off2: wp.array(dtype=wp.float64),
+    rhs: wp.array(dtype=wp.vec3d),
+    out: wp.array(dtype=wp.vec3d),
+):
+    """Solve with the factors of ``pentadiagonal_factor`` for three right-hand sides
+    (rhs is overwritten by the forward substitution)."""
     for i in range(a, b):
         z = rhs[i]
         if i - 1 >= a:
@@ -130,27 +142,24 @@ def velocity_predictor(
 
 
 @wp.kernel
-def bending_projection(
+def bending_factor(
     rod_start: wp.array(dtype=wp.int32),
-    x: wp.array(dtype=wp.vec3d),
     inv_mass: wp.array(dtype=wp.float64),
     rest_length: wp.array(dtype=wp.float64),
     bend_stiffness: wp.array(dtype=wp.float64),
     dt: wp.float64,
-    lam: wp.array(dtype=wp.vec3d),
-    # scratch
-    diag: wp.array(dtype=wp.float64),
-    off1: wp.array(dtype=wp.float64),
-    off2: wp.array(dtype=wp.float64),
-    rhs: wp.array(dtype=wp.vec3d),
-    dlam: wp.array(dtype=wp.vec3d),
-    v: wp.array(dtype=wp.vec3d),
+    bcoef: wp.array(dtype=wp.vec4d),
+    bdiag: wp.array(dtype=wp.float64),
+    boff1: wp.array(dtype=wp.float64),
+    boff2: wp.array(dtype=wp.float64),
 ):
-    """One thread per rod: one exact XPBD iteration on all bending constraints (implicit Euler).
+    """One thread per rod: factor J W J^T + alpha / dt^2 of the bending constraints.
 
-    Constraint i (interior vertex) is the discrete curvature vector kappa_i, linear in x,
-    with compliance l_i / (E I); the x, y and z components share one pentadiagonal matrix
-    J W J^T + alpha / dt^2, factored once and solved for three right-hand sides.
+    Also stores each constraint's stencil and alpha / dt^2 in ``bcoef`` so the iterations
+    need no divisions.
+
+    kappa_i is linear in x, so this matrix depends only on masses, rest lengths, E I and dt:
+    it is factored once per step size and reused by every iteration of every step.
     """
     r = wp.tid()
     a = rod_start[r]
@@ -161,105 +170,135 @@ def bending_projection(
     inv_dt2 = F1 / (dt * dt)
     for i in range(a + 1, b - 1):
         cm, c0, cp, wl = bend_coeffs(rest_length, i)
-        wm = inv_mass[i - 1]
         w0 = inv_mass[i]
         wq = inv_mass[i + 1]
         at = inv_dt2 / (EI * wl)
-        C = (x[i - 1] + v[i - 1] * dt) * cm + (x[i] + v[i] * dt) * c0 + (x[i + 1] + v[i + 1] * dt) * cp
-        diag[i] = cm * cm * wm + c0 * c0 * w0 + cp * cp * wq + at
-        rhs[i] = -C - lam[i] * at
-        off1[i] = F0
-        off2[i] = F0
+        bcoef[i] = wp.vec4d(cm, c0, cp, at)
+        bdiag[i] = cm * cm * inv_mass[i - 1] + c0 * c0 * w0 + cp * cp * wq + at
+        boff1[i] = F0
+        boff2[i] = F0
         if i + 1 < b - 1:
             dm, d0, dp, wl1 = bend_coeffs(rest_length, i + 1)
-            off1[i] = c0 * dm * w0 + cp * d0 * wq
+            boff1[i] = c0 * dm * w0 + cp * d0 * wq
         if i + 2 < b - 1:
             em, e0, ep, wl2 = bend_coeffs(rest_length, i + 2)
-            off2[i] = cp * em * wq
-    pentadiagonal_solve(a + 1, b - 1, diag, off1, off2, rhs, dlam)
-    inv_dt = F1 / dt
-    for i in range(a + 1, b - 1):
-        cm, c0, cp, wl = bend_coeffs(rest_length, i)
-        dl = dlam[i]
-        lam[i] = lam[i] + dl
-        g = dl * inv_dt
-        v[i - 1] = v[i - 1] + g * (cm * inv_mass[i - 1])
-        v[i] = v[i] + g * (c0 * inv_mass[i])
-        v[i + 1] = v[i + 1] + g * (cp * inv_mass[i + 1])
+            boff2[i] = cp * em * wq
+    pentadiagonal_factor(a + 1, b - 1, bdiag, boff1, boff2)
 
 
 @wp.kernel
-def stretch_projection(
+def stretch_factor(
     rod_start: wp.array(dtype=wp.int32),
     x: wp.array(dtype=wp.vec3d),
     inv_mass: wp.array(dtype=wp.float64),
-    rest_length: wp.array(dtype=wp.float64),
     compliance: wp.array(dtype=wp.float64),
     dt: wp.float64,
-    lam: wp.array(dtype=wp.float64),
-    # scratch
+    sdir: wp.array(dtype=wp.vec3d),
     sdiag: wp.array(dtype=wp.float64),
     soff: wp.array(dtype=wp.float64),
-    srhs: wp.array(dtype=wp.float64),
-    sdir: wp.array(dtype=wp.vec3d),
-    v: wp.array(dtype=wp.vec3d),
-    residual: wp.array(dtype=wp.float64),
 ):
-    """One thread per rod: one exact XPBD (Newton) iteration on all edge-length constraints.
+    """One thread per rod, once per step: edge directions at the start of the step and the
+    Thomas factors of J W J^T + alpha / dt^2 for the edge-length constraints.
 
-    Works on the predicted positions x + dt v and changes v only, so contacts and stretching
-    share one velocity state inside the Gauss-Seidel sweep.  Edge j joins vertices j, j+1;
-    its entries live at index j (the last vertex of a rod owns no edge).
+    SHAKE: corrections act along the start-of-step edges (fixed during the step), which keeps
+    the scheme symplectic (no energy drift) where PBD's current-edge choice dissipates, and
+    makes the matrix constant within the step.
     """
     r = wp.tid()
     a = rod_start[r]
     b = rod_start[r + 1]
-    ne = b - a - 1
     inv_dt2 = F1 / (dt * dt)
-    worst = F0
     for j in range(a, b - 1):
-        e = (x[j + 1] + v[j + 1] * dt) - (x[j] + v[j] * dt)
-        le = wp.length(e)
-        # SHAKE: the correction acts along the start-of-step edge, not the predicted one;
-        # that keeps the scheme symplectic (no energy drift), where PBD's choice dissipates.
         e0 = x[j + 1] - x[j]
         l0 = wp.length(e0)
         nj = wp.vec3d(F0, F0, F0)
         if l0 > F0:
             nj = e0 / l0
         sdir[j] = nj
-        at = compliance[j] * inv_dt2
-        cval = le - rest_length[j]
-        worst = wp.max(worst, wp.abs(cval))
-        sdiag[j] = inv_mass[j] + inv_mass[j + 1] + at
-        srhs[j] = -cval - at * lam[j]
-        soff[j] = F0
-        if j + 1 < b - 1:
-            # coupling with edge j+1 through their shared vertex j+1; n_{j+1} filled next pass
-            soff[j] = -inv_mass[j + 1]
-    for j in range(a, b - 2):
-        soff[j] = soff[j] * wp.dot(sdir[j], sdir[j + 1])
-    # Thomas algorithm (SPD tridiagonal); degenerate rows (both ends pinned) give zero change.
     for j in range(a, b - 1):
-        if sdiag[j] <= wp.float64(1.0e-300):
-            sdiag[j] = F1
-            srhs[j] = F0
-            if j + 1 < b - 1:
-                soff[j] = F0
+        d = inv_mass[j] + inv_mass[j + 1] + compliance[j] * inv_dt2
+        off = F0
+        if j + 1 < b - 1:
+            off = -inv_mass[j + 1] * wp.dot(sdir[j], sdir[j + 1])
+        if d <= wp.float64(1.0e-300):
+            # both ends pinned: a row that changes nothing
+            d = F1
+            off = F0
         if j > a:
-            w = soff[j - 1] / sdiag[j - 1]
-            sdiag[j] = sdiag[j] - w * soff[j - 1]
-            srhs[j] = srhs[j] - w * srhs[j - 1]
-    for k in range(ne):
+            d = d - soff[j - 1] * soff[j - 1] / sdiag[j - 1]
+        sdiag[j] = d
+        soff[j] = off
+
+
+@wp.kernel
+def rod_projection(
+    rod_start: wp.array(dtype=wp.int32),
+    x: wp.array(dtype=wp.vec3d),
+    inv_mass: wp.array(dtype=wp.float64),
+    rest_length: wp.array(dtype=wp.float64),
+    dt: wp.float64,
+    implicit_bending: int,
+    bcoef: wp.array(dtype=wp.vec4d),
+    bdiag: wp.array(dtype=wp.float64),
+    boff1: wp.array(dtype=wp.float64),
+    boff2: wp.array(dtype=wp.float64),
+    blam: wp.array(dtype=wp.vec3d),
+    brhs: wp.array(dtype=wp.vec3d),
+    bdl: wp.array(dtype=wp.vec3d),
+    compliance: wp.array(dtype=wp.float64),
+    sdir: wp.array(dtype=wp.vec3d),
+    sdiag: wp.array(dtype=wp.float64),
+    soff: wp.array(dtype=wp.float64),
+    slam: wp.array(dtype=wp.float64),
+    srhs: wp.array(dtype=wp.float64),
+    v: wp.array(dtype=wp.vec3d),
+    residual: wp.array(dtype=wp.float64),
+):
+    """One thread per rod: one exact XPBD (Newton) iteration on the rod's own constraints.
+
+    First all bending constraints (implicit bending only), then all edge-length
+    constraints, each block solved directly with the factors prepared for this step.  Works
+    on the predicted positions x + dt v and changes v only, so contacts, bending and
+    stretching share one velocity state and one mass metric inside the Gauss-Seidel sweep.
+    """
+    r = wp.tid()
+    a = rod_start[r]
+    b = rod_start[r + 1]
+    inv_dt = F1 / dt
+    inv_dt2 = inv_dt * inv_dt
+    if implicit_bending != 0 and b - a >= 3:
+        for i in range(a + 1, b - 1):
+            c = bcoef[i]
+            Cb = (x[i - 1] + v[i - 1] * dt) * c[0] + (x[i] + v[i] * dt) * c[1] + (x[i + 1] + v[i + 1] * dt) * c[2]
+            brhs[i] = -Cb - blam[i] * c[3]
+        pentadiagonal_substitute(a + 1, b - 1, bdiag, boff1, boff2, brhs, bdl)
+        for i in range(a + 1, b - 1):
+            c = bcoef[i]
+            dlb = bdl[i]
+            blam[i] = blam[i] + dlb
+            g = dlb * inv_dt
+            v[i - 1] = v[i - 1] + g * (c[0] * inv_mass[i - 1])
+            v[i] = v[i] + g * (c[1] * inv_mass[i])
+            v[i + 1] = v[i + 1] + g * (c[2] * inv_mass[i + 1])
+
+    worst = F0
+    for j in range(a, b - 1):
+        e = (x[j + 1] + v[j + 1] * dt) - (x[j] + v[j] * dt)
+        cval = wp.length(e) - rest_length[j]
+        worst = wp.max(worst, wp.abs(cval))
+        rj = -cval - compliance[j] * inv_dt2 * slam[j]
+        if j > a:
+            rj = rj - soff[j - 1] / sdiag[j - 1] * srhs[j - 1]
+        srhs[j] = rj
+    for k in range(b - a - 1):
         j = b - 2 - k
         val = srhs[j]
         if j + 1 < b - 1:
             val = val - soff[j] * srhs[j + 1]
         srhs[j] = val / sdiag[j]
-    inv_dt = F1 / dt
     for j in range(a, b - 1):
         dl = srhs[j]
-        lam[j] = lam[j] + dl
+        slam[j] = slam[j] + dl
         imp = sdir[j] * (dl * inv_dt)
         v[j] = v[j] - imp * inv_mass[j]
         v[j + 1] = v[j + 1] + imp * inv_mass[j + 1]

@@ -20,6 +20,7 @@ One step of :meth:`RodSolver.step` (all on the model's device):
 from __future__ import annotations
 
 import math
+import time
 import warnings
 from dataclasses import dataclass
 
@@ -47,7 +48,7 @@ class StepInfo:
     step: int
     time: float
     dt: float
-    iterations: int
+    iterations: int  # sweeps actually run
     n_contacts: int
     contact_residual: float
     stretch_residual: float
@@ -63,7 +64,11 @@ class RodSolver:
     model : Model
         The scene.
     iterations : int
-        Gauss-Seidel sweeps per step (contacts, planes and stretching each sweep).
+        Most Gauss-Seidel sweeps per step (contacts, planes, bending and stretching each).
+    tolerance : float
+        Stop sweeping early once a sweep changes no contact velocity by more than this
+        (m/s) and no edge length is off by more than 1e-6 of the shortest edge; 0 always
+        runs ``iterations`` sweeps. Checked every second sweep.
     bending : {"auto", "implicit", "explicit"}
         Bending integration. ``auto`` uses symplectic (explicit) bending when the step is
         below its stability bound, which conserves energy, and implicit Euler above it.
@@ -95,6 +100,7 @@ class RodSolver:
         model: Model,
         *,
         iterations: int = 40,
+        tolerance: float = 1e-6,
         bending: str = "auto",
         coloring: str = "auto",
         warm_start: float = 1.0,
@@ -113,6 +119,8 @@ class RodSolver:
             raise RodwarpError(f"coloring must be auto, on or off, got '{coloring}'")
         self.model = model
         self.iterations = int(iterations)
+        self.tolerance = float(tolerance)
+        self.length_tolerance = 1e-6 * float(model.rest_length_np[model.rest_length_np > 0].min())
         self.bending = bending
         self.coloring = coloring == "on" or (coloring == "auto" and wp.get_device(model.device).is_cuda)
         self.warm_start = float(warm_start)
@@ -133,6 +141,11 @@ class RodSolver:
         self._sdir = wp.zeros(V, dtype=wp.vec3d, device=d)
         self._lam = wp.zeros(V, dtype=wp.float64, device=d)
         self._blam = wp.zeros(V, dtype=wp.vec3d, device=d)
+        self._bdiag = wp.zeros(V, dtype=wp.float64, device=d)
+        self._boff1 = wp.zeros(V, dtype=wp.float64, device=d)
+        self._boff2 = wp.zeros(V, dtype=wp.float64, device=d)
+        self._bfactor_dt = None
+        self._bcoef = wp.zeros(V, dtype=wp.vec4d, device=d)
         self._dlam = wp.zeros(V, dtype=wp.vec3d, device=d)
         self._mid = wp.zeros(max(S, 1), dtype=wp.vec3, device=d)
         self._scalar = wp.zeros(4, dtype=wp.float64, device=d)
@@ -152,6 +165,9 @@ class RodSolver:
         self._grow(max(64, 4 * S))
         self._plane_gap = wp.zeros(V * max(len(model.planes), 1), dtype=wp.float64, device=d)
         self.last_info: StepInfo | None = None
+        # per-stage kernel seconds (elastics, broadphase, narrowphase, friction, checks) when
+        # profiling; None (no synchronisation, no overhead) otherwise
+        self.timings: dict | None = None
         self.colors_used = 0
 
     # ------------------------------------------------------------------ stability
@@ -249,6 +265,21 @@ class RodSolver:
             return "explicit bending, 2/omega_max"
         return "contact resolution, d_min / characteristic speed"
 
+    # ------------------------------------------------------------------ profiling
+    def _launch(self, stage: str, kernel, **kw) -> None:
+        if self.timings is None:
+            wp.launch(kernel, **kw)
+            return
+        wp.synchronize_device(self.model.device)
+        t = time.perf_counter()
+        wp.launch(kernel, **kw)
+        wp.synchronize_device(self.model.device)
+        self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - t
+
+    def reset_timings(self) -> None:
+        """Start (or restart) accumulating kernel time per stage in ``self.timings`` (s)."""
+        self.timings = {}
+
     # ------------------------------------------------------------------ buffers
     def _grow(self, cap: int) -> None:
         d = self.model.device
@@ -291,12 +322,12 @@ class RodSolver:
         if self._plane_gap.shape[0] != V * max(nplanes, 1):
             self._plane_gap = wp.zeros(V * max(nplanes, 1), dtype=wp.float64, device=dev)
 
-        wp.launch(elastics.velocity_predictor, dim=N, device=dev, inputs=[
+        self._launch("elastics", elastics.velocity_predictor, dim=N, device=dev, inputs=[
             m.rod_start, state_in.x, state_in.v, m.mass, m.inv_mass, m.rest_length, m.bend_stiffness,
             wp.vec3d(*m.gravity), wp.float64(m.damping), fdt, int(theta == 0.0), state_out.v])
 
         self._scalar.zero_()
-        wp.launch(broadphase.max_speed, dim=V, device=dev, inputs=[state_out.v, self._scalar])
+        self._launch("checks", broadphase.max_speed, dim=V, device=dev, inputs=[state_out.v, self._scalar])
         sc = self._scalar.numpy()
         if sc[1] != 0.0:
             raise self._blowup(state_in, dt, theta, "non-finite velocity after the elastic predictor")
@@ -307,10 +338,10 @@ class RodSolver:
 
         ws = wp.float64(self.warm_start)
         if n_contacts:
-            wp.launch(contacts.warm_start_rod_contacts, dim=n_contacts, device=dev, inputs=[
+            self._launch("narrowphase", contacts.warm_start_rod_contacts, dim=n_contacts, device=dev, inputs=[
                 n_contacts, state_out.contact_key, state_out.contact_normal, state_in.contact_count,
                 state_in.contact_key, state_in.contact_impulse, ws, state_out.contact_impulse])
-            wp.launch(friction.apply_rod_impulses, dim=n_contacts, device=dev, inputs=[
+            self._launch("friction", friction.apply_rod_impulses, dim=n_contacts, device=dev, inputs=[
                 n_contacts, state_out.contact_seg, m.seg_vertex, state_out.contact_st, m.inv_mass,
                 state_out.contact_impulse, state_out.v])
             if self.coloring:
@@ -323,17 +354,25 @@ class RodSolver:
             pv = wp.array(pvel, dtype=wp.vec3d, device=dev)
             pm = wp.array(mus, dtype=wp.float64, device=dev)
             state_out.plane_impulse.assign(state_in.plane_impulse)
-            wp.launch(friction.prepare_plane_contacts, dim=V, device=dev, inputs=[
+            self._launch("friction", friction.prepare_plane_contacts, dim=V, device=dev, inputs=[
                 state_in.x, state_out.v, m.vertex_rod, m.rod_radius, m.inv_mass, pn, po, pv, nplanes,
                 wp.float64(m.contact_distance), fdt, ws, self._plane_gap, state_out.plane_impulse, state_out.v])
 
         self._lam.zero_()
         self._blam.zero_()
+        if theta != 0.0 and self._bfactor_dt != dt:
+            self._launch("elastics", elastics.bending_factor, dim=N, device=dev, inputs=[
+                m.rod_start, m.inv_mass, m.rest_length, m.bend_stiffness, fdt, self._bcoef, self._bdiag, self._boff1,
+                self._boff2])
+            self._bfactor_dt = dt
+        self._launch("elastics", elastics.stretch_factor, dim=N, device=dev, inputs=[
+            m.rod_start, state_in.x, m.inv_mass, m.compliance, fdt, self._sdir, self._diag, self._off1])
         beta = wp.float64(self.baumgarte)
         max_push = wp.float64(max(self.characteristic_speed(), 1e-3))
+        used = 0
         for it in range(self.iterations):
-            last = it == self.iterations - 1
-            if last:
+            measure = it == self.iterations - 1 or (self.tolerance > 0 and it % 2 == 1)
+            if measure:
                 self._residual.zero_()
                 self._sresidual.zero_()
             if n_contacts:
@@ -342,31 +381,34 @@ class RodSolver:
                         state_out.contact_impulse, state_out.v, self._residual]
                 if self.coloring:
                     for c0, c1 in self._color_ranges:
-                        wp.launch(friction.solve_rod_contacts, dim=c1 - c0, device=dev,
+                        self._launch("friction", friction.solve_rod_contacts, dim=c1 - c0, device=dev,
                                   inputs=[self._color_ids[c0:c1], 1, *args])
                 else:
-                    wp.launch(friction.solve_rod_contacts, dim=n_contacts, device=dev,
+                    self._launch("friction", friction.solve_rod_contacts, dim=n_contacts, device=dev,
                               inputs=[self._color_ids, 0, *args])
             if nplanes:
-                wp.launch(friction.solve_plane_contacts, dim=V, device=dev, inputs=[
+                self._launch("friction", friction.solve_plane_contacts, dim=V, device=dev, inputs=[
                     m.inv_mass, pn, pv, pm, nplanes, self._plane_gap, fdt, beta, max_push,
                     state_out.plane_impulse, state_out.v, self._residual])
-            if theta != 0.0:
-                wp.launch(elastics.bending_projection, dim=N, device=dev, inputs=[
-                    m.rod_start, state_in.x, m.inv_mass, m.rest_length, m.bend_stiffness, fdt, self._blam,
-                    self._diag, self._off1, self._off2, self._rhs, self._dlam, state_out.v])
-            wp.launch(elastics.stretch_projection, dim=N, device=dev, inputs=[
-                m.rod_start, state_in.x, m.inv_mass, m.rest_length, m.compliance, fdt, self._lam,
-                self._diag, self._off1, self._rhs_scalar(), self._sdir, state_out.v, self._sresidual])
+            self._launch("elastics", elastics.rod_projection, dim=N, device=dev, inputs=[
+                m.rod_start, state_in.x, m.inv_mass, m.rest_length, fdt, int(theta != 0.0), self._bcoef,
+                self._bdiag, self._boff1, self._boff2, self._blam, self._rhs, self._dlam,
+                m.compliance, self._sdir, self._diag, self._off1, self._lam, self._rhs_scalar(), state_out.v,
+                self._sresidual])
+            used = it + 1
+            if measure and self.tolerance > 0 and it < self.iterations - 1:
+                if (self._residual.numpy()[0] < self.tolerance
+                        and self._sresidual.numpy()[0] < self.length_tolerance):
+                    break
 
-        wp.launch(elastics.integrate_positions, dim=V, device=dev, inputs=[state_in.x, state_out.v, fdt, state_out.x])
+        self._launch("elastics", elastics.integrate_positions, dim=V, device=dev, inputs=[state_in.x, state_out.v, fdt, state_out.x])
         state_out.time = state_in.time + dt
         state_out.step_index = state_in.step_index + 1
 
         self._scalar.zero_()
-        wp.launch(broadphase.max_speed, dim=V, device=dev, inputs=[state_out.v, self._scalar])
+        self._launch("checks", broadphase.max_speed, dim=V, device=dev, inputs=[state_out.v, self._scalar])
         if n_contacts:
-            wp.launch(contacts.contact_overlap, dim=n_contacts, device=dev, inputs=[
+            self._launch("checks", contacts.contact_overlap, dim=n_contacts, device=dev, inputs=[
                 n_contacts, state_out.contact_seg, m.seg_vertex, m.vertex_rod, m.rod_radius, state_out.x,
                 self._gap_check, self._scalar[2:3]])
         sc = self._scalar.numpy()
@@ -383,7 +425,7 @@ class RodSolver:
                 self._check_energy(state_in, state_out, dt, theta)
         res = self._residual.numpy()[0]
         sres = self._sresidual.numpy()[0]
-        info = StepInfo(state_out.step_index, state_out.time, dt, self.iterations, n_contacts,
+        info = StepInfo(state_out.step_index, state_out.time, dt, used, n_contacts,
                         float(res), float(sres), vmax_out, theta)
         self.last_info = info
         return info
@@ -438,7 +480,7 @@ class RodSolver:
         rebuild = self._pairs_n is None or need > self._pairs_margin
         if not rebuild:
             self._scalar.zero_()
-            wp.launch(contacts.max_displacement, dim=m.n_vertices, device=dev,
+            self._launch("broadphase", contacts.max_displacement, dim=m.n_vertices, device=dev,
                       inputs=[state_in.x, self._x_build, self._scalar])
             moved = float(self._scalar.numpy()[0])
             rebuild = 2.0 * moved + need > self._pairs_margin
@@ -448,7 +490,7 @@ class RodSolver:
         while True:
             self._count.zero_()
             if n_pairs:
-                wp.launch(contacts.narrowphase_pairs, dim=n_pairs, device=dev, inputs=[
+                self._launch("narrowphase", contacts.narrowphase_pairs, dim=n_pairs, device=dev, inputs=[
                     self._pairs, n_pairs, S, m.seg_vertex, m.vertex_rod, m.rod_radius, state_in.x, state_out.v,
                     wp.float64(base), wp.float64(dt), self._cap, self._count,
                     self._raw_seg, self._raw_key, self._raw_st, self._raw_normal, self._raw_gap])
@@ -460,10 +502,13 @@ class RodSolver:
             state_out.allocate_contacts(2 * n)
         if n == 0:
             return 0
-        wp.launch(contacts.iota, dim=n, device=dev, inputs=[self._order])
+        self._launch("narrowphase", contacts.iota, dim=n, device=dev, inputs=[self._order])
+        t0 = time.perf_counter() if self.timings is not None else 0.0
         wp.utils.radix_sort_pairs(self._raw_key, self._order, n)
+        if self.timings is not None:
+            self.timings["narrowphase"] = self.timings.get("narrowphase", 0.0) + time.perf_counter() - t0
         wp.copy(state_out.contact_key, self._raw_key, count=n)
-        wp.launch(contacts.gather_contacts, dim=n, device=dev, inputs=[
+        self._launch("narrowphase", contacts.gather_contacts, dim=n, device=dev, inputs=[
             self._order, n, self._raw_seg, self._raw_st, self._raw_normal, self._raw_gap,
             state_out.contact_seg, state_out.contact_st, state_out.contact_normal, state_out.contact_gap])
         return n
@@ -473,17 +518,20 @@ class RodSolver:
         m = self.model
         dev = m.device
         S = m.n_segments
-        wp.launch(broadphase.segment_midpoints, dim=S, device=dev, inputs=[m.seg_vertex, state.x, self._mid])
+        self._launch("broadphase", broadphase.segment_midpoints, dim=S, device=dev, inputs=[m.seg_vertex, state.x, self._mid])
         hmax = float(m.rest_length_np.max())
         rmax = float(m.radius_np.max())
         margin = need + self.skin
         query = (hmax + 2.0 * rmax + margin) * 1.0001 + 1e-6
         if self._grid is None:
             self._grid = wp.HashGrid(128, 128, 128, device=dev)
+        t0 = time.perf_counter() if self.timings is not None else 0.0
         self._grid.build(self._mid, query)
+        if self.timings is not None:
+            self.timings["broadphase"] = self.timings.get("broadphase", 0.0) + time.perf_counter() - t0
         while True:
             self._count.zero_()
-            wp.launch(contacts.find_candidate_pairs, dim=S, device=dev, inputs=[
+            self._launch("broadphase", contacts.find_candidate_pairs, dim=S, device=dev, inputs=[
                 self._grid.id, self._mid, m.seg_vertex, m.vertex_rod, m.rod_radius, state.x, float(query),
                 wp.float64(margin), self._pairs_cap, self._count, self._pairs])
             n = int(self._count.numpy()[0])
@@ -507,9 +555,9 @@ class RodSolver:
         while True:
             owner.fill_(2**31 - 1)
             remaining.zero_()
-            wp.launch(friction.color_claim, dim=n, device=dev,
+            self._launch("friction", friction.color_claim, dim=n, device=dev,
                       inputs=[n, state.contact_seg, m.seg_vertex, self._color, owner])
-            wp.launch(friction.color_commit, dim=n, device=dev,
+            self._launch("friction", friction.color_commit, dim=n, device=dev,
                       inputs=[n, state.contact_seg, m.seg_vertex, rnd, owner, self._color, remaining])
             rnd += 1
             if int(remaining.numpy()[0]) == 0:
@@ -517,7 +565,7 @@ class RodSolver:
         self.colors_used = rnd
         self._color_keys.assign(self._color_keys)  # keep allocation
         wp.copy(self._color_keys, self._color, count=n)
-        wp.launch(contacts.iota, dim=n, device=dev, inputs=[self._color_ids])
+        self._launch("narrowphase", contacts.iota, dim=n, device=dev, inputs=[self._color_ids])
         wp.utils.radix_sort_pairs(self._color_keys, self._color_ids, n)
         counts = np.bincount(self._color.numpy()[:n], minlength=rnd)
         edges = np.concatenate([[0], np.cumsum(counts)])
@@ -528,7 +576,7 @@ class RodSolver:
         """Kinetic, potential (gravity), bending and stretching energy (J) of ``state``."""
         m = self.model
         out = wp.zeros(4, dtype=wp.float64, device=m.device)
-        wp.launch(elastics.elastic_energy, dim=m.n_rods, device=m.device, inputs=[
+        self._launch("checks", elastics.elastic_energy, dim=m.n_rods, device=m.device, inputs=[
             m.rod_start, state.x, state.v, m.mass, m.rest_length, m.compliance, m.bend_stiffness,
             wp.vec3d(*m.gravity), out])
         k, p, b, s = (float(x) for x in out.numpy())
