@@ -230,8 +230,9 @@ def stretch_factor(
         soff[j] = off
 
 
-@wp.kernel
-def rod_projection(
+@wp.func
+def project_rod(
+    r: int,
     rod_start: wp.array(dtype=wp.int32),
     x: wp.array(dtype=wp.vec3d),
     inv_mass: wp.array(dtype=wp.float64),
@@ -252,16 +253,15 @@ def rod_projection(
     slam: wp.array(dtype=wp.float64),
     srhs: wp.array(dtype=wp.float64),
     v: wp.array(dtype=wp.vec3d),
-    residual: wp.array(dtype=wp.float64),
 ):
-    """One thread per rod: one exact XPBD (Newton) iteration on the rod's own constraints.
+    """One exact XPBD (Newton) iteration on rod r's own constraints; returns the largest
+    edge-length error (m) found before it.
 
     First all bending constraints (implicit bending only), then all edge-length
     constraints, each block solved directly with the factors prepared for this step.  Works
     on the predicted positions x + dt v and changes v only, so contacts, bending and
     stretching share one velocity state and one mass metric inside the Gauss-Seidel sweep.
     """
-    r = wp.tid()
     a = rod_start[r]
     b = rod_start[r + 1]
     inv_dt = F1 / dt
@@ -302,6 +302,37 @@ def rod_projection(
         imp = sdir[j] * (dl * inv_dt)
         v[j] = v[j] - imp * inv_mass[j]
         v[j + 1] = v[j + 1] + imp * inv_mass[j + 1]
+    return worst
+
+
+@wp.kernel
+def rod_projection(
+    rod_start: wp.array(dtype=wp.int32),
+    x: wp.array(dtype=wp.vec3d),
+    inv_mass: wp.array(dtype=wp.float64),
+    rest_length: wp.array(dtype=wp.float64),
+    dt: wp.float64,
+    implicit_bending: int,
+    bcoef: wp.array(dtype=wp.vec4d),
+    bdiag: wp.array(dtype=wp.float64),
+    boff1: wp.array(dtype=wp.float64),
+    boff2: wp.array(dtype=wp.float64),
+    blam: wp.array(dtype=wp.vec3d),
+    brhs: wp.array(dtype=wp.vec3d),
+    bdl: wp.array(dtype=wp.vec3d),
+    compliance: wp.array(dtype=wp.float64),
+    sdir: wp.array(dtype=wp.vec3d),
+    sdiag: wp.array(dtype=wp.float64),
+    soff: wp.array(dtype=wp.float64),
+    slam: wp.array(dtype=wp.float64),
+    srhs: wp.array(dtype=wp.float64),
+    v: wp.array(dtype=wp.vec3d),
+    residual: wp.array(dtype=wp.float64),
+):
+    """One thread per rod: ``project_rod``. Rods share no vertex, so no races."""
+    r = wp.tid()
+    worst = project_rod(r, rod_start, x, inv_mass, rest_length, dt, implicit_bending, bcoef, bdiag, boff1, boff2,
+                        blam, brhs, bdl, compliance, sdir, sdiag, soff, slam, srhs, v)
     wp.atomic_max(residual, 0, worst)
 
 

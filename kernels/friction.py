@@ -27,10 +27,9 @@ def approach_target(gap: wp.float64, dt: wp.float64, beta: wp.float64, max_push:
     return wp.min(-beta * gap / dt, max_push)
 
 
-@wp.kernel
-def solve_rod_contacts(
-    ids: wp.array(dtype=wp.int32),
-    use_ids: int,
+@wp.func
+def solve_rod_contact(
+    k: int,
     seg: wp.array(dtype=wp.vec2i),
     seg_vertex: wp.array(dtype=wp.int32),
     st: wp.array(dtype=wp.vec2d),
@@ -43,19 +42,16 @@ def solve_rod_contacts(
     max_push: wp.float64,
     impulse: wp.array(dtype=wp.vec3d),
     v: wp.array(dtype=wp.vec3d),
-    residual: wp.array(dtype=wp.float64),
 ):
-    k = wp.tid()
-    if use_ids != 0:
-        k = ids[k]
+    """Exact local solve of rod-rod contact k; returns the velocity change it caused (m/s)."""
     sp = seg[k]
     ia = seg_vertex[sp[0]]
     ib = seg_vertex[sp[1]]
     s = st[k][0]
     t = st[k][1]
-    a0 = (F1 - s)
+    a0 = F1 - s
     a1 = s
-    b0 = (F1 - t)
+    b0 = F1 - t
     b1 = t
     wa0 = inv_mass[ia] * a0
     wa1 = inv_mass[ia + 1] * a1
@@ -63,7 +59,7 @@ def solve_rod_contacts(
     wb1 = inv_mass[ib + 1] * b1
     w = wa0 * a0 + wa1 * a1 + wb0 * b0 + wb1 * b1
     if w <= F0:
-        return
+        return F0
     n = normal[k]
     u = v[ia] * a0 + v[ia + 1] * a1 - v[ib] * b0 - v[ib + 1] * b1
     P = impulse[k]
@@ -86,7 +82,33 @@ def solve_rod_contacts(
     v[ib] = v[ib] - dP * wb0
     v[ib + 1] = v[ib + 1] - dP * wb1
     impulse[k] = n * pn_new + pt_new
-    wp.atomic_max(residual, 0, wp.length(dP) * w)
+    return wp.length(dP) * w
+
+
+@wp.kernel
+def solve_rod_contacts(
+    ids: wp.array(dtype=wp.int32),
+    use_ids: int,
+    seg: wp.array(dtype=wp.vec2i),
+    seg_vertex: wp.array(dtype=wp.int32),
+    st: wp.array(dtype=wp.vec2d),
+    normal: wp.array(dtype=wp.vec3d),
+    gap: wp.array(dtype=wp.float64),
+    inv_mass: wp.array(dtype=wp.float64),
+    mu: wp.float64,
+    dt: wp.float64,
+    beta: wp.float64,
+    max_push: wp.float64,
+    impulse: wp.array(dtype=wp.vec3d),
+    v: wp.array(dtype=wp.vec3d),
+    residual: wp.array(dtype=wp.float64),
+):
+    """One thread per contact of one colour (GPU) or of all contacts in order (CPU)."""
+    k = wp.tid()
+    if use_ids != 0:
+        k = ids[k]
+    du = solve_rod_contact(k, seg, seg_vertex, st, normal, gap, inv_mass, mu, dt, beta, max_push, impulse, v)
+    wp.atomic_max(residual, 0, du)
 
 
 @wp.kernel
@@ -132,8 +154,11 @@ def prepare_plane_contacts(
     plane_gap: wp.array(dtype=wp.float64),
     plane_impulse: wp.array(dtype=wp.vec3d),
     v_out: wp.array(dtype=wp.vec3d),
+    active: wp.array(dtype=wp.int32),
+    n_active: wp.array(dtype=wp.int32),
 ):
-    """Per vertex: gaps to every plane at the start of the step; warm-started impulses.
+    """Per vertex: gaps to every plane at the start of the step; warm-started impulses;
+    the vertex joins the ``active`` list when any plane is within reach.
 
     A capsule touches a plane first at a segment endpoint, so vertex spheres suffice.
     Inactive contacts get gap = +inf and zero impulse.
@@ -142,6 +167,7 @@ def prepare_plane_contacts(
     r = rod_radius[vertex_rod[i]]
     vi = v[i]
     dv = wp.vec3d(F0, F0, F0)
+    any_active = int(0)
     for p in range(n_planes):
         k = i * n_planes + p
         n = plane_normal[p]
@@ -154,14 +180,18 @@ def prepare_plane_contacts(
             P = n * pn + (P - n * wp.dot(P, n))
             plane_impulse[k] = P
             dv = dv + P * inv_mass[i]
+            any_active = 1
         else:
             plane_gap[k] = wp.float64(1.0e300)
             plane_impulse[k] = wp.vec3d(F0, F0, F0)
     v_out[i] = v_out[i] + dv
+    if any_active != 0:
+        active[wp.atomic_add(n_active, 0, 1)] = i
 
 
-@wp.kernel
-def solve_plane_contacts(
+@wp.func
+def solve_vertex_planes(
+    i: int,
     inv_mass: wp.array(dtype=wp.float64),
     plane_normal: wp.array(dtype=wp.vec3d),
     plane_vel: wp.array(dtype=wp.vec3d),
@@ -173,13 +203,13 @@ def solve_plane_contacts(
     max_push: wp.float64,
     plane_impulse: wp.array(dtype=wp.vec3d),
     v: wp.array(dtype=wp.vec3d),
-    residual: wp.array(dtype=wp.float64),
 ):
-    """Per vertex, every active plane in turn: same exact local solve as rod-rod contacts."""
-    i = wp.tid()
+    """Every active plane of vertex i in turn (same exact local solve as rod-rod contacts);
+    returns the largest velocity change caused (m/s)."""
     w = inv_mass[i]
+    worst = F0
     if w <= F0:
-        return
+        return worst
     for p in range(n_planes):
         k = i * n_planes + p
         g = plane_gap[k]
@@ -203,7 +233,31 @@ def solve_plane_contacts(
         dP = n * (pn_new - pn) + (pt_new - pt)
         v[i] = v[i] + dP * w
         plane_impulse[k] = n * pn_new + pt_new
-        wp.atomic_max(residual, 0, wp.length(dP) * w)
+        worst = wp.max(worst, wp.length(dP) * w)
+    return worst
+
+
+@wp.kernel
+def solve_plane_contacts(
+    active: wp.array(dtype=wp.int32),
+    inv_mass: wp.array(dtype=wp.float64),
+    plane_normal: wp.array(dtype=wp.vec3d),
+    plane_vel: wp.array(dtype=wp.vec3d),
+    plane_mu: wp.array(dtype=wp.float64),
+    n_planes: int,
+    plane_gap: wp.array(dtype=wp.float64),
+    dt: wp.float64,
+    beta: wp.float64,
+    max_push: wp.float64,
+    plane_impulse: wp.array(dtype=wp.vec3d),
+    v: wp.array(dtype=wp.vec3d),
+    residual: wp.array(dtype=wp.float64),
+):
+    """One thread per vertex that touches a wall (``active`` lists them)."""
+    i = active[wp.tid()]
+    du = solve_vertex_planes(i, inv_mass, plane_normal, plane_vel, plane_mu, n_planes, plane_gap, dt, beta,
+                             max_push, plane_impulse, v)
+    wp.atomic_max(residual, 0, du)
 
 
 @wp.kernel

@@ -29,6 +29,9 @@ def init() -> None:
         return
     wp.config.kernel_cache_dir = kernel_cache_dir()
     wp.config.quiet = True
+    # warp >= 1.19 routes its greeting and module-load lines through a logger
+    if hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_WARNING
     wp.init()
     _configured = True
 

@@ -28,7 +28,7 @@ import numpy as np
 import warp as wp
 
 from rodwarp.errors import RodwarpError, SimulationBlowUp
-from rodwarp.kernels import broadphase, contacts, elastics, friction
+from rodwarp.kernels import broadphase, contacts, elastics, friction, solve
 from rodwarp.model import Model, State
 
 
@@ -164,6 +164,11 @@ class RodSolver:
         self.pair_builds = 0
         self._grow(max(64, 4 * S))
         self._plane_gap = wp.zeros(V * max(len(model.planes), 1), dtype=wp.float64, device=d)
+        self._active = wp.zeros(V, dtype=wp.int32, device=d)
+        self._n_active = wp.zeros(1, dtype=wp.int32, device=d)
+        self._solve_out = wp.zeros(3, dtype=wp.float64, device=d)
+        # sequential devices run the whole solve in one launch (same order, no launch overhead)
+        self.fused = (not self.coloring) and not wp.get_device(model.device).is_cuda
         self.last_info: StepInfo | None = None
         # per-stage kernel seconds (elastics, broadphase, narrowphase, friction, checks) when
         # profiling; None (no synchronisation, no overhead) otherwise
@@ -265,6 +270,45 @@ class RodSolver:
             return "explicit bending, 2/omega_max"
         return "contact resolution, d_min / characteristic speed"
 
+    def _sweeps(self, state_in, state_out, n_contacts, nplanes, pn, pv, pm, fdt, beta, max_push, implicit):
+        """Gauss-Seidel sweeps as separate launches (coloured contacts; the GPU path)."""
+        m = self.model
+        dev = m.device
+        N = m.n_rods
+        n_active = int(self._n_active.numpy()[0]) if nplanes else 0
+        used = 0
+        for it in range(self.iterations):
+            measure = it == self.iterations - 1 or (self.tolerance > 0 and it % 2 == 1)
+            if measure:
+                self._residual.zero_()
+                self._sresidual.zero_()
+            if n_contacts:
+                args = [state_out.contact_seg, m.seg_vertex, state_out.contact_st, state_out.contact_normal,
+                        state_out.contact_gap, m.inv_mass, wp.float64(m.mu), fdt, beta, max_push,
+                        state_out.contact_impulse, state_out.v, self._residual]
+                if self.coloring:
+                    for c0, c1 in self._color_ranges:
+                        self._launch("friction", friction.solve_rod_contacts, dim=c1 - c0, device=dev,
+                                     inputs=[self._color_ids[c0:c1], 1, *args])
+                else:
+                    self._launch("friction", friction.solve_rod_contacts, dim=n_contacts, device=dev,
+                                 inputs=[self._color_ids, 0, *args])
+            if n_active:
+                self._launch("friction", friction.solve_plane_contacts, dim=n_active, device=dev, inputs=[
+                    self._active, m.inv_mass, pn, pv, pm, nplanes, self._plane_gap, fdt, beta, max_push,
+                    state_out.plane_impulse, state_out.v, self._residual])
+            self._launch("elastics", elastics.rod_projection, dim=N, device=dev, inputs=[
+                m.rod_start, state_in.x, m.inv_mass, m.rest_length, fdt, implicit, self._bcoef,
+                self._bdiag, self._boff1, self._boff2, self._blam, self._rhs, self._dlam,
+                m.compliance, self._sdir, self._diag, self._off1, self._lam, self._rhs_scalar(), state_out.v,
+                self._sresidual])
+            used = it + 1
+            if measure and self.tolerance > 0 and it < self.iterations - 1:
+                if (self._residual.numpy()[0] < self.tolerance
+                        and self._sresidual.numpy()[0] < self.length_tolerance):
+                    break
+        return float(self._residual.numpy()[0]), float(self._sresidual.numpy()[0]), used
+
     # ------------------------------------------------------------------ profiling
     def _launch(self, stage: str, kernel, **kw) -> None:
         if self.timings is None:
@@ -348,15 +392,17 @@ class RodSolver:
                 self._color_contacts(state_out, n_contacts)
 
         normals, offsets, pvel, mus = m.plane_kinematics(state_in.time, dt)
+        pn = wp.array(normals, dtype=wp.vec3d, device=dev)
+        pv = wp.array(pvel, dtype=wp.vec3d, device=dev)
+        pm = wp.array(mus, dtype=wp.float64, device=dev)
+        self._n_active.zero_()
         if nplanes:
-            pn = wp.array(normals, dtype=wp.vec3d, device=dev)
             po = wp.array(offsets, dtype=wp.float64, device=dev)
-            pv = wp.array(pvel, dtype=wp.vec3d, device=dev)
-            pm = wp.array(mus, dtype=wp.float64, device=dev)
             state_out.plane_impulse.assign(state_in.plane_impulse)
             self._launch("friction", friction.prepare_plane_contacts, dim=V, device=dev, inputs=[
                 state_in.x, state_out.v, m.vertex_rod, m.rod_radius, m.inv_mass, pn, po, pv, nplanes,
-                wp.float64(m.contact_distance), fdt, ws, self._plane_gap, state_out.plane_impulse, state_out.v])
+                wp.float64(m.contact_distance), fdt, ws, self._plane_gap, state_out.plane_impulse, state_out.v,
+                self._active, self._n_active])
 
         self._lam.zero_()
         self._blam.zero_()
@@ -369,37 +415,21 @@ class RodSolver:
             m.rod_start, state_in.x, m.inv_mass, m.compliance, fdt, self._sdir, self._diag, self._off1])
         beta = wp.float64(self.baumgarte)
         max_push = wp.float64(max(self.characteristic_speed(), 1e-3))
-        used = 0
-        for it in range(self.iterations):
-            measure = it == self.iterations - 1 or (self.tolerance > 0 and it % 2 == 1)
-            if measure:
-                self._residual.zero_()
-                self._sresidual.zero_()
-            if n_contacts:
-                args = [state_out.contact_seg, m.seg_vertex, state_out.contact_st, state_out.contact_normal,
-                        state_out.contact_gap, m.inv_mass, wp.float64(m.mu), fdt, beta, max_push,
-                        state_out.contact_impulse, state_out.v, self._residual]
-                if self.coloring:
-                    for c0, c1 in self._color_ranges:
-                        self._launch("friction", friction.solve_rod_contacts, dim=c1 - c0, device=dev,
-                                  inputs=[self._color_ids[c0:c1], 1, *args])
-                else:
-                    self._launch("friction", friction.solve_rod_contacts, dim=n_contacts, device=dev,
-                              inputs=[self._color_ids, 0, *args])
-            if nplanes:
-                self._launch("friction", friction.solve_plane_contacts, dim=V, device=dev, inputs=[
-                    m.inv_mass, pn, pv, pm, nplanes, self._plane_gap, fdt, beta, max_push,
-                    state_out.plane_impulse, state_out.v, self._residual])
-            self._launch("elastics", elastics.rod_projection, dim=N, device=dev, inputs=[
-                m.rod_start, state_in.x, m.inv_mass, m.rest_length, fdt, int(theta != 0.0), self._bcoef,
-                self._bdiag, self._boff1, self._boff2, self._blam, self._rhs, self._dlam,
-                m.compliance, self._sdir, self._diag, self._off1, self._lam, self._rhs_scalar(), state_out.v,
-                self._sresidual])
-            used = it + 1
-            if measure and self.tolerance > 0 and it < self.iterations - 1:
-                if (self._residual.numpy()[0] < self.tolerance
-                        and self._sresidual.numpy()[0] < self.length_tolerance):
-                    break
+        implicit = int(theta != 0.0)
+        if self.fused:
+            self._launch("solve", solve.gauss_seidel_sequential, dim=1, device=dev, inputs=[
+                self.iterations, wp.float64(self.tolerance), wp.float64(self.length_tolerance), fdt, beta, max_push,
+                m.inv_mass, n_contacts, state_out.contact_seg, m.seg_vertex, state_out.contact_st,
+                state_out.contact_normal, state_out.contact_gap, wp.float64(m.mu), state_out.contact_impulse,
+                self._n_active, self._active, pn, pv, pm, nplanes, self._plane_gap, state_out.plane_impulse,
+                N, m.rod_start, state_in.x, m.rest_length, implicit, self._bcoef, self._bdiag, self._boff1,
+                self._boff2, self._blam, self._rhs, self._dlam, m.compliance, self._sdir, self._diag, self._off1,
+                self._lam, self._rhs_scalar(), state_out.v, self._solve_out])
+            res, sres, used = (float(x) for x in self._solve_out.numpy())
+            used = int(used)
+        else:
+            res, sres, used = self._sweeps(state_in, state_out, n_contacts, nplanes, pn, pv, pm, fdt, beta, max_push,
+                                           implicit)
 
         self._launch("elastics", elastics.integrate_positions, dim=V, device=dev, inputs=[state_in.x, state_out.v, fdt, state_out.x])
         state_out.time = state_in.time + dt
@@ -423,8 +453,6 @@ class RodSolver:
                 raise self._blowup(state_in, dt, theta, f"rods overlap by {depth / m.min_diameter:.2f} d")
             if self.energy_check_every and state_out.step_index % self.energy_check_every == 0:
                 self._check_energy(state_in, state_out, dt, theta)
-        res = self._residual.numpy()[0]
-        sres = self._sresidual.numpy()[0]
         info = StepInfo(state_out.step_index, state_out.time, dt, used, n_contacts,
                         float(res), float(sres), vmax_out, theta)
         self.last_info = info

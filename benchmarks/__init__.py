@@ -1,0 +1,15 @@
+"""rodwarp benchmark suite.
+
+Run ``python -m benchmarks [--quick|--full] [--only NAME ...] [--device cpu]``.  Each
+benchmark is a module ``benchmarks/bench_<name>.py`` with
+
+* ``run(quick: bool, device: str) -> dict``: the measurements, JSON-serialisable;
+* ``plot(record: dict, outdir: Path) -> list[dict]``: PNG charts drawn from the record alone,
+  each returned as ``{"file": ..., "title": ..., "reading": ...}``.
+
+The runner adds the provenance (command, date, device, versions), writes
+``benchmarks/results/<name>.json`` atomically and regenerates ``benchmarks/RESULTS.md`` from
+every JSON file in ``benchmarks/results``.  See ``benchmarks/README.md``.
+"""
+
+BENCHMARKS = ("pile", "broadphase", "accuracy")
