@@ -37,6 +37,53 @@ def bend_coeffs(rest_length: wp.array(dtype=wp.float64), i: int):
     return cm, -(cm + cp), cp, wp.float64(2.0) / (hm + hp)
 
 
+@wp.kernel
+def rest_curvature_targets(
+    rod_start: wp.array(dtype=wp.int32),
+    vertex_rod: wp.array(dtype=wp.int32),
+    x: wp.array(dtype=wp.vec3d),
+    rest_x: wp.array(dtype=wp.vec3d),
+    rest_kappa: wp.array(dtype=wp.vec3d),
+    target: wp.array(dtype=wp.vec3d),
+):
+    """Per vertex: the rest curvature vector rotated into the rod's current local frame.
+
+    The frame is the rotation that best maps the rest window x_{i-2..i+2} onto the current
+    one (polar decomposition of their cross-covariance), so a naturally curved rod keeps
+    its shape, bend plane and torsion up to a rigid motion. Evaluated at the start of the
+    step, it leaves each bending constraint linear in x (same matrix as for straight rods).
+    """
+    i = wp.tid()
+    r = vertex_rod[i]
+    a = rod_start[r]
+    b = rod_start[r + 1]
+    if i <= a or i >= b - 1:
+        target[i] = wp.vec3d(F0, F0, F0)
+        return
+    j0 = wp.max(a, i - 2)
+    j1 = wp.min(b - 1, i + 2)
+    cx = wp.vec3d(F0, F0, F0)
+    cr = wp.vec3d(F0, F0, F0)
+    for j in range(j0, j1 + 1):
+        cx = cx + x[j]
+        cr = cr + rest_x[j]
+    inv = F1 / wp.float64(j1 - j0 + 1)
+    cx = cx * inv
+    cr = cr * inv
+    A = wp.mat33d()
+    for j in range(j0, j1 + 1):
+        A = A + wp.outer(x[j] - cx, rest_x[j] - cr)
+    U = wp.mat33d()
+    sig = wp.vec3d()
+    V = wp.mat33d()
+    wp.svd3(A, U, sig, V)
+    R = U * wp.transpose(V)
+    if wp.determinant(R) < F0:
+        D = wp.mat33d(F1, F0, F0, F0, F1, F0, F0, F0, -F1)
+        R = U * D * wp.transpose(V)
+    target[i] = R * rest_kappa[i]
+
+
 @wp.func
 def pentadiagonal_factor(
     a: int,
@@ -111,6 +158,7 @@ def velocity_predictor(
     damping: wp.float64,
     dt: wp.float64,
     explicit_bending: int,
+    btarget: wp.array(dtype=wp.vec3d),
     v_out: wp.array(dtype=wp.vec3d),
 ):
     """One thread per rod: velocity after damping, body force and (explicit) bending.
@@ -134,7 +182,7 @@ def velocity_predictor(
         EI = bend_stiffness[r]
         for i in range(a + 1, b - 1):
             cm, c0, cp, wl = bend_coeffs(rest_length, i)
-            kap = x[i - 1] * cm + x[i] * c0 + x[i + 1] * cp
+            kap = x[i - 1] * cm + x[i] * c0 + x[i + 1] * cp - btarget[i]
             f = kap * (EI * wl * dt)
             v_out[i - 1] = v_out[i - 1] - f * (cm * inv_mass[i - 1])
             v_out[i] = v_out[i] - f * (c0 * inv_mass[i])
@@ -240,6 +288,7 @@ def project_rod(
     dt: wp.float64,
     implicit_bending: int,
     bcoef: wp.array(dtype=wp.vec4d),
+    btarget: wp.array(dtype=wp.vec3d),
     bdiag: wp.array(dtype=wp.float64),
     boff1: wp.array(dtype=wp.float64),
     boff2: wp.array(dtype=wp.float64),
@@ -270,7 +319,7 @@ def project_rod(
         for i in range(a + 1, b - 1):
             c = bcoef[i]
             Cb = (x[i - 1] + v[i - 1] * dt) * c[0] + (x[i] + v[i] * dt) * c[1] + (x[i + 1] + v[i + 1] * dt) * c[2]
-            brhs[i] = -Cb - blam[i] * c[3]
+            brhs[i] = -(Cb - btarget[i]) - blam[i] * c[3]
         pentadiagonal_substitute(a + 1, b - 1, bdiag, boff1, boff2, brhs, bdl)
         for i in range(a + 1, b - 1):
             c = bcoef[i]
@@ -314,6 +363,7 @@ def rod_projection(
     dt: wp.float64,
     implicit_bending: int,
     bcoef: wp.array(dtype=wp.vec4d),
+    btarget: wp.array(dtype=wp.vec3d),
     bdiag: wp.array(dtype=wp.float64),
     boff1: wp.array(dtype=wp.float64),
     boff2: wp.array(dtype=wp.float64),
@@ -331,7 +381,8 @@ def rod_projection(
 ):
     """One thread per rod: ``project_rod``. Rods share no vertex, so no races."""
     r = wp.tid()
-    worst = project_rod(r, rod_start, x, inv_mass, rest_length, dt, implicit_bending, bcoef, bdiag, boff1, boff2,
+    worst = project_rod(r, rod_start, x, inv_mass, rest_length, dt, implicit_bending, bcoef, btarget, bdiag, boff1,
+                        boff2,
                         blam, brhs, bdl, compliance, sdir, sdiag, soff, slam, srhs, v)
     wp.atomic_max(residual, 0, worst)
 
@@ -345,6 +396,7 @@ def elastic_energy(
     rest_length: wp.array(dtype=wp.float64),
     compliance: wp.array(dtype=wp.float64),
     bend_stiffness: wp.array(dtype=wp.float64),
+    btarget: wp.array(dtype=wp.vec3d),
     body_accel: wp.vec3d,
     out: wp.array(dtype=wp.float64),
 ):
@@ -367,7 +419,7 @@ def elastic_energy(
             es = es + half * stretch * stretch / compliance[j]
     for i in range(a + 1, b - 1):
         cm, c0, cp, wl = bend_coeffs(rest_length, i)
-        kap = x[i - 1] * cm + x[i] * c0 + x[i + 1] * cp
+        kap = x[i - 1] * cm + x[i] * c0 + x[i + 1] * cp - btarget[i]
         eb = eb + half * EI * wl * wp.dot(kap, kap)
     wp.atomic_add(out, 0, ek)
     wp.atomic_add(out, 1, ep)

@@ -50,6 +50,7 @@ def gauss_seidel_sequential(
     rest_length: wp.array(dtype=wp.float64),
     implicit_bending: int,
     bcoef: wp.array(dtype=wp.vec4d),
+    btarget: wp.array(dtype=wp.vec3d),
     bdiag: wp.array(dtype=wp.float64),
     boff1: wp.array(dtype=wp.float64),
     boff2: wp.array(dtype=wp.float64),
@@ -81,7 +82,7 @@ def gauss_seidel_sequential(
                                                     plane_gap, dt, beta, max_push, plane_impulse, v))
         for r in range(n_rods):
             sres = wp.max(sres, project_rod(r, rod_start, x, inv_mass, rest_length, dt, implicit_bending, bcoef,
-                                            bdiag, boff1, boff2, blam, brhs, bdl, compliance, sdir, sdiag, soff, slam,
+                                            btarget, bdiag, boff1, boff2, blam, brhs, bdl, compliance, sdir, sdiag, soff, slam,
                                             srhs, v))
         used = it + 1
         if tolerance > F0 and it % 2 == 1:

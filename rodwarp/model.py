@@ -199,6 +199,20 @@ class Model:
             inv_mass[idx] = 0.0
         compliance = np.where(last | (not extensible), 0.0, rest_length / (material.young * area[vertex_rod]))
 
+        # natural curvature: rest curvature vectors kappa_bar_i at interior vertices; only a
+        # curved rest shape switches the per-step frame estimate on (straight rods skip it)
+        rest_kappa = np.zeros((V, 3))
+        first = np.zeros(V, dtype=bool)
+        first[offsets[:-1]] = True
+        interior = ~first & ~last
+        idx = np.flatnonzero(interior)
+        if idx.size:
+            tp = (rest[idx + 1] - rest[idx]) / rest_length[idx, None]
+            tm = (rest[idx] - rest[idx - 1]) / rest_length[idx - 1, None]
+            rest_kappa[idx] = tp - tm
+        self.curved = bool(idx.size and np.max(np.linalg.norm(rest_kappa, axis=1)) > 1e-9)
+        self.rest_kappa_np = rest_kappa
+
         self.n_rods, self.n_vertices = N, V
         self.seg_vertex_np = np.flatnonzero(~last).astype(np.int32)
         self.n_segments = int(self.seg_vertex_np.size)
@@ -220,6 +234,8 @@ class Model:
         self.compliance = wp.array(compliance, dtype=wp.float64, device=d)
         self.bend_stiffness = wp.array(self.bend_stiffness_np, dtype=wp.float64, device=d)
         self.rod_radius = wp.array(self.radius_np, dtype=wp.float64, device=d)
+        self.rest_x = wp.array(rest, dtype=wp.vec3d, device=d)
+        self.rest_kappa = wp.array(rest_kappa, dtype=wp.vec3d, device=d)
 
     # ------------------------------------------------------------------ boundaries
     def add_plane(self, normal, offset: float, *, mu: float | None = None, moving: bool = False, name: str = "plane") -> Plane:

@@ -146,6 +146,7 @@ class RodSolver:
         self._boff2 = wp.zeros(V, dtype=wp.float64, device=d)
         self._bfactor_dt = None
         self._bcoef = wp.zeros(V, dtype=wp.vec4d, device=d)
+        self._btarget = wp.zeros(V, dtype=wp.vec3d, device=d)
         self._dlam = wp.zeros(V, dtype=wp.vec3d, device=d)
         self._mid = wp.zeros(max(S, 1), dtype=wp.vec3, device=d)
         self._scalar = wp.zeros(4, dtype=wp.float64, device=d)
@@ -298,7 +299,7 @@ class RodSolver:
                     self._active, m.inv_mass, pn, pv, pm, nplanes, self._plane_gap, fdt, beta, max_push,
                     state_out.plane_impulse, state_out.v, self._residual])
             self._launch("elastics", elastics.rod_projection, dim=N, device=dev, inputs=[
-                m.rod_start, state_in.x, m.inv_mass, m.rest_length, fdt, implicit, self._bcoef,
+                m.rod_start, state_in.x, m.inv_mass, m.rest_length, fdt, implicit, self._bcoef, self._btarget,
                 self._bdiag, self._boff1, self._boff2, self._blam, self._rhs, self._dlam,
                 m.compliance, self._sdir, self._diag, self._off1, self._lam, self._rhs_scalar(), state_out.v,
                 self._sresidual])
@@ -366,9 +367,12 @@ class RodSolver:
         if self._plane_gap.shape[0] != V * max(nplanes, 1):
             self._plane_gap = wp.zeros(V * max(nplanes, 1), dtype=wp.float64, device=dev)
 
+        if m.curved:
+            self._launch("elastics", elastics.rest_curvature_targets, dim=V, device=dev, inputs=[
+                m.rod_start, m.vertex_rod, state_in.x, m.rest_x, m.rest_kappa, self._btarget])
         self._launch("elastics", elastics.velocity_predictor, dim=N, device=dev, inputs=[
             m.rod_start, state_in.x, state_in.v, m.mass, m.inv_mass, m.rest_length, m.bend_stiffness,
-            wp.vec3d(*m.gravity), wp.float64(m.damping), fdt, int(theta == 0.0), state_out.v])
+            wp.vec3d(*m.gravity), wp.float64(m.damping), fdt, int(theta == 0.0), self._btarget, state_out.v])
 
         self._scalar.zero_()
         self._launch("checks", broadphase.max_speed, dim=V, device=dev, inputs=[state_out.v, self._scalar])
@@ -422,7 +426,7 @@ class RodSolver:
                 m.inv_mass, n_contacts, state_out.contact_seg, m.seg_vertex, state_out.contact_st,
                 state_out.contact_normal, state_out.contact_gap, wp.float64(m.mu), state_out.contact_impulse,
                 self._n_active, self._active, pn, pv, pm, nplanes, self._plane_gap, state_out.plane_impulse,
-                N, m.rod_start, state_in.x, m.rest_length, implicit, self._bcoef, self._bdiag, self._boff1,
+                N, m.rod_start, state_in.x, m.rest_length, implicit, self._bcoef, self._btarget, self._bdiag, self._boff1,
                 self._boff2, self._blam, self._rhs, self._dlam, m.compliance, self._sdir, self._diag, self._off1,
                 self._lam, self._rhs_scalar(), state_out.v, self._solve_out])
             res, sres, used = (float(x) for x in self._solve_out.numpy())
@@ -600,13 +604,22 @@ class RodSolver:
         self._color_ranges = [(int(edges[i]), int(edges[i + 1])) for i in range(rnd) if counts[i] > 0]
 
     # ------------------------------------------------------------------ diagnostics
+    def _targets_for(self, state: State):
+        m = self.model
+        if not m.curved:
+            return self._btarget
+        t = wp.zeros(m.n_vertices, dtype=wp.vec3d, device=m.device)
+        wp.launch(elastics.rest_curvature_targets, dim=m.n_vertices, device=m.device, inputs=[
+            m.rod_start, m.vertex_rod, state.x, m.rest_x, m.rest_kappa, t])
+        return t
+
     def energy(self, state: State) -> dict:
         """Kinetic, potential (gravity), bending and stretching energy (J) of ``state``."""
         m = self.model
         out = wp.zeros(4, dtype=wp.float64, device=m.device)
         self._launch("checks", elastics.elastic_energy, dim=m.n_rods, device=m.device, inputs=[
             m.rod_start, state.x, state.v, m.mass, m.rest_length, m.compliance, m.bend_stiffness,
-            wp.vec3d(*m.gravity), out])
+            self._targets_for(state), wp.vec3d(*m.gravity), out])
         k, p, b, s = (float(x) for x in out.numpy())
         return {"kinetic": k, "potential": p, "bending": b, "stretching": s, "total": k + p + b + s}
 

@@ -15,6 +15,14 @@ from rodwarp.solver import RodSolver, run
 TEST_MAT = Material(young=TEST_YOUNG, density=TEST_DENSITY)
 
 
+def straightened(pts):
+    """A straight polyline with the same edge lengths (a straight rest shape)."""
+    h = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    out = np.zeros_like(pts)
+    out[1:, 0] = np.cumsum(h)
+    return out
+
+
 def settle_cantilever(n_edges, dt=1e-3, duration=1.5, damping=40.0, **solver_kw):
     rods, pinned = cantilever(n_edges)
     model = Model(rods, TEST_MAT, gravity=(0, 0, -9.81), damping=damping, pinned=pinned, rod_contacts=False)
@@ -90,7 +98,7 @@ def test_free_rod_momentum_and_no_energy_drift():
     n = 10
     s = np.linspace(0, 1, n)
     pts = np.stack([s, 0.05 * np.sin(np.pi * s), np.zeros(n)], axis=1)
-    rods = RodSet.from_polylines([pts], TEST_RADIUS)
+    rods = RodSet.from_polylines([pts], TEST_RADIUS, rest_points=straightened(pts))
     v = np.zeros_like(pts)
     v[:, 1] = 0.3 * (s - 0.5)
     v[:, 2] = 0.1
@@ -111,3 +119,45 @@ def test_free_rod_momentum_and_no_energy_drift():
     assert abs(last - first) / first < 2e-3
     p1 = (model.mass_np[:, None] * state.velocities()).sum(axis=0)
     assert np.linalg.norm(p1 - p0) <= 1e-9 * np.linalg.norm(p0)
+
+
+def helix(n=30, turns=1.0, radius=0.1, pitch=0.05):
+    t = np.linspace(0, 2 * np.pi * turns, n)
+    return np.stack([radius * np.cos(t), radius * np.sin(t), pitch * t / (2 * np.pi)], axis=1)
+
+
+def pair_distances(x):
+    return np.linalg.norm(x[:, None] - x[None], axis=-1)
+
+
+def test_curved_rod_at_rest_shape_stays_put_under_rigid_motion():
+    # a helix at its rest shape, rotated and moved: no elastic force, no motion
+    pts = helix()
+    th = 0.7
+    R = np.array([[np.cos(th), 0, np.sin(th)], [0, 1, 0], [-np.sin(th), 0, np.cos(th)]])
+    moved = pts @ R.T + np.array([0.3, -0.2, 0.5])
+    rods = RodSet.from_polylines([moved], 0.005, rest_points=pts)
+    model = Model(rods, TEST_MAT, gravity=(0, 0, 0), rod_contacts=False)
+    assert model.curved
+    solver = RodSolver(model)
+    state = model.state()
+    assert solver.energy(state)["bending"] < 1e-20
+    state = run(solver, state, 0.2, solver.default_dt())
+    assert np.max(np.abs(state.positions() - moved)) < 1e-9
+
+
+def test_curved_rod_recovers_its_natural_shape():
+    # a helix flattened and straightened towards a line springs back to its rest shape
+    # (up to a rigid motion) under damping: natural curvature and torsion are kept
+    pts = helix()
+    flat = pts.copy()
+    flat[:, 2] = 0.0
+    flat = 0.5 * flat + 0.5 * straightened(pts) * 0.5
+    rods = RodSet.from_polylines([flat], 0.005, rest_points=pts)
+    model = Model(rods, TEST_MAT, gravity=(0, 0, 0), damping=20.0, rod_contacts=False, extensible=False)
+    solver = RodSolver(model)
+    state = run(solver, model.state(), 3.0, 1e-3)
+    d_rest = pair_distances(pts)
+    err0 = np.abs(pair_distances(flat) - d_rest).max()
+    err = np.abs(pair_distances(state.positions()) - d_rest).max()
+    assert err < 0.02 * err0
