@@ -221,7 +221,7 @@ def _point(n_tiles: int, quick: bool, device: str, limit_s: float, rate: list) -
         def go():
             out["r"] = ckdtree_contacts(model, x, radius)
 
-        t = common.time_repeats(go, repeats)
+        t = common.time_repeats(go, repeats, warmup=True)
         pairs, gaps, ncand = out["r"]
         kd[label] = {"time_s": t, "query_radius_m": radius, "candidates": int(ncand),
                      "agreement_vs_rodwarp": _compare(pairs, gaps, rw_pairs, rw_gaps, cd), "_pairs": (pairs, gaps)}
@@ -241,7 +241,7 @@ def _point(n_tiles: int, quick: bool, device: str, limit_s: float, rate: list) -
         def go():
             out["r"] = all_pairs_contacts(model, x)
 
-        ap["time_s"] = common.time_repeats(go, repeats)
+        ap["time_s"] = common.time_repeats(go, repeats, warmup=predicted < 1.0)
         ap["skipped"] = False
         ap_pairs = out["r"]
         rate[0] = n_pairs_total / ap["time_s"]["median"]  # refine the prediction for the next N
@@ -413,7 +413,7 @@ def plot(rec: dict, outdir) -> list[dict]:
     ax2.set_title("Speed ratio (same run, same positions)", fontsize=10)
     ax2.grid(True, which="both", alpha=0.3)
     ax2.legend(fontsize=7.5)
-    fig.suptitle(f"Contact search, {rec.get('device', '').split(';')[0]}", fontsize=11)
+    fig.suptitle(f"Contact search, {common.short_device(rec)}", fontsize=11)
     fig.tight_layout()
     f = common.save_figure(fig, outdir / f"{NAME}_scaling.png")
     last = pts[-1]

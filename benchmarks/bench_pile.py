@@ -343,7 +343,7 @@ def plot(rec: dict, outdir) -> list[dict]:
     ax.set_yscale("log")
     ax.set_xlabel("rods N (10 vertices each)")
     ax.set_ylabel("vertex-steps per second (median; bars: min–max)")
-    ax.set_title(f"Pile throughput, {rec.get('device', 'device').split(';')[0]}", fontsize=10)
+    ax.set_title(f"Pile throughput, {common.short_device(rec)}", fontsize=10)
     ax.set_ylim(top=max(ax.get_ylim()[1], TARGET * 1.5))
     ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2)
     ax.grid(True, which="both", alpha=0.3)

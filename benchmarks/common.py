@@ -83,8 +83,13 @@ def device_name(device: str) -> str:
     dev = _warp.resolve_device(device)
     d = wp.get_device(dev)
     if d.is_cpu:
-        return f"cpu ({cpu_model()}; Warp CPU kernels run on one thread)"
-    return f"{dev} ({d.name})"
+        return f"cpu: {cpu_model()} (Warp CPU kernels run on one thread)"
+    return f"{dev}: {d.name}"
+
+
+def short_device(rec: dict) -> str:
+    """Device without the parenthesised remark, for chart titles and table cells."""
+    return (rec.get("device") or "").split(" (")[0]
 
 
 def utc_now() -> str:
@@ -115,8 +120,13 @@ def spread(samples) -> dict:
             "samples": [float(x) for x in a]}
 
 
-def time_repeats(fn, repeats: int, *, setup=None, device: str | None = None) -> dict:
-    """Call ``setup()`` (untimed) then ``fn()`` (timed, wall clock) ``repeats`` times."""
+def time_repeats(fn, repeats: int, *, setup=None, device: str | None = None, warmup: bool = False) -> dict:
+    """Call ``setup()`` (untimed) then ``fn()`` (timed, wall clock) ``repeats`` times; with
+    ``warmup`` one untimed call first (imports, allocations, compilation)."""
+    if warmup:
+        if setup is not None:
+            setup()
+        fn()
     out = []
     for _ in range(repeats):
         if setup is not None:

@@ -72,7 +72,7 @@ def render(recs: list[dict]) -> str:
         out += meta + [""]
         out += ["| benchmark | rodwarp | peer | ratio | device | versions | date | command |",
                 "| --- | --- | --- | --- | --- | --- | --- | --- |"]
-        dev = (rec.get("device") or "").split(";")[0]
+        dev = common.short_device(rec)
         v = rec.get("versions", {})
         vshort = f"rodwarp {v.get('rodwarp')} ({(v.get('git') or {}).get('commit')}), warp {v.get('warp')}"
         for row in rec.get("summary", []):
