@@ -84,7 +84,7 @@ def simulate(
     young: float = typer.Option(200e9, help="Young's modulus (Pa)."),
     density: float = typer.Option(7850.0, help="Density (kg/m^3)."),
     dt: Optional[float] = typer.Option(None, help="Time step (s); default from the scene's stability bound."),
-    iterations: int = typer.Option(10, help="Gauss-Seidel iterations per step."),
+    iterations: int = typer.Option(20, help="Most Gauss-Seidel sweeps per step (20: max overlap < 0.1 d in the default run)."),
     save_every: float = typer.Option(0.1, help="Metrics and frame interval (s of simulated time)."),
     seed: int = typer.Option(0, help="Random seed of the packing."),
     device: str = typer.Option("auto", help="auto, cpu or cuda."),

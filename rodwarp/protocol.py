@@ -51,7 +51,7 @@ class ProtocolParams:
     young: float = 200e9
     density: float = 7850.0
     dt: float | None = None
-    iterations: int = 10
+    iterations: int = 20
     save_every: float = 0.1
     seed: int = 0
     device: str = "auto"
