@@ -86,6 +86,9 @@ def simulate(
     dt: Optional[float] = typer.Option(None, help="Time step (s); default from the scene's stability bound."),
     iterations: int = typer.Option(20, help="Most Gauss-Seidel sweeps per step (20: max overlap < 0.1 d in the default run)."),
     save_every: float = typer.Option(0.1, help="Metrics and frame interval (s of simulated time)."),
+    checkpoint_every: float = typer.Option(1.0, help="Checkpoint interval (s of simulated time)."),
+    resume: bool = typer.Option(False, help="Continue a killed run from its newest checkpoint in --out."),
+    entangle: bool = typer.Option(False, help="With --initial: run the entangling stage too."),
     seed: int = typer.Option(0, help="Random seed of the packing."),
     device: str = typer.Option("auto", help="auto, cpu or cuda."),
     out: Optional[Path] = typer.Option(None, help="Output directory (default runs/alpha{A}_freq{F})."),
@@ -99,12 +102,13 @@ def simulate(
         alpha=alpha, freq=freq, amplitude=amplitude, gravity=gravity, duration=duration,
         entangle_duration=entangle_duration, entangle_freq=entangle_freq, entangle_amplitude=entangle_amplitude,
         static_load=static_load, n_rods=n_rods, length=length, vertices=vertices, box=_parse_box(box), mu=mu,
-        young=young, density=density, dt=dt, iterations=iterations, save_every=save_every, seed=seed,
-        device=device, initial=str(initial) if initial else None,
+        young=young, density=density, dt=dt, iterations=iterations, save_every=save_every,
+        checkpoint_every=checkpoint_every, seed=seed, device=device, initial=str(initial) if initial else None,
+        entangle=entangle,
     )
     params.validate()
     outdir = out or Path("runs") / f"alpha{alpha:g}_freq{freq:g}"
-    summary = run_protocol(params, outdir, progress=not quiet)
+    summary = run_protocol(params, outdir, progress=not quiet, resume=resume)
     typer.echo(
         f"alpha={summary['alpha']:g} n_rods={summary['n_rods']} a/g={summary['a_over_g']:.3g} "
         f"Z={summary['contacts_per_rod']:.2f} f={summary['largest_cluster_fraction']:.3f} "

@@ -53,9 +53,11 @@ class ProtocolParams:
     dt: float | None = None
     iterations: int = 20
     save_every: float = 0.1
+    checkpoint_every: float = 1.0
     seed: int = 0
     device: str = "auto"
     initial: str | None = None
+    entangle: bool = False
 
     def validate(self) -> None:
         """Raise :class:`RodwarpError` (one line) for any impossible parameter."""
@@ -86,6 +88,8 @@ class ProtocolParams:
             bad(f"--iterations must be >= 1, got {self.iterations}")
         if self.save_every <= 0:
             bad(f"--save-every must be > 0 s, got {self.save_every:g}")
+        if self.checkpoint_every <= 0:
+            bad(f"--checkpoint-every must be > 0 s, got {self.checkpoint_every:g}")
         if self.dt is not None and not self.dt > 0:
             bad(f"--dt must be > 0 s, got {self.dt:g}")
         height = self.box[2] * self.length
@@ -116,12 +120,49 @@ def _versions() -> dict:
             "python": platform.python_version(), "platform": platform.platform()}
 
 
-def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True) -> dict:
+def _build(params: ProtocolParams, rods, device):
+    """Model and solver of the experiment (deterministic given the parameters and rods)."""
+    from rodwarp.model import Material, Model
+    from rodwarp.solver import RodSolver
+
+    g_eff = params.gravity * (1.0 + 4.0 * params.static_load / math.pi)
+    model = Model(rods, Material(params.young, params.density), gravity=(0.0, 0.0, -g_eff), mu=params.mu,
+                  device=device)
+    if rods.box is not None:
+        lo, hi = np.asarray(rods.box[0], float), np.asarray(rods.box[1], float)
+    else:  # an input without a container: the floor under its lowest point, walls around it
+        bb = rods.bounding_box()
+        lo, hi = bb[0], bb[1]
+    model.add_box(lo, hi + np.array([0, 0, 0.5 * params.length]), walls=("floor", "ceiling", "x-", "x+", "y-", "y+"),
+                  moving=True)
+    return model, RodSolver(model, iterations=params.iterations), (lo, hi)
+
+
+def _stages(params: ProtocolParams):
+    stages = []
+    if params.entangle_duration > 0 and (not params.initial or params.entangle):
+        stages.append(("entangle", params.entangle_duration, params.entangle_amplitude, params.entangle_freq))
+    stages.append(("stability", params.duration, params.amplitude, params.freq))
+    return stages
+
+
+def _enter_stage(model, name, amp, freq, t0):
+    if name == "stability":
+        # side walls and lid removed, the floor kept and vibrated
+        model.remove_planes(["ceiling", "x-", "x+", "y-", "y+"])
+    model.set_drive(amp, freq, phase_time=t0)
+
+
+def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resume: bool = False) -> dict:
     """Run the whole experiment and write its outputs to ``outdir``.
 
     Writes ``summary.json`` (every parameter, seed, versions, device, dt, steps, wall time and
-    the results), ``metrics.csv`` (time series), ``initial.npz`` and ``final.npz`` (rod sets,
-    the final one with contacts) and ``metrics.png``.  Every file is written atomically.
+    the results), ``metrics.csv`` (time series), ``trajectory.zarr`` (frames every
+    ``save_every`` s), ``trajectory.pvd`` with ``vtk/`` (ParaView), ``initial.npz`` and
+    ``final.npz`` (rod sets, the final one with contacts), ``metrics.png`` and
+    ``snapshots.png``; checkpoints every ``checkpoint_every`` s of simulated time in
+    ``checkpoints/``. With ``resume`` the run continues from the newest checkpoint and ends in
+    the same final state, bit for bit on the CPU, as an uninterrupted run.
 
     Returns
     -------
@@ -130,52 +171,82 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True) -> di
     """
     from rodwarp import _warp
     from rodwarp.metrics import centroid_height, contacts_per_rod, largest_cluster_fraction, rod_contacts
-    from rodwarp.model import Material, Model, State
+    from rodwarp.model import State
+    from rodwarp.outputs import Trajectory, latest_checkpoint, plot_snapshots, save_checkpoint, write_pvd, write_vtp
     from rodwarp.packing import orientation_statistics, random_packing
     from rodwarp.rodset import load
-    from rodwarp.solver import RodSolver
 
     params.validate()
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     device = _warp.resolve_device(params.device)
     t_wall = time.perf_counter()
-    box = np.asarray(params.box, float) * params.length
-
-    if params.initial:
+    ckdir = outdir / "checkpoints"
+    ck = None
+    if resume:
+        ck = latest_checkpoint(ckdir)
+        if ck is None:
+            raise RodwarpError(f"nothing to resume: no checkpoint in {ckdir}; run without --resume")
+        saved = ck[1]["parameters"]
+        mine = {k: v for k, v in asdict(params).items() if k != "device"}
+        theirs = {k: v for k, v in saved.items() if k != "device"}
+        if json.loads(json.dumps(mine)) != theirs:
+            diff = sorted(k for k in mine if json.loads(json.dumps(mine[k])) != theirs.get(k))
+            raise RodwarpError(f"--resume with different parameters than the checkpoint ({', '.join(diff)}); "
+                               f"repeat the original command with --resume")
+        rods = load(outdir / "initial.npz")
+    elif params.initial:
         rods = load(params.initial, diameter=params.diameter)
-        if rods.box is not None:
-            box = rods.box[1] - rods.box[0]
     else:
-        rods = random_packing(params.rods, params.length, params.diameter, box, n_vertices=params.vertices,
-                              seed=params.seed, device=device)
-    rods.save(outdir / "initial.npz")
+        rods = random_packing(params.rods, params.length, params.diameter, np.asarray(params.box) * params.length,
+                              n_vertices=params.vertices, seed=params.seed, device=device)
+    if not resume:
+        for old in ckdir.glob("ckpt_*.npz"):
+            old.unlink()
+        rods.save(outdir / "initial.npz")
     orient = orientation_statistics(rods)
+    model, solver, (box_lo, box_hi) = _build(params, rods, device)
+    stages = _stages(params)
 
-    g_eff = params.gravity * (1.0 + 4.0 * params.static_load / math.pi)
-    model = Model(rods, Material(params.young, params.density), gravity=(0.0, 0.0, -g_eff), mu=params.mu,
-                  device=device)
-    lo = rods.box[0] if rods.box is not None else np.zeros(3)
-    hi = lo + box
-    model.add_box(lo, hi + np.array([0, 0, 0.5 * params.length]), walls=("floor", "ceiling", "x-", "x+", "y-", "y+"),
-                  moving=True)
-    solver = RodSolver(model, iterations=params.iterations)
-
-    stages = []
-    if params.entangle_duration > 0 and not params.initial:
-        stages.append(("entangle", params.entangle_duration, params.entangle_amplitude, params.entangle_freq))
-    stages.append(("stability", params.duration, params.amplitude, params.freq))
-
-    rows = []
     state = model.state()
     other = State(model)
     y0 = centroid_height(model, state)
-    total = sum(s[1] for s in stages)
+    rows: list = []
     steps = 0
-    info = None
-    dts = {}
+    dts: dict = {}
+    stage_t0 = {}
+    start_stage, start_k = 0, 0
+    vtk_entries: list = []
+    snaps = [("start", rods.points.copy())]
+    if ck is not None:
+        arrays, meta = ck
+        rows = meta["rows"]
+        y0 = meta["y0"]
+        steps = meta["steps"]
+        stage_t0 = {k: float(v) for k, v in meta["stage_t0"].items()}
+        start_stage, start_k = meta["stage"], meta["k"]
+        vtk_entries = [tuple(e) for e in meta["vtk"]]
+        for name in [s[0] for s in stages[:start_stage]]:
+            if name == "entangle" and "after_entangle" in arrays:
+                snaps.append(("after entangling", arrays["after_entangle"]))
+        for si in range(start_stage + 1):
+            name, dur, amp, freq = stages[si]
+            if si < start_stage or start_k > 0:
+                _enter_stage(model, name, amp, freq, stage_t0[name])
+        state.ensure_plane_storage()
+        other.ensure_plane_storage()
+        state.load_numpy({k[6:]: v for k, v in arrays.items() if k.startswith("state_")})
+
+    frames_per = {}
+    for name, dur, amp, freq in stages:
+        frames_per[name] = int(math.ceil(dur / params.save_every)) + 1
+    traj = Trajectory(outdir / "trajectory.zarr", 1 + sum(frames_per.values()), rods.offsets, rods.radii,
+                      resume=ck is not None)
+    frame = ck[1]["frame"] if ck is not None else 0
+    (outdir / "vtk").mkdir(exist_ok=True)
 
     def sample(stage, st, inf):
+        nonlocal frame
         c = rod_contacts(model, st)
         rows.append({
             "time": st.time, "stage": stage,
@@ -185,41 +256,70 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True) -> di
             "kinetic_energy": solver.energy(st)["kinetic"],
             "max_penetration_over_d": max(0.0, -float(c.gap.min()) if len(c) else 0.0) / model.min_diameter,
             "friction_residual": inf.contact_residual if inf else 0.0,
+            "iterations": inf.iterations if inf else 0,
             "n_contact_pairs": inf.n_contacts if inf else 0,
         })
+        x = st.positions()
+        traj.write(frame, st.time, x)
+        fname = f"vtk/frame_{frame:05d}.vtp"
+        write_vtp(outdir / fname, x, rods.offsets, rods.radii, st.time)
+        vtk_entries.append((st.time, fname))
+        write_pvd(outdir / "trajectory.pvd", vtk_entries)
+        frame += 1
+
+    def checkpoint(si, k):
+        arrays = {f"state_{key}": val for key, val in state.to_numpy().items()}
+        for title, x in snaps:
+            if title == "after entangling":
+                arrays["after_entangle"] = x
+        meta = {"stage": si, "k": k, "steps": steps, "y0": y0, "rows": rows, "stage_t0": stage_t0, "frame": frame,
+                "vtk": vtk_entries, "parameters": json.loads(json.dumps(asdict(params)))}
+        save_checkpoint(ckdir, steps, arrays, meta)
+        _write_metrics(outdir / "metrics.csv", rows)
 
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
+    total = sum(s[1] for s in stages)
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("t={task.completed:.2f}/{task.total:.2f} s"),
                   TextColumn("{task.fields[rate]}"), TimeRemainingColumn(), disable=not progress) as bar:
         task = bar.add_task("simulate", total=total, rate="")
-        t_stage0 = 0.0
-        for name, dur, amp, freq in stages:
-            if name == "stability":
-                model.remove_planes(["ceiling", "x-", "x+", "y-", "y+"])
-                for p in model.planes:
-                    p.moving = True
+        t_done = 0.0
+        for si, (name, dur, amp, freq) in enumerate(stages):
+            if si < start_stage:
+                t_done += dur
+                continue
+            k0 = start_k if si == start_stage else 0
+            if k0 == 0:
+                stage_t0[name] = state.time
+                _enter_stage(model, name, amp, freq, state.time)
                 state.ensure_plane_storage()
-                state.plane_impulse.zero_()
                 other.ensure_plane_storage()
-            model.set_drive(amp, freq, phase_time=state.time)
+                if name == "stability":
+                    state.plane_impulse.zero_()
             dt = params.dt or solver.default_dt()
             dts[name] = dt
             n = int(round(dur / dt))
             every = max(1, int(round(params.save_every / dt)))
-            bar.update(task, description=name)
-            if name == stages[0][0]:
+            ck_every = max(1, int(round(params.checkpoint_every / dt)))
+            bar.update(task, description=name, completed=t_done + k0 * dt)
+            if si == 0 and k0 == 0:
                 sample(name, state, None)
             t0 = time.perf_counter()
-            for k in range(n):
+            for k in range(k0, n):
                 info = solver.step(state, other, dt)
                 state, other = other, state
                 steps += 1
                 if (k + 1) % every == 0 or k == n - 1:
                     sample(name, state, info)
-                    rate = (k + 1) / max(time.perf_counter() - t0, 1e-9)
-                    bar.update(task, completed=t_stage0 + (k + 1) * dt, rate=f"{rate:.0f} steps/s")
-            t_stage0 += dur
+                    rate = (k + 1 - k0) / max(time.perf_counter() - t0, 1e-9)
+                    bar.update(task, completed=t_done + (k + 1) * dt, rate=f"{rate:.0f} steps/s")
+                if (k + 1) % ck_every == 0 and k + 1 < n:
+                    checkpoint(si, k + 1)
+            t_done += dur
+            if name == "entangle":
+                snaps.append(("after entangling", state.positions()))
+            if si + 1 < len(stages):
+                checkpoint(si + 1, 0)
 
     wall = time.perf_counter() - t_wall
     c = rod_contacts(model, state)
@@ -227,9 +327,12 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True) -> di
     final.contacts = c
     final.attrs.update({"time": state.time})
     final.save(outdir / "final.npz")
+    snaps.append(("end", state.positions()))
+    plot_snapshots(outdir / "snapshots.png", snaps, rods.offsets, box=(box_lo, box_hi))
 
     stab = [r for r in rows if r["stage"] == "stability"]
-    tail = [r["largest_cluster_fraction"] for r in stab if r["time"] >= stab[0]["time"] + 0.5 * params.duration] or \
+    t_stab = stage_t0.get("stability", 0.0)
+    tail = [r["largest_cluster_fraction"] for r in stab if r["time"] >= t_stab + 0.5 * params.duration] or \
         [stab[-1]["largest_cluster_fraction"]]
     summary = {
         "alpha": params.alpha, "n_rods": model.n_rods, "freq": params.freq, "amplitude": params.amplitude,
@@ -238,9 +341,9 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True) -> di
         "largest_cluster_fraction": largest_cluster_fraction(model.n_rods, c),
         "centroid_height_ratio": centroid_height(model, state) / y0,
         "stable": bool(min(tail) >= STABLE_F), "stable_threshold_f": STABLE_F,
+        "max_penetration_over_d": max(r["max_penetration_over_d"] for r in rows),
         "seed": params.seed, "device": device, "dt": dts, "steps": steps, "wall_time_s": wall,
-        "steps_per_second": steps / wall if wall > 0 else None,
-        "initial_orientation": orient,
+        "resumed": bool(resume), "initial_orientation": orient,
         "parameters": asdict(params), "versions": _versions(),
     }
     _write_metrics(outdir / "metrics.csv", rows)
@@ -273,6 +376,12 @@ def _plot_metrics(path, rows, summary):
         a.set_ylabel(label)
         a.grid(alpha=0.3)
     ax[1, 1].set_yscale("symlog", linthresh=1e-6)
+    t_stab = [r["time"] for r in rows if r["stage"] == "stability"]
+    if t_stab and any(r["stage"] == "entangle" for r in rows):
+        for a in ax.ravel():
+            a.axvline(t_stab[0], ls="--", lw=0.8, color="0.5")
+        ax[0, 0].annotate("stability test", (t_stab[0], 0.02), xycoords=("data", "axes fraction"), fontsize=8,
+                          color="0.4", xytext=(3, 0), textcoords="offset points")
     for a in ax[1]:
         a.set_xlabel("t (s)")
     fig.suptitle(f"alpha = {summary['alpha']:g}, a/g = {summary['a_over_g']:.3g}, stable = {summary['stable']}")
