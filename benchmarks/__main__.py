@@ -15,7 +15,7 @@ import sys
 import time
 import traceback
 
-from benchmarks import BENCHMARKS, common, report
+from benchmarks import BENCHMARKS, DEFAULT, common, report
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -44,7 +44,7 @@ def main(argv=None) -> int:
     from rodwarp.atomic import write_json
 
     quick = not args.full
-    names = args.only or list(BENCHMARKS)
+    names = args.only or list(DEFAULT)
     device = _warp.resolve_device(args.device)
     command = "python -m benchmarks " + " ".join(argv if argv is not None else sys.argv[1:])
     failed = []
