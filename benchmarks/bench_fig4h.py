@@ -14,7 +14,7 @@ from benchmarks import common
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = ROOT / "runs" / "fig4h"
-ARGS = ["--entangle-duration", "2", "--duration", "2", "--workers", "2", "--out", str(RUNS)]
+ARGS = ["--entangle-duration", "1.5", "--duration", "1.5", "--workers", "2", "--out", str(RUNS)]
 
 
 def run(quick: bool, device: str) -> dict:

@@ -36,7 +36,7 @@ def random_packing(
     clearance: float = 0.0,
     max_attempts: int | None = None,
     device: str = "cpu",
-    batch: int = 512,
+    batch: int = 4096,
 ) -> RodSet:
     """Place ``n_rods`` non-overlapping straight rods fully inside a box.
 
@@ -55,7 +55,7 @@ def random_packing(
     clearance : float
         Extra surface gap required between rods (m); 0 means touching is allowed.
     max_attempts : int, optional
-        Give up after this many candidates (default 2000 N + 10000).
+        Give up after this many candidates, inside the box or not (default 20000 N + 1e5).
     device : str
         Warp device for the clearance kernel.
 
@@ -78,7 +78,7 @@ def random_packing(
     rng = np.random.default_rng(seed)
     r = 0.5 * diameter
     h = length / (n_vertices - 1)
-    max_attempts = max_attempts or 2000 * n_rods + 10000
+    max_attempts = max_attempts or 20000 * n_rods + 100000
     dev = _warp.resolve_device(device)
 
     placed_a = np.zeros((0, 3))  # segment starts of placed rods
@@ -95,11 +95,11 @@ def random_packing(
         m = min(batch, max_attempts - attempts)
         attempts += m
         d = isotropic_directions(rng, m)
+        c = rng.random((m, 3)) * box
         half = 0.5 * length * np.abs(d) + r  # half extent of each rod along each axis
-        lo = half
-        hi = box - half
-        ok = np.all(hi > lo, axis=1)
-        c = lo + rng.random((m, 3)) * np.maximum(hi - lo, 0.0)
+        # uniform position and isotropic direction, rejected unless fully inside: in a box
+        # narrower than ~l this favours steep rods, as in the paper's procedure
+        ok = np.all((c - half >= 0.0) & (c + half <= box), axis=1)
         d, c = d[ok], c[ok]
         if len(c) == 0:
             continue

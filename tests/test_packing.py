@@ -29,8 +29,9 @@ def test_random_packing_is_valid_and_reproducible():
     assert np.array_equal(again.points, rods.points)
     assert not np.array_equal(random_packing(n, l, d, box, seed=12).points, rods.points)
     stats = orientation_statistics(rods)
-    # the tall box admits more vertical rods than horizontal extent allows: <u_z^2> >= 1/3
-    assert 0.3 < stats["mean_uz2"] < 0.6
+    # the 1 x 1 x 2.5 box favours steep rods (the paper notes it): a rod of length 1 fits
+    # horizontally only at few positions
+    assert 0.5 < stats["mean_uz2"] < 0.75  # isotropic would be 1/3
 
 
 def test_impossible_packing_fails_clearly():
