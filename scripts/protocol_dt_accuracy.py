@@ -17,21 +17,16 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 
-def default_dt(alpha: float, stage: str) -> float:
-    """The step ``rodwarp simulate`` picks for a stage (read back from a 0-length dry run)."""
-    from rodwarp.protocol import ProtocolParams, _build, _enter_stage
-    from rodwarp.packing import random_packing
+def default_dt(alpha: float) -> float:
+    """The step ``rodwarp simulate --alpha A`` picks by default (s)."""
     import numpy as np
+
+    from rodwarp.packing import random_packing
+    from rodwarp.protocol import ProtocolParams, _default_dt
 
     p = ProtocolParams(alpha=alpha)
     rods = random_packing(p.rods, p.length, p.diameter, np.asarray(p.box) * p.length, seed=p.seed)
-    model, solver, _ = _build(p, rods, "cpu")
-    if stage == "entangle":
-        _enter_stage(model, "entangle", p.entangle_amplitude, p.entangle_freq, 0.0)
-    else:
-        _enter_stage(model, "entangle", p.entangle_amplitude, p.entangle_freq, 0.0)
-        _enter_stage(model, "stability", p.amplitude, p.freq, 0.0)
-    return solver.default_dt()
+    return _default_dt(p, rods, "cpu")
 
 
 def main(argv=None):
@@ -46,8 +41,7 @@ def main(argv=None):
     out = Path(args.out)
     alphas = [float(a) for a in args.alphas.split(",")]
     factors = [float(f) for f in args.factors.split(",")]
-    # one fixed step for the whole run: the smaller of the two stages' defaults, divided
-    base = {a: min(default_dt(a, "entangle"), default_dt(a, "stability")) for a in alphas}
+    base = {a: default_dt(a) for a in alphas}
     jobs = [(a, k) for k in sorted(factors, reverse=True) for a in alphas]
 
     def point(job):
