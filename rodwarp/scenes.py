@@ -82,3 +82,12 @@ def tilted_gravity(g: float, theta_deg: float, downhill=(1.0, 0.0, 0.0)) -> np.n
     d = np.asarray(downhill, float)
     d = d / np.linalg.norm(d)
     return g * (math.sin(t) * d - math.cos(t) * np.array([0.0, 0.0, 1.0]))
+
+
+def straightened(points) -> np.ndarray:
+    """A straight polyline along +x with the same edge lengths (a straight rest shape)."""
+    pts = np.asarray(points, float)
+    h = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    out = np.zeros_like(pts)
+    out[1:, 0] = np.cumsum(h)
+    return out

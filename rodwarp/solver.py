@@ -607,7 +607,6 @@ class RodSolver:
             if int(remaining.numpy()[0]) == 0:
                 break
         self.colors_used = rnd
-        self._color_keys.assign(self._color_keys)  # keep allocation
         wp.copy(self._color_keys, self._color, count=n)
         self._launch("narrowphase", contacts.iota, dim=n, device=dev, inputs=[self._color_ids])
         wp.utils.radix_sort_pairs(self._color_keys, self._color_ids, n)

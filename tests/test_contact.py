@@ -9,17 +9,12 @@ import pytest
 from rodwarp.errors import RodwarpError, SimulationBlowUp
 from rodwarp.model import STEEL, Material, Model
 from rodwarp.rodset import RodSet
-from rodwarp.scenes import log_cabin, straight_rod, tilted_gravity
+from rodwarp.scenes import log_cabin, straight_rod, straightened, tilted_gravity
 from rodwarp.solver import RodSolver, run
 
 G = 9.81
 
 
-def straightened(pts):
-    h = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-    out = np.zeros_like(pts)
-    out[1:, 0] = np.cumsum(h)
-    return out
 
 
 def rod_on_incline(theta_deg, mu=0.4, duration=1.0):

@@ -8,19 +8,13 @@ import pytest
 from rodwarp.model import Material, Model
 from rodwarp.rodset import RodSet
 from rodwarp.scenes import (
-    TEST_DENSITY, TEST_RADIUS, TEST_YOUNG, cantilever, cantilever_frequency, cantilever_sag,
+    TEST_DENSITY, TEST_RADIUS, TEST_YOUNG, cantilever, cantilever_frequency, cantilever_sag, straightened,
 )
 from rodwarp.solver import RodSolver, run
 
 TEST_MAT = Material(young=TEST_YOUNG, density=TEST_DENSITY)
 
 
-def straightened(pts):
-    """A straight polyline with the same edge lengths (a straight rest shape)."""
-    h = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-    out = np.zeros_like(pts)
-    out[1:, 0] = np.cumsum(h)
-    return out
 
 
 def settle_cantilever(n_edges, dt=1e-3, duration=1.5, damping=40.0, **solver_kw):
