@@ -136,7 +136,6 @@ class RodSolver:
         V, S = model.n_vertices, model.n_segments
         self._diag = wp.zeros(V, dtype=wp.float64, device=d)
         self._off1 = wp.zeros(V, dtype=wp.float64, device=d)
-        self._off2 = wp.zeros(V, dtype=wp.float64, device=d)
         self._rhs = wp.zeros(V, dtype=wp.vec3d, device=d)
         self._sdir = wp.zeros(V, dtype=wp.vec3d, device=d)
         self._lam = wp.zeros(V, dtype=wp.float64, device=d)
