@@ -1,0 +1,101 @@
+"""Entanglement: the Gauss linking integral of two straight segments, exactly, in float64.
+
+For segments p1->p2 and p3->p4 the Gauss integrand's numerator (t1 x t2).(r1 - r2) has one
+sign over the whole pair, so the pair's average crossing number is exactly |G| with G the
+signed Gauss integral, which equals the solid angle that the "difference quadrilateral"
+{p - q : p on P, q on Q} (vertices a = p1-p3, b = p2-p3, c = p2-p4, d = p1-p4) subtends
+at the origin, divided by 4 pi (Banchoff 1976; Klenin & Langowski 2000).
+
+The quadrilateral is split along a-c into two triangles whose solid angles use the
+Van Oosterom-Strackee form tan(Omega/2) = u.(v x w) / (|u||v||w| + (u.v)|w| + (u.w)|v| +
+(v.w)|u|) through atan2, which stays accurate in float32 where the four-arcsin form does not.
+
+Every vertex of the quadrilateral lies at the same signed height h = (p1-p3).(e1 x e2) above
+the plane through the origin, so each triangle's solid angle lies in (-2 pi, 2 pi) and
+atan2 never wraps unless h is 0.  h = 0 means coplanar, collinear, parallel, touching or
+degenerate segments, whose Gauss integrand vanishes everywhere it is defined: G = 0.
+"""
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+F0 = wp.float64(0.0)
+TWO = wp.float64(2.0)
+INV_4PI = wp.float64(0.07957747154594767)  # 1 / (4 pi)
+# |h| below this fraction of |e1| |e2| |a| counts as coplanar (touching, in-plane, parallel)
+COPLANAR_TOL = wp.float64(1.0e-14)
+
+
+@wp.func
+def triangle_solid_angle(u: wp.vec3d, v: wp.vec3d, w: wp.vec3d) -> wp.float64:
+    """Signed solid angle of triangle (u, v, w) seen from the origin (Van Oosterom-Strackee)."""
+    lu = wp.length(u)
+    lv = wp.length(v)
+    lw = wp.length(w)
+    num = wp.dot(u, wp.cross(v, w))
+    den = lu * lv * lw + wp.dot(u, v) * lw + wp.dot(u, w) * lv + wp.dot(v, w) * lu
+    return TWO * wp.atan2(num, den)
+
+
+@wp.func
+def gauss_linking_segments(p1: wp.vec3d, p2: wp.vec3d, p3: wp.vec3d, p4: wp.vec3d) -> wp.float64:
+    """Signed Gauss linking integral G of segments p1->p2 and p3->p4 (|G| < 1/2).
+
+    The pair's contribution to the average crossing number is |G|; summed with sign over
+    two closed polygons it gives their linking number.
+    """
+    e1 = p2 - p1
+    e2 = p4 - p3
+    a = p1 - p3
+    h = wp.dot(a, wp.cross(e1, e2))
+    scale = wp.length(e1) * wp.length(e2) * wp.max(wp.length(a), wp.max(wp.length(e1), wp.length(e2)))
+    if wp.abs(h) <= COPLANAR_TOL * scale:
+        return F0
+    b = p2 - p3
+    c = p2 - p4
+    d = p1 - p4
+    return (triangle_solid_angle(a, d, c) + triangle_solid_angle(a, c, b)) * INV_4PI
+
+
+@wp.kernel
+def gauss_linking_pairs(
+    p1: wp.array(dtype=wp.vec3d),
+    p2: wp.array(dtype=wp.vec3d),
+    p3: wp.array(dtype=wp.vec3d),
+    p4: wp.array(dtype=wp.vec3d),
+    out: wp.array(dtype=wp.float64),
+):
+    """Signed G of segment pairs (p1[i]->p2[i], p3[i]->p4[i]), one pair per thread."""
+    i = wp.tid()
+    out[i] = gauss_linking_segments(p1[i], p2[i], p3[i], p4[i])
+
+
+@wp.kernel
+def polyline_linking_rows(
+    a: wp.array(dtype=wp.vec3d),
+    na_edges: int,
+    b: wp.array(dtype=wp.vec3d),
+    nb_edges: int,
+    signed_out: wp.array(dtype=wp.float64),
+    abs_out: wp.array(dtype=wp.float64),
+):
+    """Row i: sum over edges j of polyline b of G and |G| with edge i of polyline a.
+
+    Edge k of a polyline joins vertex k and vertex (k + 1) mod (vertex count), so a closed
+    polygon is passed as its vertices with edges = vertex count, an open one with one fewer.
+    Rows are summed on the host in a fixed order (deterministic, no atomics).
+    """
+    i = wp.tid()
+    na = a.shape[0]
+    nb = b.shape[0]
+    q1 = a[i]
+    q2 = a[(i + 1) % na]
+    s = F0
+    sa = F0
+    for j in range(nb_edges):
+        g = gauss_linking_segments(q1, q2, b[j], b[(j + 1) % nb])
+        s += g
+        sa += wp.abs(g)
+    signed_out[i] = s
+    abs_out[i] = sa
