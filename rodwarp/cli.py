@@ -116,6 +116,48 @@ def simulate(
     )
 
 
+@app.command()
+@_friendly
+def analyze(
+    input: Path = typer.Argument(..., help="simulate/segment output directory, rod-set file (.npz, .zarr, .csv) "
+                                           "or precomputed fields (.zarr, .npz with e and n)."),
+    out: Optional[Path] = typer.Option(None, help="Output directory (default analysis/ beside the input)."),
+    radius: Optional[float] = typer.Option(None, help="Ball radius R (input units; default sqrt(d l))."),
+    spacing: Optional[float] = typer.Option(None, help="Grid spacing (input units; default R / 2)."),
+    diameter: Optional[float] = typer.Option(None, help="Rod diameter d for the default R (required for a CSV without radius)."),
+    length: Optional[float] = typer.Option(None, help="Rod length l for the default R (default the mean rod length)."),
+    units: Optional[str] = typer.Option(None, help="Length unit of a CSV (m, mm, um, voxel); converts npz/zarr rod sets."),
+    keep_outside: bool = typer.Option(False, help="Keep voxels whose ball leaves the domain (masked as NaN by default)."),
+    contact_tolerance: Optional[float] = typer.Option(None, help="Surface gap counted as contact when contacts are detected (default d / 10)."),
+    outlier: str = typer.Option("q3", help="Outlier bound: q3 = Q3 + 1.5 IQR (the paper's) or q1 = Q1 + 1.5 IQR."),
+    connectivity: int = typer.Option(26, help="Tangle connectivity: 26 (default) or 6."),
+    bins: int = typer.Option(40, help="Histogram bins."),
+    device: str = typer.Option("cpu", help="cpu, cuda or auto."),
+    figures: bool = typer.Option(True, help="Write the PNG figures."),
+    quiet: bool = typer.Option(False, help="No progress bar."),
+):
+    """Local fields (phi, S, c, e), their statistics, outliers, tangles and percolation."""
+    from rodwarp.analyze import AnalyzeOptions, analyze as run_analyze, default_out
+
+    opts = AnalyzeOptions(radius=radius, spacing=spacing, diameter=diameter, length=length, units=units,
+                          keep_outside=keep_outside, contact_tolerance=contact_tolerance, outlier=outlier,
+                          connectivity=connectivity, bins=bins, device=device, figures=figures)
+    opts.validate()
+    outdir = out or default_out(input)
+    s = run_analyze(input, outdir, opts, progress=not quiet)
+
+    def f(v):
+        return "n/a" if v is None else f"{v:.3g}"
+
+    ext = s.get("largest_tangle_extent") or {}
+    typer.echo(
+        f"mean phi={f(s.get('mean_phi'))} S={f(s.get('mean_S'))} c={f(s.get('mean_c'))} e={f(s.get('mean_e'))} "
+        f"cv_e={f(s.get('cv_e'))} e_lb={f(s.get('e_lb'))} outliers={f(s.get('outlier_fraction'))} "
+        f"tangles={s.get('n_tangles')} largest xi/L=({f(ext.get('x'))}, {f(ext.get('y'))}, {f(ext.get('z'))}) "
+        f"percolates={s.get('percolates')} -> {outdir}"
+    )
+
+
 def _parse_box(text: str):
     try:
         vals = tuple(float(v) for v in text.split(","))

@@ -1,0 +1,236 @@
+"""``rodwarp analyze``: inputs -> rod set (or precomputed fields) -> fields -> statistics -> files.
+
+Inputs
+    * a ``rodwarp simulate`` output directory (its ``final.npz``, with contacts and the box),
+    * a ``rodwarp segment`` output directory (its ``rods.npz``/``rods.zarr``),
+    * a rod-set file (``.npz``, ``.zarr``) or a CSV of centrelines ``rod,x,y,z[,radius]``
+      (``--diameter`` when there is no radius column),
+    * precomputed fields (``fields.zarr``, or an ``.npz`` holding ``e`` and ``n`` such as the
+      paper authors' files), for the statistics alone.
+
+Outputs in ``out`` (written atomically): ``fields.zarr``, ``summary.json``, ``rods.npz`` (the
+analysed rod set with its contacts), PNG figures (histograms, mid-plane slices, z-profiles,
+outliers and tangles).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rodwarp.atomic import write_json
+from rodwarp.errors import RodwarpError
+from rodwarp.fieldset import Fields
+from rodwarp.rodset import RodSet
+from rodwarp.rodset import load as load_rods
+
+ROD_FILES = ("final.npz", "rods.npz", "rods.zarr", "final.zarr")
+
+
+@dataclass
+class AnalyzeOptions:
+    """Options of :func:`analyze` (lengths in the input's units)."""
+
+    radius: float | None = None
+    spacing: float | None = None
+    diameter: float | None = None
+    length: float | None = None
+    units: str | None = None
+    keep_outside: bool = False
+    contact_tolerance: float | None = None
+    outlier: str = "q3"
+    connectivity: int = 26
+    bins: int = 40
+    device: str = "cpu"
+    figures: bool = True
+
+    def validate(self) -> None:
+        if self.outlier not in ("q3", "q1"):
+            raise RodwarpError(f"--outlier must be q3 (Q3 + 1.5 IQR, the paper's) or q1, got '{self.outlier}'")
+        if self.connectivity not in (6, 26):
+            raise RodwarpError(f"--connectivity must be 6 or 26, got {self.connectivity}")
+        if self.bins < 2:
+            raise RodwarpError(f"--bins must be at least 2, got {self.bins}")
+
+
+def _is_fields_npz(path: Path) -> bool:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return "e" in z.files and "points" not in z.files
+    except Exception:  # noqa: BLE001 - unreadable archives are reported by the loaders
+        return False
+
+
+def _is_zarr_with(path: Path, key: str) -> bool:
+    return (path / key / "zarr.json").exists() or (path / key / ".zarray").exists()
+
+
+def load_input(path, opts: AnalyzeOptions) -> tuple[str, RodSet | Fields, Path]:
+    """Classify and read ``path``: returns ("rods", RodSet, file) or ("fields", Fields, file)."""
+    path = Path(path)
+    if not path.exists():
+        raise RodwarpError(f"input '{path}' does not exist; pass a simulate/segment output directory, "
+                           "a rod-set file (.npz, .zarr, .csv) or a fields file")
+    if path.is_dir() and not (path.suffix == ".zarr" or (path / "zarr.json").exists()
+                              or (path / ".zgroup").exists()):
+        for name in ROD_FILES:
+            if (path / name).exists():
+                return "rods", _load_rods(path / name, opts), path / name
+        if (path / "fields.zarr").exists():
+            return "fields", Fields.load(path / "fields.zarr"), path / "fields.zarr"
+        raise RodwarpError(f"directory '{path}' holds none of {', '.join(ROD_FILES)} or fields.zarr; "
+                           "is it a rodwarp simulate or segment output?")
+    if path.is_dir():  # a zarr group: fields or rods
+        if _is_zarr_with(path, "e"):
+            return "fields", Fields.load(path), path
+        return "rods", _load_rods(path, opts), path
+    if path.suffix.lower() == ".npz" and _is_fields_npz(path):
+        return "fields", Fields.load(path), path
+    return "rods", _load_rods(path, opts), path
+
+
+def _load_rods(path: Path, opts: AnalyzeOptions) -> RodSet:
+    if path.suffix.lower() == ".csv":
+        rods = load_rods(path, diameter=opts.diameter, units=opts.units)
+    else:
+        rods = load_rods(path, units=opts.units)
+    if rods.n_rods == 0:
+        raise RodwarpError(f"'{path}' holds no rods: nothing to analyse")
+    return rods
+
+
+def default_out(path: Path) -> Path:
+    """``analysis/`` beside the input (inside it when the input is a directory of results)."""
+    path = Path(path)
+    if path.is_dir() and path.suffix != ".zarr":
+        return path / "analysis"
+    return path.parent / "analysis"
+
+
+def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: bool = False) -> dict:
+    """Compute (or read) the fields of an input, their statistics, and write every output.
+
+    Parameters
+    ----------
+    path : path-like
+        Input (see the module docstring).
+    out : path-like, optional
+        Output directory; default :func:`default_out`.
+    opts : AnalyzeOptions
+        Grid, contact, statistics and device options.
+    progress : bool
+        Show a progress bar over the voxel batches.
+
+    Returns
+    -------
+    dict
+        The summary written to ``summary.json``.
+    """
+    from rodwarp import __version__
+    from rodwarp.stats import field_statistics, find_tangles
+
+    opts = opts or AnalyzeOptions()
+    opts.validate()
+    t0 = time.perf_counter()
+    kind, obj, src = load_input(path, opts)
+    out = Path(out) if out is not None else default_out(Path(path))
+    out.mkdir(parents=True, exist_ok=True)
+    cluster = None
+    if kind == "rods":
+        rods: RodSet = obj
+        from rodwarp.fields import resolve_contacts, resolve_params
+        from rodwarp.metrics import largest_cluster_fraction
+
+        tol = resolve_params(rods, radius=opts.radius, spacing=opts.spacing, diameter=opts.diameter,
+                             length=opts.length, keep_outside=opts.keep_outside,
+                             contact_tolerance=opts.contact_tolerance).contact_tolerance
+        contacts, source = resolve_contacts(rods, tol)
+        fields = _fields_with_progress(rods, contacts, opts, progress)
+        fields.attrs["contact_source"] = source
+        cluster = largest_cluster_fraction(rods.n_rods, contacts)
+        analysed = rods.copy()
+        analysed.contacts = contacts
+        analysed.save(out / "rods.npz")
+        fields.attrs["source"] = str(src)
+        fields.save(out / "fields.zarr")
+    else:
+        fields = obj
+        if fields.attrs.get("layout") == "paper-authors" or not (out / "fields.zarr").exists() \
+                or Path(src).resolve() != (out / "fields.zarr").resolve():
+            fields.save(out / "fields.zarr")
+    if not fields.valid.any():
+        raise RodwarpError("no voxel of the grid lies inside the packing (every ball is empty or leaves "
+                           "the domain); lower --radius/--spacing or pass --keep-outside")
+    stats = field_statistics(fields, method=opts.outlier, connectivity=opts.connectivity, bins=opts.bins,
+                             contact_cluster_fraction=cluster)
+    summary = {
+        "input": str(src),
+        "input_kind": kind,
+        "radius": fields.radius,
+        "spacing": fields.spacing,
+        "units": fields.units,
+        "grid_shape_zyx": list(fields.shape),
+        "axis_order": "z,y,x",
+        **{k: v for k, v in fields.attrs.items() if k not in ("source",)},
+        "options": asdict(opts),
+        **stats,
+        "rodwarp_version": __version__,
+        "analysis_wall_s": None,
+    }
+    if opts.figures:
+        from rodwarp import fieldplots
+
+        labels, _ = find_tangles(fields.e, fields.valid, stats["e_lb"], connectivity=opts.connectivity,
+                                 spacing=fields.spacing, system_size=fields.system_size)
+        figs = [fieldplots.plot_histograms(fields, stats, out / "histograms.png"),
+                fieldplots.plot_slices(fields, out / "slices.png"),
+                fieldplots.plot_zprofiles(stats, out / "zprofiles.png"),
+                fieldplots.plot_tangles(fields, labels, stats, out / "tangles.png")]
+        summary["figures"] = [Path(f).name for f in figs]
+    summary["analysis_wall_s"] = time.perf_counter() - t0
+    write_json(out / "summary.json", _finite(json.loads(json.dumps(summary, default=_jsonable))))
+    return summary
+
+
+def _finite(o):
+    """NaN and infinities become null: strict JSON readers reject them."""
+    if isinstance(o, float):
+        return o if np.isfinite(o) else None
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, list):
+        return [_finite(v) for v in o]
+    return o
+
+
+def _jsonable(o):
+    if isinstance(o, np.generic):
+        v = o.item()
+        return None if isinstance(v, float) and not np.isfinite(v) else v
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    return str(o)
+
+
+def _fields_with_progress(rods: RodSet, contacts, opts: AnalyzeOptions, progress: bool) -> Fields:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from rodwarp.fields import compute_fields
+
+    with Progress(TextColumn("fields"), BarColumn(), MofNCompleteColumn(), TextColumn("voxels"),
+                  TimeRemainingColumn(), disable=not progress, transient=False) as bar:
+        task = bar.add_task("fields", total=None)
+
+        def cb(done, total):
+            bar.update(task, completed=done, total=total)
+
+        return compute_fields(rods, radius=opts.radius, spacing=opts.spacing, diameter=opts.diameter,
+                              length=opts.length, keep_outside=opts.keep_outside,
+                              contact_tolerance=opts.contact_tolerance, contacts=contacts,
+                              device=opts.device, progress=cb)
