@@ -99,7 +99,9 @@ def linking_number(a, b, closed: bool = True, device: str | None = "cpu") -> flo
 def average_crossing_number(a, b, closed: bool = False, device: str | None = "cpu") -> float:
     """Average crossing number of two polylines: the sum of |G| over every segment pair.
 
-    Equal to the mean, over all viewing directions, of the number of crossings of the two
-    curves' projections; exact for polylines.  Open curves by default.
+    (1 / 4 pi) times the double integral of |(t1 x t2).(r1 - r2)| / |r1 - r2|^3 over the two
+    curves (each pair of points once): half the mean, over viewing directions, of the number
+    of crossings between the two projected curves (the paper's convention; a unit-segment pair
+    of REFERENCE.md gives 1/6).  Exact for polylines.  Open curves by default.
     """
     return _polyline_sums(a, b, closed, device)[1]
