@@ -156,8 +156,8 @@ def plot_slices(fields, path) -> Path:
 
     Notes
     -----
-    "Mid" is the middle of the valid voxels' bounding box. Each row shares one colour scale
-    (0.5-99.5 percentiles of the whole field); NaN (outside the domain) is light grey.
+    "Mid" is the middle of the valid voxels' bounding box. Each row shares one colour scale and
+    colourbar (0.5-99.5 percentiles of the whole field); NaN (outside the domain) is light grey.
     """
     kz, jy, _ = _mid_indices(fields)
     u = _units(fields)
@@ -185,7 +185,8 @@ def plot_slices(fields, path) -> Path:
             ax.set_xlabel(f"{xl} [{u}]")
             ax.set_ylabel(f"{yl} [{u}]")
             ax.set_title(f"{_SHORT[name]}: {ttl}", fontsize=9)
-            fig.colorbar(im, ax=ax, shrink=0.85, extend="both", label=_SHORT[name])
+        # both planes share the row's scale, so one colourbar per row says it all
+        fig.colorbar(im, ax=axs[row, :], shrink=0.85, extend="both", label=_SHORT[name])
     fig.suptitle(f"mid-plane slices (grid {fields.shape[2]} x {fields.shape[1]} x {fields.shape[0]}, "
                  f"R = {fields.radius:.4g} {u}, spacing {h:.4g} {u})")
     return _save(fig, path)

@@ -63,10 +63,13 @@ def test_outlier_bound_ignores_nan_and_rejects_bad_method():
 # ----------------------------------------------------------------------------------------------
 
 def two_blobs():
-    """Background e = 1, two blobs of e = 100: A (z 2, y 3, x 4 voxels) and B (1 x 2 x 2)."""
+    """Background e = 1, two blobs of e = 100: A (z 2, y 3, x 4 voxels) and B (1 x 2 x 2).
+
+    B comes first in scan order, so ranking by size has to relabel them.
+    """
     e = np.ones((10, 12, 14))
-    e[1:3, 1:4, 1:5] = 100.0  # A: 24 voxels
-    e[6:7, 8:10, 9:11] = 100.0  # B: 4 voxels
+    e[5:7, 1:4, 1:5] = 100.0  # A: 24 voxels
+    e[1:2, 8:10, 9:11] = 100.0  # B: 4 voxels
     return e
 
 
@@ -81,7 +84,8 @@ def test_two_planted_blobs_exact_counts_shares_extents():
     assert a["share"] == pytest.approx(24 / n_valid)
     assert b["share"] == pytest.approx(4 / n_valid)
     # extents are reported (x, y, z) although arrays are (z, y, x)
-    assert a["bbox"] == {"x": [1, 4], "y": [1, 3], "z": [1, 2]}
+    assert a["bbox"] == {"x": [1, 4], "y": [1, 3], "z": [5, 6]}
+    assert b["bbox"] == {"x": [9, 10], "y": [8, 9], "z": [1, 1]}
     assert a["xi"] == pytest.approx({"x": 2.0, "y": 1.5, "z": 1.0})
     assert b["xi"] == pytest.approx({"x": 1.0, "y": 1.0, "z": 0.5})
     # default L: bounding box of the valid voxels, (span + 1) * spacing = (7, 6, 5)
@@ -89,7 +93,7 @@ def test_two_planted_blobs_exact_counts_shares_extents():
     assert not a["percolates"] and not b["percolates"]
     # labels: 1 is the largest tangle, exactly blob A
     blob_a = np.zeros(e.shape, dtype=bool)
-    blob_a[1:3, 1:4, 1:5] = True
+    blob_a[5:7, 1:4, 1:5] = True
     assert np.array_equal(labels == 1, blob_a)
     assert int((labels == 2).sum()) == 4 and int((labels > 0).sum()) == 28
 
@@ -139,6 +143,7 @@ def test_slab_spanning_x_percolates_along_x_only():
     assert len(tangles) == 1
     t = tangles[0]
     assert t["percolates_axes"] == ["x"] and t["percolates"]
+    assert t["n_voxels"] == 28 and t["share"] == pytest.approx(28 / (6 * 7 * 7))  # of valid voxels, not the grid
     assert t["xi_over_L"] == pytest.approx({"x": 1.0, "y": 2 / 7, "z": 2 / 6})
     assert t["touches"] == {"x-": True, "x+": True, "y-": False, "y+": False, "z-": False, "z+": False}
     s = field_statistics(f, method="q3")
@@ -219,25 +224,37 @@ def test_z_profiles_linear_in_z():
 # figures
 # ----------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("nan_other", [False, True], ids=["all-fields", "only-e"])
-def test_plots_write_png(tmp_path, nan_other):
-    from rodwarp.fieldplots import plot_histograms, plot_slices, plot_tangles, plot_zprofiles
-
-    e = two_blobs()
-    e[:, :, 0] = np.nan  # some voxels outside the domain
-    f = make_fields(e, spacing=0.5, nan_other=nan_other)
-    s = field_statistics(f)
-    labels, _ = find_tangles(f.e, f.valid, s["e_lb"])
-    paths = [
-        plot_histograms(f, s, tmp_path / "hist.png"),
-        plot_slices(f, tmp_path / "slices.png"),
-        plot_zprofiles(s, tmp_path / "zprof.png"),
-        plot_zprofiles(f, tmp_path / "zprof_fields.png"),
-        plot_tangles(f, labels, s, tmp_path / "tangles.png"),
-        plot_tangles(f, None, None, tmp_path / "sub" / "tangles_auto.png"),
-    ]
+def _check_pngs(tmp_path, paths):
     for p in paths:
         assert p.exists() and p.stat().st_size > 1000
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # atomic writes leave no temporary files behind
     assert sorted(p.name for p in tmp_path.rglob("*") if p.is_file()) == sorted(p.name for p in paths)
+
+
+def test_plots_write_png(tmp_path):
+    from rodwarp.fieldplots import plot_histograms, plot_slices, plot_tangles, plot_zprofiles
+
+    e = two_blobs()
+    e[:, :, 0] = np.nan  # some voxels outside the domain
+    f = make_fields(e, spacing=0.5)
+    s = field_statistics(f)
+    labels, _ = find_tangles(f.e, f.valid, s["e_lb"])
+    _check_pngs(tmp_path, [
+        plot_histograms(f, s, tmp_path / "hist.png"),
+        plot_slices(f, tmp_path / "slices.png"),
+        plot_zprofiles(s, tmp_path / "zprof.png"),
+        plot_tangles(f, labels, s, tmp_path / "tangles.png"),
+    ])
+
+
+def test_plots_with_missing_fields_and_defaults(tmp_path):
+    from rodwarp.fieldplots import plot_histograms, plot_slices, plot_tangles, plot_zprofiles
+
+    f = make_fields(two_blobs(), spacing=0.5, nan_other=True)  # only e and n: "not available" panels
+    _check_pngs(tmp_path, [
+        plot_histograms(f, None, tmp_path / "hist.png"),
+        plot_slices(f, tmp_path / "slices.png"),
+        plot_zprofiles(f, tmp_path / "zprof.png"),
+        plot_tangles(f, None, None, tmp_path / "sub" / "tangles.png"),  # labels and stats computed
+    ])
