@@ -16,9 +16,13 @@ def load_records() -> list[dict]:
     recs = []
     for path in sorted(common.RESULTS.glob("*.json")):
         try:
-            recs.append(json.loads(path.read_text()))
+            rec = json.loads(path.read_text())
         except (OSError, ValueError) as e:
             common.log(f"skipping unreadable {path.name}: {e}")
+            continue
+        # results/ also holds analysis tables (e.g. paper_fields.json) that are not benchmark records
+        if isinstance(rec, dict) and rec.get("name") in BENCHMARKS:
+            recs.append(rec)
     order = {n: i for i, n in enumerate(BENCHMARKS)}
     recs.sort(key=lambda r: (order.get(r.get("name"), len(order)), r.get("name", "")))
     return recs

@@ -34,6 +34,11 @@ def atomic_path(path: str | os.PathLike, *, directory: bool = False) -> Iterator
         tmp.unlink()
     try:
         yield tmp
+        # mkstemp creates 0600; give the result the permissions a plain open() would
+        mask = os.umask(0)
+        os.umask(mask)
+        if tmp.exists():
+            os.chmod(tmp, (0o777 if tmp.is_dir() else 0o666) & ~mask)
         if directory:
             if path.exists():
                 old = path.with_name(f".{path.name}.old")

@@ -114,3 +114,30 @@ def test_bad_input_one_line():
     with pytest.raises(RodwarpError, match="same number"):
         gauss_linking(np.zeros((3, 3)), np.zeros((2, 3)), np.zeros((3, 3)), np.zeros((3, 3)))
     assert math.isfinite(linking_number(_circle(3, [0, 0, 0], 2), _circle(3, [5, 0, 0], 2)))
+
+
+def _rectangle_solid_angle(x1, x2, y1, y2, h):
+    """Solid angle of the rectangle [x1, x2] x [y1, y2] (z = 0) seen from (0, 0, h), closed form."""
+    out = 0.0
+    for x, sx in ((x2, 1), (x1, -1)):
+        for y, sy in ((y2, 1), (y1, -1)):
+            out += sx * sy * np.arctan(x * y / (h * np.sqrt(x * x + y * y + h * h)))
+    return out
+
+
+@pytest.mark.parametrize("gap", [1e-2, 1e-4, 1e-6, 1e-7])
+def test_nearly_touching_perpendicular_pairs_full_accuracy(gap):
+    # perpendicular unit segments crossing at (s, t) of their lengths, a gap apart; the difference
+    # quadrilateral is a rectangle, so G = Omega / (4 pi) in closed form.  s = t puts the crossing
+    # on a diagonal of the quadrilateral, where a two-triangle split loses ~1e-16 / gap.
+    rng = np.random.default_rng(11)
+    st = np.vstack([rng.uniform(0.05, 0.95, (20, 2)), np.c_[np.linspace(0.1, 0.9, 9), np.linspace(0.1, 0.9, 9)]])
+    p1 = np.c_[-st[:, 0], np.zeros(len(st)), np.zeros(len(st))]
+    p2 = p1 + [1.0, 0.0, 0.0]
+    p3 = np.c_[np.zeros(len(st)), -st[:, 1], np.full(len(st), gap)]
+    p4 = p3 + [0.0, 1.0, 0.0]
+    g = gauss_linking(p1, p2, p3, p4)
+    # difference vectors p - q span x in [-s, 1 - s], y in [t - 1, t], z = -gap
+    exact = np.array([_rectangle_solid_angle(-s, 1 - s, t - 1, t, gap) for s, t in st]) / (4 * np.pi)
+    np.testing.assert_allclose(np.abs(g), np.abs(exact), rtol=0, atol=2e-15)
+    assert np.all(np.abs(g) < 0.5)

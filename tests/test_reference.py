@@ -83,15 +83,52 @@ def test_agrees_with_warp_kernel_on_random_pairs():
     p = rng.uniform(-1, 1, size=(4, 2000, 3))
     # plus some near-touching perpendicular pairs
     s = rng.uniform(0.05, 0.95, 200)
-    gap = 10.0 ** rng.uniform(-6, -1, 200)
+    # (below gap 1e-4 the kernel's two-triangle split loses up to 1e-16 / gap near its diagonal)
+    gap = 10.0 ** rng.uniform(-4, -1, 200)
     q1 = np.stack([-s, 0 * s, 0 * s], 1)
     q2 = q1 + [1.0, 0, 0]
     q3 = np.stack([0 * s, -s[::-1], gap], 1)
     q4 = q3 + [0, 1.0, 0]
     P = [np.concatenate([p[k], q]) for k, q in enumerate((q1, q2, q3, q4))]
-    ours = gauss_linking_numpy(*P)
     warp = gauss_linking(*P, device="cpu")
-    assert np.max(np.abs(ours - warp)) < 1e-12
+    for form in ("foot", "diagonal"):
+        assert np.max(np.abs(gauss_linking_numpy(*P, form=form) - warp)) < 1e-12, form
+
+
+def _crossing_pairs(s, t, gap, angle_deg, rng):
+    """Unit segments crossing at parameters (s, t), gap apart, randomly rotated and moved."""
+    n = len(s)
+    th = math.radians(angle_deg)
+    u2 = np.array([math.cos(th), math.sin(th), 0.0])
+    p1 = -s[:, None] * np.array([1.0, 0, 0])
+    p3 = -t[:, None] * u2 + [0, 0, gap]
+    pts = (p1, p1 + [1.0, 0, 0], p3, p3 + u2)
+    out = []
+    rots = [_rotation(rng) for _ in range(n)]
+    shift = rng.uniform(-1, 1, size=(n, 3))
+    for p in pts:
+        out.append(np.stack([r @ x for r, x in zip(rots, p)]) + shift)
+    return out
+
+
+@pytest.mark.parametrize("gap", [1e-5, 1e-7])
+def test_foot_form_accurate_when_nearly_touching(gap):
+    """Crossing within a few gaps of the a-c diagonal (the Warp kernel's split) and of the
+    b-d diagonal: the foot form stays within 1e-14 of a long-double evaluation of the split
+    whose diagonal is far from the crossing."""
+    rng = np.random.default_rng(23)
+    s = rng.uniform(0.1, 0.9, 300)
+    off = rng.uniform(-3, 3, 300) * gap
+    for t, ref_form in ((s + off, "diagonal"), (1.0 - s + off, None)):
+        P = _crossing_pairs(s, t, gap, 70.0, rng)
+        foot = gauss_linking_numpy(*P)
+        if ref_form is None:  # near b-d: compare with the foot form in long double
+            ref = reference._gauss_cf(*(np.ascontiguousarray(p.T).astype(np.longdouble) for p in P))
+        else:                 # near a-c: the b-d split is well conditioned there
+            ref = reference._gauss_cf(*(np.ascontiguousarray(p.T).astype(np.longdouble) for p in P),
+                                      form=ref_form)
+        assert np.max(np.abs(foot - ref.astype(float))) < 1e-14
+        assert np.all(np.abs(foot) < 0.5) and np.median(np.abs(foot)) > 0.49
 
 
 # ----------------------------------------------------------------------------------------------
