@@ -9,8 +9,9 @@ Methods, in the same run on the same voxels:
 
 * **rodwarp**: :func:`rodwarp.fields.compute_fields` (hash-grid candidates, exact clipping,
   closed-form Gauss integral per clipped segment pair, all five fields) on one CPU core;
-* **NumPy**: :func:`rodwarp.reference.fields_numpy`, the same exact formulas vectorised per
-  chunk of centres with scipy cKDTree candidates.  Where NumPy over the whole grid would take
+* **NumPy**: :func:`rodwarp.reference.fields_numpy` (``form="product"``: the kernel's
+  closed form step for step), the same exact formulas vectorised per chunk of centres with
+  scipy cKDTree candidates, timed with a warmed allocator (see ``bench_acn``).  Where NumPy over the whole grid would take
   too long (quick mode at alpha = 300) it runs on an evenly strided subset of the voxels and
   its time is scaled to the whole grid (recorded as ``numpy_extrapolated``).
 
@@ -48,11 +49,14 @@ def _numpy_fields(rods, centres, R):
     from rodwarp.reference import fields_numpy
 
     p0, p1, rod = rods.segments()
-    return fields_numpy(p0, p1, rod, 2 * rods.radii[rod], centres, R)
+    return fields_numpy(p0, p1, rod, 2 * rods.radii[rod], centres, R, form="product")
 
 
 def run(quick: bool, device: str) -> dict:
+    from benchmarks.bench_acn import _warm_allocator
     from rodwarp.fields import compute_fields
+
+    _warm_allocator()
     from rodwarp.stats import field_statistics
 
     reps = common.n_repeats(quick)

@@ -18,7 +18,7 @@ query radius carries a margin and every candidate is re-tested exactly in float6
 
 import warp as wp
 
-from rodwarp.kernels.acn import gauss_linking_segments
+from rodwarp.kernels.acn import gauss_linking_lengths
 
 wp.set_module_options({"enable_backward": False})
 
@@ -105,6 +105,7 @@ def gather_clipped_segments(
     clip_b: wp.array(dtype=wp.vec3d),
     clip_seg: wp.array(dtype=wp.int32),
     clip_rod: wp.array(dtype=wp.int32),
+    clip_len: wp.array(dtype=wp.float64),
 ):
     """The clipped parts of voxel voxels[t]'s ball, written from start[t] on (same order as counted)."""
     t = wp.tid()
@@ -116,8 +117,11 @@ def gather_clipped_segments(
         tt = clip_to_ball(p0[s], p1[s], c, radius)
         if tt[1] > tt[0]:
             d = p1[s] - p0[s]
-            clip_a[w] = p0[s] + tt[0] * d
-            clip_b[w] = p0[s] + tt[1] * d
+            ca = p0[s] + tt[0] * d
+            cb = p0[s] + tt[1] * d
+            clip_a[w] = ca
+            clip_b[w] = cb
+            clip_len[w] = wp.length(cb - ca)
             clip_seg[w] = wp.int32(s)
             clip_rod[w] = seg_rod[s]
             w += 1
@@ -131,6 +135,7 @@ def ball_fields(
     clip_b: wp.array(dtype=wp.vec3d),
     clip_seg: wp.array(dtype=wp.int32),
     clip_rod: wp.array(dtype=wp.int32),
+    clip_len: wp.array(dtype=wp.float64),
     seg_diameter: wp.array(dtype=wp.float64),
     rods_out: wp.array(dtype=wp.int32),
     length_out: wp.array(dtype=wp.float64),
@@ -157,7 +162,7 @@ def ball_fields(
         bi = clip_b[b + i]
         ri = clip_rod[b + i]
         d = bi - ai
-        L = wp.length(d)
+        L = clip_len[b + i]
         total += L
         dia = seg_diameter[int(clip_seg[b + i])]
         vol += wp.float64(0.7853981633974483) * dia * dia * L
@@ -170,7 +175,7 @@ def ball_fields(
         rods += first
         for j in range(i + 1, m):
             if clip_rod[b + j] != ri:
-                ent += wp.abs(gauss_linking_segments(ai, bi, clip_a[b + j], clip_b[b + j]))
+                ent += wp.abs(gauss_linking_lengths(ai, bi, L, clip_a[b + j], clip_b[b + j], clip_len[b + j]))
     rods_out[t] = wp.int32(rods)
     length_out[t] = total
     volume_out[t] = vol

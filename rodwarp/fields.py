@@ -201,17 +201,18 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
         cbb = wp.empty(total, dtype=wp.vec3d, device=dev)
         cs = wp.empty(total, dtype=wp.int32, device=dev)
         cr = wp.empty(total, dtype=wp.int32, device=dev)
+        cl = wp.empty(total, dtype=wp.float64, device=dev)
         m = b1 - b0
         wp.launch(k.gather_clipped_segments, dim=m, device=dev,
                   inputs=[grid.id, w_vox[b0:b1], nx, ny, origin, h, R, query, w_p0, w_p1, w_rod,
-                          w_start, ca, cbb, cs, cr])
+                          w_start, ca, cbb, cs, cr, cl])
         o_n = wp.empty(m, dtype=wp.int32, device=dev)
         o_len = wp.empty(m, dtype=wp.float64, device=dev)
         o_vol = wp.empty(m, dtype=wp.float64, device=dev)
         o_S = wp.empty(m, dtype=wp.float64, device=dev)
         o_e = wp.empty(m, dtype=wp.float64, device=dev)
         wp.launch(k.ball_fields, dim=m, device=dev,
-                  inputs=[w_start, w_count, ca, cbb, cs, cr, w_d, o_n, o_len, o_vol, o_S, o_e])
+                  inputs=[w_start, w_count, ca, cbb, cs, cr, cl, w_d, o_n, o_len, o_vol, o_S, o_e])
         out_n[b0:b1] = o_n.numpy()
         out_len[b0:b1] = o_len.numpy()
         out_vol[b0:b1] = o_vol.numpy()

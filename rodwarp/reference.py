@@ -27,6 +27,10 @@ evidence, not tautology:
     instead divides two O(delta) quantities computed from O(1) vectors, and loses about
     ``1e-16 / delta`` (relative to segment length) when the projection lies within a few
     ``delta`` of the split diagonal: 4e-10 at gap 1e-7, 4e-12 at gap 1e-5.
+  - ``form="product"``: the same fan, but the four half-angles (each in (-pi/2, pi/2), since
+    every denominator is positive) are added as the argument of the product of the four
+    complex numbers ``den + i num``, one ``arctan2`` instead of four: rodwarp's Warp kernel
+    evaluates exactly this, so it is the same-formula speed peer of ``rodwarp.fields``.
   - ``form="diagonal"``: the two triangles ``(d, c, b)`` and ``(b, a, d)`` split along
     ``b - d``, the same cost and the same conditioning as the Warp kernel (speed peer).
 
@@ -107,7 +111,7 @@ def _gauss_cf(p1, p2, p3, p4, form: str = "foot"):
     with np.errstate(invalid="ignore", divide="ignore"):
         if form == "diagonal":
             g = (_solid_angle(d, c, b, ld, lc, lb) + _solid_angle(b, a, d, lb, la, ld)) / (4.0 * math.pi)
-        elif form == "foot":
+        elif form in ("foot", "product"):
             nn = _dot3(n, n)
             ln = np.sqrt(nn)
             k = h / nn
@@ -117,15 +121,19 @@ def _gauss_cf(p1, p2, p3, p4, form: str = "foot"):
             verts = ((a, la), (d, ld), (c, lc), (b, lb))      # traversal a -> d -> c -> b
             w = [(v[0] - foot[0], v[1] - foot[1], v[2] - foot[2]) for v, _ in verts]
             g = 0.0
+            zr, zi = 1.0, 0.0
             for i in range(4):
                 j = (i + 1) % 4
                 li, lj = verts[i][1], verts[j][1]
                 num = sgn * _dot3(n, _cross3(w[i], w[j]))
                 den = li * lj + delta * (li + lj) + delta * delta + _dot3(w[i], w[j])
-                g = g + 2.0 * np.arctan2(num, den)
-            g = g / (4.0 * math.pi)
+                if form == "foot":
+                    g = g + 2.0 * np.arctan2(num, den)
+                else:  # den > 0: the four half-angles sum to 2 pi G in (-pi, pi), the argument of the product
+                    zr, zi = zr * den - zi * num, zr * num + zi * den
+            g = g / (4.0 * math.pi) if form == "foot" else np.arctan2(zi, zr) / (2.0 * math.pi)
         else:
-            raise RodwarpError(f"unknown form '{form}'; use 'foot' or 'diagonal'")
+            raise RodwarpError(f"unknown form '{form}'; use 'foot', 'product' or 'diagonal'")
     return np.where(degenerate, 0.0, g)
 
 
@@ -305,8 +313,8 @@ def fields_numpy(p0, p1, seg_rod, diameter, centers, radius, contact_points=None
     if not (R > 0 and math.isfinite(R)):
         raise RodwarpError(f"radius must be a positive finite length, got {radius}")
     chunk = max(int(chunk), 1)
-    if form not in ("foot", "diagonal"):
-        raise RodwarpError(f"unknown form '{form}'; use 'foot' or 'diagonal'")
+    if form not in ("foot", "product", "diagonal"):
+        raise RodwarpError(f"unknown form '{form}'; use 'foot', 'product' or 'diagonal'")
 
     out = {
         "n": np.zeros(k, np.int64),
