@@ -1,19 +1,20 @@
 """Local fields on a voxel grid: rods clipped exactly to the ball Omega_R(x) around each voxel centre.
 
-Three passes per batch of voxels, so that no kernel needs a per-thread dynamic buffer:
+Passes per batch of voxels, so that no kernel needs a per-thread dynamic buffer:
 
-1. ``count_clipped_segments``: per voxel, the segments whose clipped part has positive length
-   (candidates from the hash grid of segment midpoints);
-2. ``gather_clipped_segments``: the clipped parts written to a flat buffer at the voxel's
-   offset (an exclusive scan of the counts, done by the host);
+1. ``scatter_clipped_segments`` (count mode): per segment, the grid balls it enters with
+   positive length, counted per ball;
+2. ``scatter_clipped_segments`` (write mode) then ``sort_parts_by_segment``: the clipped
+   parts written to a flat buffer at each ball's offset (an exclusive scan of the counts,
+   done by the host), in segment order;
 3. ``ball_fields``: per voxel, from its clipped parts only: rods counted, clipped length,
    clipped volume, nematic order S and the entanglement e (sum of |G| over clipped segment
    pairs of distinct rods, the exact closed form of :mod:`kernels.acn`).
 
 ``count_contacts_in_ball`` counts contact points within R of each centre.
 
-Everything that decides a result is float64.  The hash grid stores float32 midpoints, so the
-query radius carries a margin and every candidate is re-tested exactly in float64.
+Everything that decides a result is float64.  ``count_contacts_in_ball`` queries a hash grid
+of float32 contact points with a widened radius and re-tests every candidate in float64.
 """
 
 import warp as wp
@@ -60,71 +61,112 @@ def clip_to_ball(p0: wp.vec3d, p1: wp.vec3d, centre: wp.vec3d, radius: wp.float6
     return wp.vec2d(t0, t1)
 
 
-@wp.kernel
-def count_clipped_segments(
-    grid: wp.uint64,
-    voxels: wp.array(dtype=wp.int32),
-    nx: int,
-    ny: int,
-    origin: wp.vec3d,
-    spacing: wp.float64,
-    radius: wp.float64,
-    query_radius: float,
-    p0: wp.array(dtype=wp.vec3d),
-    p1: wp.array(dtype=wp.vec3d),
-    count: wp.array(dtype=wp.int32),
-):
-    """count[t]: segments with a clipped part of positive length in the ball of voxel voxels[t]."""
-    t = wp.tid()
-    c = voxel_centre(int(voxels[t]), nx, ny, origin, spacing)
-    q = wp.hash_grid_query(grid, wp.vec3(float(c[0]), float(c[1]), float(c[2])), query_radius)
-    s = int(0)
-    m = int(0)
-    while wp.hash_grid_query_next(q, s):
-        tt = clip_to_ball(p0[s], p1[s], c, radius)
-        if tt[1] > tt[0]:
-            m += 1
-    count[t] = wp.int32(m)
+@wp.func
+def grid_range(lo: wp.float64, hi: wp.float64, origin: wp.float64, spacing: wp.float64, n: int) -> wp.vec2i:
+    """Indices [i0, i1] of grid centres origin + i spacing within [lo, hi], clamped to [0, n - 1]."""
+    i0 = int(wp.ceil((lo - origin) / spacing))
+    i1 = int(wp.floor((hi - origin) / spacing))
+    return wp.vec2i(wp.max(i0, 0), wp.min(i1, n - 1))
 
 
 @wp.kernel
-def gather_clipped_segments(
-    grid: wp.uint64,
-    voxels: wp.array(dtype=wp.int32),
-    nx: int,
-    ny: int,
-    origin: wp.vec3d,
-    spacing: wp.float64,
-    radius: wp.float64,
-    query_radius: float,
+def scatter_clipped_segments(
     p0: wp.array(dtype=wp.vec3d),
     p1: wp.array(dtype=wp.vec3d),
     seg_rod: wp.array(dtype=wp.int32),
+    nx: int,
+    ny: int,
+    nz: int,
+    origin: wp.vec3d,
+    spacing: wp.float64,
+    radius: wp.float64,
+    voxel_slot: wp.array(dtype=wp.int32),
+    slot_lo: int,
+    slot_hi: int,
+    write: int,
     start: wp.array(dtype=wp.int32),
+    fill: wp.array(dtype=wp.int32),
     clip_a: wp.array(dtype=wp.vec3d),
     clip_b: wp.array(dtype=wp.vec3d),
     clip_seg: wp.array(dtype=wp.int32),
     clip_rod: wp.array(dtype=wp.int32),
     clip_len: wp.array(dtype=wp.float64),
 ):
-    """The clipped parts of voxel voxels[t]'s ball, written from start[t] on (same order as counted)."""
+    """Segment s against every grid ball its bounding box (grown by R) reaches.
+
+    For each ball (voxel whose slot lies in [slot_lo, slot_hi)) that the segment enters with
+    positive length: with ``write == 0`` count it in fill[slot - slot_lo]; otherwise also
+    write the clipped part at start[slot - slot_lo] + (its rank from fill).  Balls are
+    visited per segment rather than segments per ball: the segment's box holds few voxel
+    centres, while a ball-centred hash query visits every midpoint in 27 cells.
+    """
+    s = wp.tid()
+    a = p0[s]
+    b = p1[s]
+    rx = grid_range(wp.min(a[0], b[0]) - radius, wp.max(a[0], b[0]) + radius, origin[0], spacing, nx)
+    ry = grid_range(wp.min(a[1], b[1]) - radius, wp.max(a[1], b[1]) + radius, origin[1], spacing, ny)
+    rz = grid_range(wp.min(a[2], b[2]) - radius, wp.max(a[2], b[2]) + radius, origin[2], spacing, nz)
+    d = b - a
+    for k in range(rz[0], rz[1] + 1):
+        for j in range(ry[0], ry[1] + 1):
+            for i in range(rx[0], rx[1] + 1):
+                v = (k * ny + j) * nx + i
+                slot = int(voxel_slot[v])
+                if slot < slot_lo or slot >= slot_hi:
+                    continue
+                c = origin + spacing * wp.vec3d(wp.float64(i), wp.float64(j), wp.float64(k))
+                tt = clip_to_ball(a, b, c, radius)
+                if tt[1] > tt[0]:
+                    t = slot - slot_lo
+                    rank = wp.atomic_add(fill, t, wp.int32(1))
+                    if write != 0:
+                        w = int(start[t]) + int(rank)
+                        ca = a + tt[0] * d
+                        cb = a + tt[1] * d
+                        clip_a[w] = ca
+                        clip_b[w] = cb
+                        clip_len[w] = wp.length(cb - ca)
+                        clip_seg[w] = wp.int32(s)
+                        clip_rod[w] = seg_rod[s]
+
+
+@wp.kernel
+def sort_parts_by_segment(
+    start: wp.array(dtype=wp.int32),
+    count: wp.array(dtype=wp.int32),
+    clip_a: wp.array(dtype=wp.vec3d),
+    clip_b: wp.array(dtype=wp.vec3d),
+    clip_seg: wp.array(dtype=wp.int32),
+    clip_rod: wp.array(dtype=wp.int32),
+    clip_len: wp.array(dtype=wp.float64),
+):
+    """Insertion sort of each ball's parts by segment id: a fixed summation order on every device
+    (parallel atomics write them in any order; on one CPU thread they arrive sorted, O(k))."""
     t = wp.tid()
-    c = voxel_centre(int(voxels[t]), nx, ny, origin, spacing)
-    q = wp.hash_grid_query(grid, wp.vec3(float(c[0]), float(c[1]), float(c[2])), query_radius)
-    s = int(0)
-    w = int(start[t])
-    while wp.hash_grid_query_next(q, s):
-        tt = clip_to_ball(p0[s], p1[s], c, radius)
-        if tt[1] > tt[0]:
-            d = p1[s] - p0[s]
-            ca = p0[s] + tt[0] * d
-            cb = p0[s] + tt[1] * d
-            clip_a[w] = ca
-            clip_b[w] = cb
-            clip_len[w] = wp.length(cb - ca)
-            clip_seg[w] = wp.int32(s)
-            clip_rod[w] = seg_rod[s]
-            w += 1
+    b = int(start[t])
+    m = int(count[t])
+    for i in range(1, m):
+        key = clip_seg[b + i]
+        j = i - 1
+        if clip_seg[b + j] > key:
+            ka = clip_a[b + i]
+            kb = clip_b[b + i]
+            kr = clip_rod[b + i]
+            kl = clip_len[b + i]
+            while j >= 0:
+                if clip_seg[b + j] <= key:
+                    break
+                clip_a[b + j + 1] = clip_a[b + j]
+                clip_b[b + j + 1] = clip_b[b + j]
+                clip_seg[b + j + 1] = clip_seg[b + j]
+                clip_rod[b + j + 1] = clip_rod[b + j]
+                clip_len[b + j + 1] = clip_len[b + j]
+                j -= 1
+            clip_a[b + j + 1] = ka
+            clip_b[b + j + 1] = kb
+            clip_seg[b + j + 1] = key
+            clip_rod[b + j + 1] = kr
+            clip_len[b + j + 1] = kl
 
 
 @wp.kernel

@@ -163,24 +163,24 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
     R = wp.float64(p.radius)
 
     p0, p1, seg_rod = rods.segments()
-    seg_len = np.linalg.norm(p1 - p0, axis=1)
     seg_d = 2.0 * rods.radii[seg_rod]
-    mid = (0.5 * (p0 + p1)).astype(np.float32)
-    scale = float(np.abs(mid).max()) + p.radius
-    # float32 midpoints: widen the query so no segment reaching the ball is missed
-    query = float(p.radius + 0.5 * seg_len.max() + 1e-5 * scale)
-    grid = wp.HashGrid(128, 128, 128, device=dev)
-    w_mid = wp.array(mid, dtype=wp.vec3, device=dev)
-    grid.build(w_mid, radius=query)
     w_p0 = wp.array(p0, dtype=wp.vec3d, device=dev)
     w_p1 = wp.array(p1, dtype=wp.vec3d, device=dev)
     w_rod = wp.array(seg_rod.astype(np.int32), dtype=wp.int32, device=dev)
     w_d = wp.array(seg_d, dtype=wp.float64, device=dev)
     w_vox = wp.array(vox, dtype=wp.int32, device=dev)
     nv = len(vox)
+    ns = len(seg_rod)
+    slot = np.full(nz * ny * nx, -1, np.int32)
+    slot[vox] = np.arange(nv, dtype=np.int32)
+    w_slot = wp.array(slot, dtype=wp.int32, device=dev)
+    dummy3 = wp.empty(1, dtype=wp.vec3d, device=dev)
+    dummy_i = wp.empty(1, dtype=wp.int32, device=dev)
+    dummy_f = wp.empty(1, dtype=wp.float64, device=dev)
     count = wp.zeros(nv, dtype=wp.int32, device=dev)
-    wp.launch(k.count_clipped_segments, dim=nv, device=dev,
-              inputs=[grid.id, w_vox, nx, ny, origin, h, R, query, w_p0, w_p1, count])
+    wp.launch(k.scatter_clipped_segments, dim=ns, device=dev,
+              inputs=[w_p0, w_p1, w_rod, nx, ny, nz, origin, h, R, w_slot, 0, nv, 0,
+                      dummy_i, count, dummy3, dummy3, dummy_i, dummy_i, dummy_f])
     counts = count.numpy().astype(np.int64)
 
     out_n = np.zeros(nv, np.int32)
@@ -197,15 +197,17 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
         total = max(int(cb.sum()), 1)
         w_start = wp.array(start.astype(np.int32), dtype=wp.int32, device=dev)
         w_count = wp.array(cb.astype(np.int32), dtype=wp.int32, device=dev)
+        fill = wp.zeros(len(cb), dtype=wp.int32, device=dev)
         ca = wp.empty(total, dtype=wp.vec3d, device=dev)
         cbb = wp.empty(total, dtype=wp.vec3d, device=dev)
         cs = wp.empty(total, dtype=wp.int32, device=dev)
         cr = wp.empty(total, dtype=wp.int32, device=dev)
         cl = wp.empty(total, dtype=wp.float64, device=dev)
         m = b1 - b0
-        wp.launch(k.gather_clipped_segments, dim=m, device=dev,
-                  inputs=[grid.id, w_vox[b0:b1], nx, ny, origin, h, R, query, w_p0, w_p1, w_rod,
-                          w_start, ca, cbb, cs, cr, cl])
+        wp.launch(k.scatter_clipped_segments, dim=ns, device=dev,
+                  inputs=[w_p0, w_p1, w_rod, nx, ny, nz, origin, h, R, w_slot, int(b0), int(b1), 1,
+                          w_start, fill, ca, cbb, cs, cr, cl])
+        wp.launch(k.sort_parts_by_segment, dim=m, device=dev, inputs=[w_start, w_count, ca, cbb, cs, cr, cl])
         o_n = wp.empty(m, dtype=wp.int32, device=dev)
         o_len = wp.empty(m, dtype=wp.float64, device=dev)
         o_vol = wp.empty(m, dtype=wp.float64, device=dev)
