@@ -249,8 +249,25 @@ def _parse_box(text: str):
     return vals
 
 
-def main():  # pragma: no cover
-    app()
+def main(argv=None) -> int:
+    """Console entry point: like ``app()`` but a usage error (a bad option value, a missing
+    argument, an unknown option) is one line on stderr with exit code 2, not a box."""
+    try:
+        import click
+    except ImportError:  # typer >= 0.2x vendors click
+        from typer import _click as click
+
+    try:
+        rv = app(args=argv, standalone_mode=False)
+    except click.exceptions.UsageError as e:
+        cmd = e.ctx.command_path if e.ctx is not None else "rodwarp"
+        msg = " ".join(e.format_message().split())
+        typer.echo(f"error: {msg} (see '{cmd} --help')", err=True)
+        return 2
+    except (getattr(click.exceptions, "Abort", typer.Abort), typer.Abort):
+        typer.echo("aborted", err=True)
+        return 1
+    return rv if isinstance(rv, int) else 0
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -42,3 +42,17 @@ def test_short_simulation_writes_its_outputs(tmp_path):
     assert abs(summary["a_over_g"] - 4 * 3.141592653589793**2 * 100 * 0.001 / 0.5) < 1e-9
     assert (out / "metrics.csv").read_text().count("\n") >= 3
     assert (out / "final.npz").exists() and (out / "metrics.png").exists()
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["simulate", "--alpha", "abc"], "Invalid value for '--alpha'"),
+    (["simulate", "--bogus"], "No such option"),
+    (["analyze"], "Missing argument"),
+    (["phantom", "random", "--shape", "9", "9", "--out", "x.tif"], "--shape"),
+])
+def test_usage_errors_are_one_line(args, fragment, capsys):
+    from rodwarp.cli import main
+
+    assert main(args) == 2
+    err = [ln for ln in capsys.readouterr().err.strip().splitlines() if "CUDA" not in ln]
+    assert len(err) == 1 and err[0].startswith("error:") and fragment in err[0]
