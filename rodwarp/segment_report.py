@@ -89,7 +89,14 @@ def plot_qa_slices(path, volume, rods_vox: RodSet, *, slices=None) -> Path:
     from matplotlib.figure import Figure
 
     nz = volume.shape[0]
-    zs = slices if slices is not None else [int(nz * q) for q in (0.25, 0.5, 0.75)]
+    if slices is not None:
+        zs = list(slices)
+    elif rods_vox.n_rods:
+        # spread over the slices the rods occupy (a small packing in a big volume stays visible)
+        zlo, zhi = float(rods_vox.points[:, 2].min()), float(rods_vox.points[:, 2].max())
+        zs = sorted({int(np.clip(round(zlo + q * (zhi - zlo)), 0, nz - 1)) for q in (0.25, 0.5, 0.75)})
+    else:
+        zs = [int(nz * q) for q in (0.25, 0.5, 0.75)]
     fig = Figure(figsize=(5.2 * len(zs), 5.4))
     p0, p1, rod = rods_vox.segments()
     r = rods_vox.radii[rod]
