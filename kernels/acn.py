@@ -31,18 +31,16 @@ COPLANAR_TOL = wp.float64(1.0e-14)
 
 
 @wp.func
-def fan_factor(z: wp.vec2d, wi: wp.vec3d, li: wp.float64, wj: wp.vec3d, lj: wp.float64, n_hat: wp.vec3d,
+def fan_factor(z: wp.vec2d, num: wp.float64, vi: wp.vec3d, li: wp.float64, vj: wp.vec3d, lj: wp.float64,
                delta: wp.float64) -> wp.vec2d:
-    """z times (den + i num) of the fan triangle (f, f + wi, f + wj), f = delta n_hat the foot.
+    """z times (den + i num) for the fan triangle (f, vi, vj), f = delta n_hat the foot.
 
-    Van Oosterom-Strackee with u = f and wi, wj perpendicular to f gives the triangle's half
-    solid angle as arg(den + i num); numerator and denominator both carry a factor delta,
-    divided out here, so nothing of size O(delta) is formed from O(1) terms (li, lj: the
-    distances |f + wi|, |f + wj|).  den > 0 (li lj >= |wi||wj| >= -wi.wj), so every factor
-    lies in the right half plane.
+    Van Oosterom-Strackee with u = f: numerator and denominator both carry a factor delta,
+    divided out, so nothing of size O(delta) is formed from O(1) terms: num = n_hat.(wi x wj)
+    (wi = vi - f, passed in) and den = li lj + delta (li + lj) + vi.vj (= ... + delta^2 + wi.wj).
+    den > 0 (li lj >= |vi||vj|), so every factor lies in the right half plane.
     """
-    num = wp.dot(n_hat, wp.cross(wi, wj))
-    den = li * lj + delta * (li + lj) + delta * delta + wp.dot(wi, wj)
+    den = li * lj + delta * (li + lj) + wp.dot(vi, vj)
     return wp.vec2d(z[0] * den - z[1] * num, z[0] * num + z[1] * den)
 
 
@@ -75,21 +73,20 @@ def gauss_linking_lengths(p1: wp.vec3d, p2: wp.vec3d, l1: wp.float64, p3: wp.vec
     if h < F0:
         n_hat = -n_hat
     delta = wp.abs(h) / ln
-    f = delta * n_hat
-    wa = a - f
-    wd = d - f
-    wc = c - f
-    wb = b - f
     ld = wp.length(d)
     lc = wp.length(c)
     lb = wp.length(b)
+    # fan numerators n_hat.(wi x wj): consecutive vertices differ by -e2, e1, e2, -e1, and
+    # n_hat.(w x e) = w.(e x n_hat) = v.(e x n_hat) (the foot is along n_hat)
+    m1 = wp.cross(e1, n_hat)
+    m2 = wp.cross(e2, n_hat)
     # the four half solid angles add up to Omega / 2 = 2 pi G in (-pi, pi), so the argument of
     # the product of the four factors is their sum exactly: one atan2 instead of four
     z = wp.vec2d(F1, F0)
-    z = fan_factor(z, wa, la, wd, ld, n_hat, delta)
-    z = fan_factor(z, wd, ld, wc, lc, n_hat, delta)
-    z = fan_factor(z, wc, lc, wb, lb, n_hat, delta)
-    z = fan_factor(z, wb, lb, wa, la, n_hat, delta)
+    z = fan_factor(z, -wp.dot(a, m2), a, la, d, ld, delta)
+    z = fan_factor(z, wp.dot(d, m1), d, ld, c, lc, delta)
+    z = fan_factor(z, wp.dot(c, m2), c, lc, b, lb, delta)
+    z = fan_factor(z, -wp.dot(b, m1), b, lb, a, la, delta)
     return wp.atan2(z[1], z[0]) * INV_2PI
 
 
