@@ -11,9 +11,9 @@ contrast-to-noise 5.
   rod F1, centreline and angle errors, contact F1 (``rodwarp.segment.match_rods`` /
   ``score_contacts``).
 * **knobs**: 200^3 voxels with 100 rods; one knob varied at a time from the defaults
-  (denoising sigma, greyscale refinement rounds, coarse fit iterations, marching block):
-  accuracy (mean centreline error, median angle error, rod F1, contact F1) against wall time;
-  the default marked.
+  (greyscale refinement rounds, the disc radius that locates ends, the margin the refinement
+  reads around each axis, the denoising sigma): accuracy (mean centreline error, median angle
+  and endpoint errors, rod F1, contact F1) against wall time; the default marked.
 * **peer**: a naive pipeline of the kind REFERENCE.md section 3 warns about: Gaussian
   denoising, Otsu threshold, 3-D skeleton (``skimage.morphology.skeletonize``), every branch
   between junctions taken as a rod (PCA line through its voxels, extended to its extreme
@@ -34,10 +34,10 @@ NAME = "segment"
 TITLE = "CT segmentation on synthetic CT: speed, accuracy against time over the knobs, naive skeleton peer"
 
 KNOBS = {
-    "smooth_sigma": [0.0, 0.5, 1.0, 1.5],
-    "refine_iterations": [0, 1, 3, 5],
-    "fit_iterations": [1, 3, 5],
-    "march_block": [6, 12, 24],
+    "refine_iterations": [0, 1, 2, 3, 5],
+    "end_radius": [1.0, 2.0, 3.0],
+    "window_margin": [1.5, 2.5, 3.5],
+    "smooth_sigma": [0.5, 1.0, 2.0],
 }
 
 
@@ -223,7 +223,7 @@ def plot(rec: dict, outdir) -> list[dict]:
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.4))
     metrics = (("mean_centreline_error", "mean centreline error (voxel)"),
                ("median_angle_error_deg", "median angle error (deg)"),
-               ("rod_f1", "rod F1"))
+               ("median_endpoint_error", "median endpoint error (voxel)"))
     for ax, (key, lab) in zip(axes, metrics):
         for k, name in enumerate(KNOBS):
             rr = [r for r in rows if r["knob"] == name]
@@ -234,6 +234,7 @@ def plot(rec: dict, outdir) -> list[dict]:
                 ax.annotate(str(r["value"]), (ti, yi), textcoords="offset points", xytext=(3, 3), fontsize=7)
         d = next(r for r in rows if r["default"])
         ax.plot([d["time_s"]["median"]], [d[key]], "r*", ms=14, label="defaults")
+        ax.set_xscale("log")
         ax.set_xlabel("wall time (s)")
         ax.set_ylabel(lab)
         ax.grid(alpha=0.3)
