@@ -12,7 +12,8 @@ The runner adds the provenance (command, date, device, versions), writes
 every JSON file in ``benchmarks/results``.  See ``benchmarks/README.md``.
 """
 
-BENCHMARKS = ("pile", "broadphase", "accuracy", "simulate", "fig4h", "protocol_dt", "acn", "fields")
+BENCHMARKS = ("pile", "broadphase", "accuracy", "simulate", "fig4h", "protocol_dt", "acn", "fields", "stability",
+              "scaling", "pyelastica", "acn_peer", "segment")
 # run when no --only is given; fig4h and protocol_dt are long protocol sweeps (tens of minutes
 # on two cores) that run only when named
 DEFAULT = ("pile", "broadphase", "accuracy", "simulate", "acn", "fields")
