@@ -239,6 +239,66 @@ def segment(
                f"({s['diameter_voxels']:.2f} voxels), {s['wall_time_s']:.1f} s -> {s['out']}")
 
 
+def _floats(text: str, name: str) -> list[float]:
+    try:
+        vals = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise RodwarpError(f"{name} must be comma-separated numbers, e.g. 25,50,100; got '{text}'") from None
+    if not vals:
+        raise RodwarpError(f"{name} needs at least one value")
+    return vals
+
+
+@app.command()
+@_friendly
+def sweep(
+    alpha: str = typer.Option("25,50,100,200,300", help="Aspect ratios, comma-separated."),
+    freq: str = typer.Option("1,10,100", help="Stability-test floor frequencies (Hz), comma-separated."),
+    gravity: str = typer.Option("0.5", help="Gravitational accelerations (m/s^2), comma-separated."),
+    static_load: str = typer.Option("0", help="Static loads F~, comma-separated."),
+    seeds: int = typer.Option(1, help="Seeds per point (0 .. N-1)."),
+    entangle_duration: float = typer.Option(5.0, help="Entangling duration (s)."),
+    duration: float = typer.Option(5.0, help="Stability-test duration (s)."),
+    amplitude: float = typer.Option(0.001, help="Floor vibration amplitude (m)."),
+    out: Path = typer.Option(..., help="Sweep directory (results.csv, points/, figures)."),
+    scheduler: Optional[str] = typer.Option(None, help="Existing Dask scheduler tcp://HOST:8786 (default: a local cluster on 127.0.0.1)."),
+    workers: Optional[int] = typer.Option(None, help="Local worker processes (default: the number of cores)."),
+    device: str = typer.Option("auto", help="Warp device of each point (auto: the worker's GPU if any)."),
+    figures: bool = typer.Option(True, help="Draw the phase diagram at the end."),
+    quiet: bool = typer.Option(False, help="No progress bar."),
+):
+    """Parameter sweep: simulate + analyze per point on Dask; results.csv, then the phase diagram."""
+    from rodwarp.sweep import SweepSpec, phase_diagram, run_sweep
+
+    if seeds < 1:
+        raise RodwarpError(f"--seeds must be at least 1, got {seeds}")
+    if workers is not None and workers < 1:
+        raise RodwarpError(f"--workers must be at least 1, got {workers}")
+    spec = SweepSpec(alphas=_floats(alpha, "--alpha"), freqs=_floats(freq, "--freq"),
+                     gravities=_floats(gravity, "--gravity"), static_loads=_floats(static_load, "--static-load"),
+                     seeds=list(range(seeds)), entangle_duration=entangle_duration, duration=duration,
+                     amplitude=amplitude, device=device)
+    path = run_sweep(spec, out, scheduler=scheduler, workers=workers, progress=not quiet)
+    if figures:
+        for f in phase_diagram(out):
+            typer.echo(f"wrote {f}")
+    typer.echo(f"results -> {path}")
+
+
+@app.command("phase-diagram")
+@_friendly
+def phase_diagram_cmd(
+    sweep_dir: Path = typer.Argument(..., help="A `rodwarp sweep` output directory (with results.csv)."),
+):
+    """Phase diagram of a sweep: cv_e against a/g (Fig. 4L), f against alpha and a/g, alpha*."""
+    from rodwarp.sweep import phase_diagram
+
+    if not (sweep_dir / "results.csv").exists():
+        raise RodwarpError(f"'{sweep_dir}' holds no results.csv; run `rodwarp sweep --out {sweep_dir}` first")
+    for f in phase_diagram(sweep_dir):
+        typer.echo(f"wrote {f}")
+
+
 def _parse_box(text: str):
     try:
         vals = tuple(float(v) for v in text.split(","))

@@ -1,0 +1,137 @@
+"""`rodwarp sweep` machinery (issue 7): Dask LocalCluster runs, resume, failures, phase diagram."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import pytest
+
+pytest.importorskip("distributed")
+
+from rodwarp.sweep import SweepSpec, alpha_star, phase_diagram, points, read_results, run_point, run_sweep  # noqa: E402
+
+TINY = {"n_rods": 12, "save_every": 0.01, "checkpoint_every": 0.01}
+
+
+def _spec(**kw):
+    base = dict(alphas=[20, 30], freqs=[1, 10], entangle_duration=0.02, duration=0.02, overrides=dict(TINY),
+                device="cpu")
+    base.update(kw)
+    return SweepSpec(**base)
+
+
+def test_points_grid_and_ids():
+    spec = _spec(gravities=[0.5, 2], seeds=[0, 1])
+    pts = points(spec)
+    assert len(pts) == 2 * 2 * 2 * 2
+    ids = [p["id"] for p in pts]
+    assert len(set(ids)) == len(ids)
+    assert ids == [p["id"] for p in points(spec)]  # stable
+    assert "alpha30_freq1_g0.5_F0_seed0" in ids
+    assert all(p["n_rods"] == 12 and p["_analyze"] == {} for p in pts)
+
+
+def test_spec_rejects_bad_overrides():
+    from rodwarp.errors import RodwarpError
+
+    with pytest.raises(RodwarpError, match="unknown simulate"):
+        points(_spec(overrides={"nope": 1}))
+    with pytest.raises(RodwarpError, match="set by the sweep"):
+        points(_spec(overrides={"alpha": 3}))
+
+
+def test_run_point_records_failure(tmp_path):
+    p = points(_spec(alphas=[0.5], freqs=[1]))[0]  # alpha must be > 1
+    row = run_point(p, str(tmp_path / p["id"]))
+    assert row["status"].startswith("error:") and "alpha" in row["status"]
+    assert row["alpha"] == 0.5 and row["worker"] and row["wall_s"] >= 0
+
+
+def test_sweep_local_cluster_resume_and_failure(tmp_path):
+    out = tmp_path / "sw"
+    spec = _spec()
+    path = run_sweep(spec, out, workers=2, progress=False)
+    rows = read_results(path)
+    assert len(rows) == 4
+    assert [r["status"] for r in rows] == ["ok"] * 4, rows
+    for r in rows:
+        assert 0 < float(r["largest_cluster_fraction"]) <= 1
+        assert float(r["contacts_per_rod"]) >= 0
+        assert r["stable"] in ("True", "False")
+        assert r["cv_e"] != ""
+        ag = 4 * math.pi**2 * float(r["freq"]) ** 2 * float(r["amplitude"]) / float(r["gravity"])
+        assert math.isclose(float(r["a_over_g"]), ag, rel_tol=1e-9)
+        assert r["F_tilde"] == r["static_load"]
+        assert (out / "points" / r["id"] / "summary.json").exists()
+        assert (out / "points" / r["id"] / "analysis" / "summary.json").exists()
+    workers = {r["worker"] for r in rows}
+    assert len(workers) >= 1 and all(":" in w for w in workers)
+    meta = json.loads((out / "sweep.json").read_text())
+    assert meta["submitted"] == 4 and meta["skipped"] == 0 and meta["failed"] == 0
+    assert meta["spec"]["alphas"] == [20, 30] and "distributed" in meta["versions"]
+
+    # second run: nothing redone, rows untouched
+    run_sweep(spec, out, workers=2, progress=False)
+    again = read_results(path)
+    assert again == rows
+    meta = json.loads((out / "sweep.json").read_text())
+    assert meta["submitted"] == 0 and meta["skipped"] == 4
+
+    # a larger grid in the same directory: one new point fails (alpha 1 is invalid), the
+    # others finish; the four finished points are not redone
+    spec2 = _spec(alphas=[1, 20, 30], freqs=[1, 10])
+    run_sweep(spec2, out, workers=2, progress=False)
+    rows2 = {r["id"]: r for r in read_results(path)}
+    assert len(rows2) == 6
+    for r in rows:
+        assert rows2[r["id"]] == r
+    bad = [r for r in rows2.values() if r["status"] != "ok"]
+    assert len(bad) == 2 and all(float(r["alpha"]) == 1 for r in bad)
+    assert all("--alpha must be > 1" in r["status"] for r in bad)
+    meta = json.loads((out / "sweep.json").read_text())
+    assert meta["submitted"] == 2 and meta["skipped"] == 4 and meta["failed"] == 2
+
+
+def _synthetic(out):
+    rows = []
+    for ag, freq in ((0.079, 1.0), (7.9, 10.0), (790.0, 100.0)):
+        for a in (25, 50, 100, 200, 300):
+            for seed in (0, 1):
+                f = 1 / (1 + (100 / a) ** 3) + 0.02 * seed
+                cv = 1.4 if f >= 0.5 else 0.8
+                rows.append({"id": f"a{a}_f{freq}_s{seed}", "alpha": a, "freq": freq, "gravity": 0.5,
+                             "static_load": 0.0, "seed": seed, "amplitude": 0.001, "a_over_g": ag,
+                             "largest_cluster_fraction": f, "contacts_per_rod": 3.0, "cv_e": cv,
+                             "stable": f >= 0.5, "status": "ok"})
+    rows.append({"id": "broken", "alpha": 25, "freq": 1.0, "status": "error: something"})
+    keys = list(rows[0])
+    with open(out / "results.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=keys)
+        w.writeheader()
+        w.writerows(rows)
+
+
+def test_phase_diagram_from_synthetic(tmp_path):
+    _synthetic(tmp_path)
+    written = phase_diagram(tmp_path)
+    names = {p.name for p in written}
+    assert {"phase_cv_e.png", "phase_f_alpha.png", "phase_f_ag.png", "alpha_star.csv",
+            "phase_alpha_star.png"} <= names
+    for p in written:
+        assert p.stat().st_size > 1000 or p.suffix == ".csv"
+    table = list(csv.DictReader(open(tmp_path / "alpha_star.csv")))
+    assert len(table) == 3
+    for t in table:
+        a = float(t["alpha_star_f"])
+        assert 50 < a < 110  # f = 0.5 at alpha = 100 (seed 0), slightly lower on the seed mean
+        assert float(t["bracket_lo"]) == 50 and float(t["bracket_hi"]) == 100 and float(t["err"]) == 25
+        assert t["boot_std"] != ""
+
+
+def test_alpha_star_bounds():
+    rows = [{"alpha": a, "ag": 1.0, "gravity": 0.5, "static_load": 0.0, "largest_cluster_fraction": 0.9,
+             "stable": True} for a in (25, 50)]
+    t = alpha_star(rows)[0]
+    assert t["alpha_star_f"] is None and t["bracket_hi"] == 25 and "below" in t["note"]
