@@ -312,19 +312,27 @@ def _parse_box(text: str):
 def main(argv=None) -> int:
     """Console entry point: like ``app()`` but a usage error (a bad option value, a missing
     argument, an unknown option) is one line on stderr with exit code 2, not a box."""
-    try:
-        import click
-    except ImportError:  # typer >= 0.2x vendors click
-        from typer import _click as click
+    # typer >= 0.2x raises its vendored click's exceptions; older typer uses the click package
+    # (which other dependencies may install alongside): catch whichever exist
+    usage, abort = [], [typer.Abort]
+    for modname in ("typer._click.exceptions", "click.exceptions"):
+        try:
+            import importlib
 
+            mod = importlib.import_module(modname)
+        except ImportError:
+            continue
+        usage.append(mod.UsageError)
+        if hasattr(mod, "Abort"):
+            abort.append(mod.Abort)
     try:
         rv = app(args=argv, standalone_mode=False)
-    except click.exceptions.UsageError as e:
-        cmd = e.ctx.command_path if e.ctx is not None else "rodwarp"
+    except tuple(usage) as e:
+        cmd = e.ctx.command_path if getattr(e, "ctx", None) is not None else "rodwarp"
         msg = " ".join(e.format_message().split())
         typer.echo(f"error: {msg} (see '{cmd} --help')", err=True)
         return 2
-    except (getattr(click.exceptions, "Abort", typer.Abort), typer.Abort):
+    except tuple(abort):
         typer.echo("aborted", err=True)
         return 1
     return rv if isinstance(rv, int) else 0
