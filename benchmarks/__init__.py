@@ -16,4 +16,5 @@ BENCHMARKS = ("pile", "broadphase", "accuracy", "simulate", "fig4h", "protocol_d
               "scaling", "pyelastica", "acn_peer", "segment")
 # run when no --only is given; fig4h and protocol_dt are long protocol sweeps (tens of minutes
 # on two cores) that run only when named
-DEFAULT = ("pile", "broadphase", "accuracy", "simulate", "acn", "fields")
+DEFAULT = ("pile", "broadphase", "accuracy", "simulate", "acn", "fields", "segment", "stability", "scaling",
+           "pyelastica", "acn_peer")
