@@ -66,18 +66,35 @@ def contacts_per_rod(n_rods: int, c: Contacts) -> float:
     return 2.0 * len(c) / max(n_rods, 1)
 
 
+def largest_cluster(n_rods: int, c: Contacts) -> np.ndarray:
+    """Membership (N,) bool of the largest connected component of the contact graph
+    (the lowest-labelled one among equal sizes, so the choice is deterministic)."""
+    if n_rods == 0:
+        return np.zeros(0, bool)
+    if len(c) == 0:
+        m = np.zeros(n_rods, bool)
+        m[0] = True
+        return m
+    g = coo_matrix((np.ones(len(c)), (c.rod_i, c.rod_j)), shape=(n_rods, n_rods))
+    _, labels = connected_components(g, directed=False)
+    return labels == int(np.argmax(np.bincount(labels)))
+
+
 def largest_cluster_fraction(n_rods: int, c: Contacts) -> float:
     """Rods in the largest connected component of the contact graph, over all rods (f)."""
     if n_rods == 0:
         return 0.0
-    if len(c) == 0:
-        return 1.0 / n_rods
-    g = coo_matrix((np.ones(len(c)), (c.rod_i, c.rod_j)), shape=(n_rods, n_rods))
-    _, labels = connected_components(g, directed=False)
-    return float(np.bincount(labels).max() / n_rods)
+    return float(np.count_nonzero(largest_cluster(n_rods, c)) / n_rods)
 
 
-def centroid_height(model: Model, state: State) -> float:
-    """Mass-weighted mean height of all vertices (m)."""
+def centroid_height(model: Model, state: State, floor: float | None = None) -> float:
+    """Mass-weighted mean height of all vertices above the floor (m).
+
+    ``floor`` is the floor plane's height z (m); by default the model's floor at the
+    state's time (:meth:`Model.floor_height`), or z = 0 when the model has no floor.
+    """
+    if floor is None:
+        floor = model.floor_height(state.time)
+        floor = 0.0 if floor is None else floor
     x = state.x.numpy()
-    return float(np.average(x[:, 2], weights=model.mass_np))
+    return float(np.average(x[:, 2], weights=model.mass_np) - floor)

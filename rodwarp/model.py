@@ -305,6 +305,17 @@ class Model:
                 vel[k] = self.drive.direction * ((d1 - d0) / dt)
         return normals, offsets, vel, mus
 
+    def floor_height(self, t: float) -> float | None:
+        """Height z (m) at time t of the floor (the plane named ``floor``, moving with the
+        drive when it is ``moving``); None when the scene has no floor."""
+        for p in self.planes:
+            if p.name == "floor":
+                z = p.offset / p.normal[2] if abs(p.normal[2]) > 0 else p.offset
+                if p.moving:
+                    z += float(self.drive.direction[2]) * self.drive.displacement(t)
+                return float(z)
+        return None
+
     # ------------------------------------------------------------------ scene scales
     @property
     def min_diameter(self) -> float:

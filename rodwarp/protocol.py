@@ -7,8 +7,11 @@ Stages (seed paper, "Numerical simulations of rod packings"; REFERENCE.md sectio
 3. stability: side walls and lid removed, the floor vibrated at ``freq`` with ``amplitude``
    for ``duration``; f = largest contact cluster / all rods measured over time.
 
-Stability verdict: ``stable`` when f >= ``STABLE_F`` (0.5) at every sample of the last
-half of the stability test, i.e. a single cluster holds the majority of the rods.
+Stability verdict (:mod:`rodwarp.verdict`): every ``save_every`` of the test, the height
+kept h(t) (mass centroid above the floor over its value at the test start), the largest
+contact cluster f(t) and the rods that left the pile are recorded; ``stable`` when the
+packing is still entangled (h and f above their thresholds) at the end and was entangled
+for at least the threshold fraction of the test (the persistence tau).
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ import numpy as np
 from rodwarp.atomic import atomic_path, write_json
 from rodwarp.errors import RodwarpError
 
-STABLE_F = 0.5
+#: contacts per rod of the paper's packings, N = round(5.4 alpha) (seed paper, "Materials and Methods")
 Z_TARGET = 5.4
 
 
@@ -169,7 +172,8 @@ def _enter_stage(model, name, amp, freq, t0):
     model.set_drive(amp, freq, phase_time=t0)
 
 
-def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resume: bool = False) -> dict:
+def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resume: bool = False,
+                 thresholds=None) -> dict:
     """Run the whole experiment and write its outputs to ``outdir``.
 
     Writes ``summary.json`` (every parameter, seed, versions, device, dt, steps, wall time and
@@ -180,19 +184,24 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     ``checkpoints/``. With ``resume`` the run continues from the newest checkpoint and ends in
     the same final state, bit for bit on the CPU, as an uninterrupted run.
 
+    ``thresholds`` (:class:`rodwarp.verdict.Thresholds`, default the measured ones) set the
+    stability verdict; summary.json records them with the rule.
+
     Returns
     -------
     dict
         The summary.
     """
     from rodwarp import _warp
-    from rodwarp.metrics import centroid_height, contacts_per_rod, largest_cluster_fraction, rod_contacts
+    from rodwarp import verdict as vd
+    from rodwarp.metrics import centroid_height, contacts_per_rod, largest_cluster, rod_contacts
     from rodwarp.model import State
     from rodwarp.outputs import Trajectory, latest_checkpoint, plot_snapshots, save_checkpoint, write_pvd, write_vtp
     from rodwarp.packing import orientation_statistics, random_packing
     from rodwarp.rodset import load
 
     params.validate()
+    thresholds = thresholds or vd.DEFAULT_THRESHOLDS
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     device = _warp.resolve_device(params.device)
@@ -228,6 +237,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     state = model.state()
     other = State(model)
     y0 = centroid_height(model, state)
+    pile_ref = None  # the pile at the start of the stability test (reference of h and rods left)
     rows: list = []
     steps = 0
     dts: dict = {}
@@ -239,6 +249,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         arrays, meta = ck
         rows = meta["rows"]
         y0 = meta["y0"]
+        pile_ref = vd.PileReference.from_dict(meta["pile_ref"]) if meta.get("pile_ref") else None
         steps = meta["steps"]
         stage_t0 = {k: float(v) for k, v in meta["stage_t0"].items()}
         start_stage, start_k = meta["stage"], meta["k"]
@@ -265,18 +276,27 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     def sample(stage, st, inf):
         nonlocal frame
         c = rod_contacts(model, st)
+        x = st.positions()
+        floor = model.floor_height(st.time)
+        floor = 0.0 if floor is None else floor
+        in_big = largest_cluster(model.n_rods, c)
+        h = vd.centroid_height_above(x, model.mass_np, floor)
+        test = stage == "stability" and pile_ref is not None
         rows.append({
             "time": st.time, "stage": stage,
             "contacts_per_rod": contacts_per_rod(model.n_rods, c),
-            "largest_cluster_fraction": largest_cluster_fraction(model.n_rods, c),
-            "centroid_height_ratio": centroid_height(model, st) / y0,
+            "largest_cluster_fraction": float(np.count_nonzero(in_big) / max(model.n_rods, 1)),
+            "centroid_height": h,
+            "centroid_height_ratio": h / y0,
+            "height_kept": h / pile_ref.height if test else "",
+            "rods_left": vd.rods_left(x, model.vertex_rod_np, model.mass_np, model.n_rods, floor, in_big, pile_ref)
+            if test else "",
             "kinetic_energy": solver.energy(st)["kinetic"],
             "max_penetration_over_d": max(0.0, -float(c.gap.min()) if len(c) else 0.0) / model.min_diameter,
             "friction_residual": inf.contact_residual if inf else 0.0,
             "iterations": inf.iterations if inf else 0,
             "n_contact_pairs": inf.n_contacts if inf else 0,
         })
-        x = st.positions()
         traj.write(frame, st.time, x)
         fname = f"vtk/frame_{frame:05d}.vtp"
         write_vtp(outdir / fname, x, rods.offsets, rods.radii, st.time)
@@ -289,7 +309,8 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         for title, x in snaps:
             if title == "after entangling":
                 arrays["after_entangle"] = x
-        meta = {"stage": si, "k": k, "steps": steps, "y0": y0, "rows": rows, "stage_t0": stage_t0, "frame": frame,
+        meta = {"stage": si, "k": k, "steps": steps, "y0": y0, "rows": rows,
+                "pile_ref": pile_ref.to_dict() if pile_ref is not None else None, "stage_t0": stage_t0, "frame": frame,
                 "vtk": vtk_entries, "parameters": json.loads(json.dumps(asdict(params)))}
         save_checkpoint(ckdir, steps, arrays, meta)
         _write_metrics(outdir / "metrics.csv", rows)
@@ -313,6 +334,10 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
                 other.ensure_plane_storage()
                 if name == "stability":
                     state.plane_impulse.zero_()
+                    floor = model.floor_height(state.time)
+                    pile_ref = vd.pile_reference(state.time, state.positions(), model.vertex_rod_np, model.mass_np,
+                                                 model.n_rods, 0.0 if floor is None else floor,
+                                                 float(np.max(rods.rod_lengths())), model.min_diameter)
             dt = params.dt or protocol_dt
             dts[name] = dt
             n = int(round(dur / dt))
@@ -347,17 +372,16 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     snaps.append(("end", state.positions()))
     plot_snapshots(outdir / "snapshots.png", snaps, rods.offsets, box=(box_lo, box_hi))
 
-    stab = [r for r in rows if r["stage"] == "stability"]
-    t_stab = stage_t0.get("stability", 0.0)
-    tail = [r["largest_cluster_fraction"] for r in stab if r["time"] >= t_stab + 0.5 * params.duration] or \
-        [stab[-1]["largest_cluster_fraction"]]
+    verdict = vd.judge_rows(rows, pile_ref.time, thresholds).to_dict()
     summary = {
         "alpha": params.alpha, "n_rods": model.n_rods, "freq": params.freq, "amplitude": params.amplitude,
         "gravity": params.gravity, "a_over_g": params.a_over_g, "static_load": params.static_load,
         "contacts_per_rod": contacts_per_rod(model.n_rods, c),
-        "largest_cluster_fraction": largest_cluster_fraction(model.n_rods, c),
+        "largest_cluster_fraction": verdict["largest_cluster_fraction"],
+        "height_kept": verdict["height_kept"], "persistence": verdict["persistence"],
+        "rods_left": verdict["rods_left"], "stable": verdict["stable"], "thresholds": verdict["thresholds"],
+        "stable_rule": verdict["rule"], "test_start": pile_ref.to_dict(),
         "centroid_height_ratio": centroid_height(model, state) / y0,
-        "stable": bool(min(tail) >= STABLE_F), "stable_threshold_f": STABLE_F,
         "max_penetration_over_d": max(r["max_penetration_over_d"] for r in rows),
         "seed": params.seed, "device": device, "dt": dts, "steps": steps, "wall_time_s": wall,
         "resumed": bool(resume), "initial_orientation": orient,
@@ -378,30 +402,56 @@ def _write_metrics(path, rows):
 
 
 def _plot_metrics(path, rows, summary):
+    """metrics.png: Z, f, height kept, rods left, y_c(t)/y_c(0) and kinetic energy against time,
+    the verdict's thresholds drawn on f and h, the entangled part of the test shaded."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    t = np.array([r["time"] for r in rows])
-    fig, ax = plt.subplots(2, 2, figsize=(9, 6), sharex=True)
-    for a, key, label in ((ax[0, 0], "contacts_per_rod", "Z (contacts per rod)"),
-                          (ax[0, 1], "largest_cluster_fraction", "f (largest cluster)"),
-                          (ax[1, 0], "centroid_height_ratio", "y_c(t) / y_c(0)"),
-                          (ax[1, 1], "kinetic_energy", "kinetic energy (J)")):
-        a.plot(t, [r[key] for r in rows], lw=1)
-        a.set_ylabel(label)
+    def col(key, sel=rows):
+        return np.array([float(r[key]) if r[key] != "" else np.nan for r in sel])
+
+    t = col("time")
+    thr = summary["thresholds"]
+    test = [r for r in rows if r["stage"] == "stability" and r["height_kept"] != ""]
+    t0 = summary["test_start"]["time"]
+    tt = np.concatenate([[t0], col("time", test)])
+    fig, ax = plt.subplots(3, 2, figsize=(10, 8.5), sharex=True)
+    panels = ((ax[0, 0], t, col("contacts_per_rod"), "Z (contacts per rod)", None),
+              (ax[0, 1], t, col("largest_cluster_fraction"), "f (largest cluster)", thr["cluster"]),
+              (ax[1, 0], tt, np.concatenate([[1.0], col("height_kept", test)]), "height kept h = y_c(t) / y_c(t0)",
+               thr["height_kept"]),
+              (ax[1, 1], tt, np.concatenate([[0.0], col("rods_left", test)]), "rods left the pile (fraction)", None),
+              (ax[2, 0], t, col("centroid_height_ratio"), "y_c(t) / y_c(0) (whole run)", None),
+              (ax[2, 1], t, col("kinetic_energy"), "kinetic energy (J)", None))
+    for a, x, y, label, level in panels:
+        a.plot(x, y, lw=1)
+        a.set_ylabel(label, fontsize=9)
         a.grid(alpha=0.3)
-    ax[1, 1].set_yscale("symlog", linthresh=1e-6)
+        if level is not None:
+            a.axhline(level, color="tab:red", ls=":", lw=1, label=f"threshold {level:g}")
+            a.legend(fontsize=7, loc="lower left")
+    for a in (ax[0, 1], ax[1, 0], ax[1, 1]):
+        a.set_ylim(bottom=0)
+    ax[2, 1].set_yscale("symlog", linthresh=1e-6)
+    ax[2, 1].set_ylim(bottom=0)
+    if test:
+        ent = (col("height_kept", test) >= thr["height_kept"]) & (col("largest_cluster_fraction", test) >= thr["cluster"])
+        for k in np.flatnonzero(ent):  # sample k covers the interval since the previous sample
+            for a in (ax[0, 1], ax[1, 0]):
+                a.axvspan(tt[k], tt[k + 1], color="tab:green", alpha=0.12, lw=0)
     t_stab = [r["time"] for r in rows if r["stage"] == "stability"]
     if t_stab and any(r["stage"] == "entangle" for r in rows):
         for a in ax.ravel():
-            a.axvline(t_stab[0], ls="--", lw=0.8, color="0.5")
+            a.axvline(t0, ls="--", lw=0.8, color="0.5")
         ax[0, 0].annotate("stability test", (t_stab[0], 0.02), xycoords=("data", "axes fraction"), fontsize=8,
                           color="0.4", xytext=(3, 0), textcoords="offset points")
-    for a in ax[1]:
+    for a in ax[2]:
         a.set_xlabel("t (s)")
-    fig.suptitle(f"alpha = {summary['alpha']:g}, a/g = {summary['a_over_g']:.3g}, stable = {summary['stable']}")
+    fig.suptitle(f"alpha = {summary['alpha']:g}, a/g = {summary['a_over_g']:.3g}: stable = {summary['stable']} "
+                 f"(h = {summary['height_kept']:.2f}, f = {summary['largest_cluster_fraction']:.2f}, "
+                 f"tau = {summary['persistence']:.2f}; shaded: entangled)", fontsize=10)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)

@@ -36,8 +36,9 @@ from rodwarp.errors import RodwarpError
 GRID_KEYS = ("alpha", "freq", "gravity", "static_load", "seed")
 FIXED_KEYS = ("amplitude", "entangle_duration", "duration")
 #: result columns, after the parameter columns
-RESULT_KEYS = ("a_over_g", "F_tilde", "n_rods", "largest_cluster_fraction", "contacts_per_rod", "cv_e",
-               "mean_e", "std_e", "stable", "max_penetration_over_d", "device", "wall_s", "worker", "status")
+RESULT_KEYS = ("a_over_g", "F_tilde", "n_rods", "largest_cluster_fraction", "height_kept", "persistence",
+               "rods_left", "contacts_per_rod", "cv_e", "mean_e", "std_e", "stable", "max_penetration_over_d",
+               "device", "wall_s", "worker", "status")
 #: ProtocolParams fields a sweep sets itself (not allowed in ``overrides``)
 _OWN = set(GRID_KEYS) | set(FIXED_KEYS) | {"device", "initial"}
 
@@ -173,6 +174,8 @@ def run_point(point: dict, outdir: str) -> dict:
         row.update({
             "n_rods": summary["n_rods"], "a_over_g": summary["a_over_g"],
             "largest_cluster_fraction": summary["largest_cluster_fraction"],
+            "height_kept": summary["height_kept"], "persistence": summary["persistence"],
+            "rods_left": summary["rods_left"],
             "contacts_per_rod": summary["contacts_per_rod"], "stable": bool(summary["stable"]),
             "max_penetration_over_d": summary.get("max_penetration_over_d"), "device": dev,
             "cv_e": a.get("cv_e"), "mean_e": a.get("mean_e"), "std_e": a.get("std_e"),
@@ -398,7 +401,8 @@ def _ok_rows(out) -> list[dict]:
         if r.get("status") != "ok":
             continue
         d = {k: _num(r.get(k)) for k in ("alpha", "freq", "gravity", "static_load", "seed", "amplitude",
-                                           "a_over_g", "largest_cluster_fraction", "contacts_per_rod", "cv_e")}
+                                           "a_over_g", "largest_cluster_fraction", "height_kept", "persistence",
+                                           "rods_left", "contacts_per_rod", "cv_e")}
         if d["a_over_g"] is None and None not in (d["freq"], d["amplitude"], d["gravity"]):
             d["a_over_g"] = 4 * math.pi**2 * d["freq"] ** 2 * d["amplitude"] / d["gravity"]
         if d["alpha"] is None or d["a_over_g"] is None or d["largest_cluster_fraction"] is None:
@@ -435,12 +439,32 @@ def _crossing(xs, ys, level=0.5):
     return x, 0.5 * (x1 - x0), x0, x1, note
 
 
+def _bracketed(alphas, by_alpha, value, rng, n_boot):
+    """Crossing of 0.5 by the seed mean of ``value(row)`` against alpha, with a bootstrap over seeds."""
+    mean = [sum(value(r) for r in by_alpha[a]) / len(by_alpha[a]) for a in alphas]
+    x, err, lo, hi, note = _crossing(alphas, mean)
+    boot = None
+    if max(len(v) for v in by_alpha.values()) > 1 and x is not None:
+        vals = []
+        for _ in range(n_boot):
+            bm = [sum(value(rng.choice(by_alpha[a])) for _ in by_alpha[a]) / len(by_alpha[a]) for a in alphas]
+            bx = _crossing(alphas, bm)[0]
+            if bx is not None:
+                vals.append(math.log(bx))
+        if len(vals) > 1:
+            m = sum(vals) / len(vals)
+            boot = x * (sum((v - m) ** 2 for v in vals) / (len(vals) - 1)) ** 0.5  # log spread in alpha units
+    return x, err, lo, hi, boot, note
+
+
 def alpha_star(rows: list[dict], n_boot: int = 200, seed: int = 0) -> list[dict]:
     """Critical aspect ratio for each (a/g, gravity, static load) from ok rows (see :func:`_ok_rows`).
 
-    ``alpha_star_f``: where the seed-mean f crosses 0.5, interpolated in log alpha; ``err`` is
-    half the bracketing interval; ``boot_std`` the bootstrap spread over seeds (when a point
-    has several seeds). ``alpha_star_stable``: the same on the fraction of seeds ``stable``.
+    ``alpha_star``: where the fraction of seeds judged ``stable`` (the verdict of
+    :mod:`rodwarp.verdict`: height kept, persistence and the contact cluster) crosses 1/2,
+    interpolated in log alpha; ``err`` is half the bracketing interval, ``boot_std`` the
+    bootstrap spread over seeds (when a point has several). ``alpha_star_f``: the same on
+    the seed-mean largest-cluster fraction f crossing 0.5 (the paper's Fig. 4H measure).
     """
     import random
 
@@ -454,29 +478,14 @@ def alpha_star(rows: list[dict], n_boot: int = 200, seed: int = 0) -> list[dict]
         for r in rs:
             by_alpha.setdefault(r["alpha"], []).append(r)
         alphas = sorted(by_alpha)
-        fmean = [sum(r["largest_cluster_fraction"] for r in by_alpha[a]) / len(by_alpha[a]) for a in alphas]
-        stab = [sum(r["stable"] for r in by_alpha[a]) / len(by_alpha[a]) for a in alphas]
-        x, err, lo, hi, note = _crossing(alphas, fmean)
-        xs_, errs_, _, _, notes_ = _crossing(alphas, stab)
-        boot = None
         nseeds = max(len(v) for v in by_alpha.values())
-        if nseeds > 1 and x is not None:
-            vals = []
-            for _ in range(n_boot):
-                fm = []
-                for a in alphas:
-                    v = by_alpha[a]
-                    fm.append(sum(rng.choice(v)["largest_cluster_fraction"] for _ in v) / len(v))
-                bx = _crossing(alphas, fm)[0]
-                if bx is not None:
-                    vals.append(math.log(bx))
-            if len(vals) > 1:
-                m = sum(vals) / len(vals)
-                sd = (sum((v - m) ** 2 for v in vals) / (len(vals) - 1)) ** 0.5
-                boot = x * sd  # log-space spread converted to alpha units
+        x, err, lo, hi, boot, note = _bracketed(alphas, by_alpha, lambda r: float(r["stable"]), rng, n_boot)
+        xf, errf, lof, hif, bootf, notef = _bracketed(alphas, by_alpha, lambda r: r["largest_cluster_fraction"],
+                                                     rng, n_boot)
         out.append({"a_over_g": ag, "gravity": g, "static_load": s, "n_alphas": len(alphas), "seeds": nseeds,
-                    "alpha_star_f": x, "err": err, "bracket_lo": lo, "bracket_hi": hi, "boot_std": boot,
-                    "note": note, "alpha_star_stable": xs_, "err_stable": errs_, "note_stable": notes_})
+                    "alpha_star": x, "err": err, "bracket_lo": lo, "bracket_hi": hi, "boot_std": boot, "note": note,
+                    "alpha_star_f": xf, "err_f": errf, "bracket_lo_f": lof, "bracket_hi_f": hif,
+                    "boot_std_f": bootf, "note_f": notef})
     return out
 
 
@@ -485,7 +494,8 @@ def phase_diagram(out) -> list[Path]:
 
     Writes ``phase_cv_e.png`` (Fig. 4L: sigma_e/mu_e against a/g, coloured by stability, with
     shaded stable/unstable regions), ``phase_f_alpha.png`` (Fig. 4H: f against alpha for each
-    a/g), ``phase_f_ag.png`` (Fig. 4I: f against a/g for each alpha and static load),
+    a/g), ``phase_verdict_alpha.png`` (height kept and persistence against alpha, the verdict's
+    thresholds drawn), ``phase_f_ag.png`` (Fig. 4I: f against a/g for each alpha and static load),
     ``alpha_star.csv`` and ``phase_alpha_star.png`` (alpha* against a/g with its uncertainty).
     Returns the paths written.
     """
@@ -543,10 +553,11 @@ def phase_diagram(out) -> list[Path]:
     plt.close(fig)
     written.append(p)
 
-    def mean_by(rs, key):
+    def mean_by(rs, key, value="largest_cluster_fraction"):
         d: dict = {}
         for r in rs:
-            d.setdefault(r[key], []).append(r["largest_cluster_fraction"])
+            if r[value] is not None:
+                d.setdefault(r[key], []).append(r[value])
         ks = sorted(d)
         return ks, [sum(d[k]) / len(d[k]) for k in ks], [(max(d[k]) - min(d[k])) / 2 for k in ks]
 
@@ -573,6 +584,41 @@ def phase_diagram(out) -> list[Path]:
     fig.savefig(p, dpi=120)
     plt.close(fig)
     written.append(p)
+
+    # the verdict's measures against alpha: height kept and persistence, with their thresholds
+    from rodwarp.verdict import DEFAULT_THRESHOLDS as thr
+
+    if any(r["height_kept"] is not None for r in rows):
+        fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+        for ax, value, label, level in ((axes[0], "height_kept", "height kept h at the end", thr.height_kept),
+                                        (axes[1], "persistence", "persistence tau", thr.persistence)):
+            for j, s in enumerate(loads):
+                for k, ag in enumerate(ags):
+                    sel = [r for r in rows if r["ag"] == ag and r["static_load"] == s and r[value] is not None]
+                    if not sel:
+                        continue
+                    col = f"C{(j * len(ags) + k) % 10}"
+                    xs, ys, _ = mean_by(sel, "alpha", value)
+                    ax.plot(xs, ys, "-", color=col, lw=1,
+                            label=f"a/g = {ag:.3g}" + (f", F~ = {s:g}" if len(loads) > 1 else ""))
+                    for flag, face in ((True, col), (False, "white")):
+                        pts_ = [r for r in sel if r["stable"] == flag]
+                        ax.scatter([r["alpha"] for r in pts_], [r[value] for r in pts_], s=26, facecolors=face,
+                                   edgecolors=col, zorder=3)
+            ax.axhline(level, ls=":", color="tab:red", lw=1, label=f"threshold {level:g}")
+            ax.set_xscale("log")
+            ax.set_xlabel("aspect ratio alpha")
+            ax.set_ylabel(label)
+            ax.set_ylim(0, 1.05)
+            ax.grid(alpha=0.3)
+        axes[0].legend(fontsize=7)
+        axes[1].set_title("filled: stable, open: unstable", fontsize=8)
+        fig.suptitle("stability verdict against alpha (height kept, persistence)", fontsize=9)
+        fig.tight_layout()
+        p = out / "phase_verdict_alpha.png"
+        fig.savefig(p, dpi=120)
+        plt.close(fig)
+        written.append(p)
 
     # Fig. 4I: f against a/g for each alpha and static load
     fig, ax = plt.subplots(figsize=(5.5, 4))
@@ -616,14 +662,14 @@ def phase_diagram(out) -> list[Path]:
         sel = [t for t in table if t["static_load"] == s]
         col = f"C{j}"
         lab = f"F~ = {s:g}"
-        pts_ = [t for t in sel if t["alpha_star_f"] is not None]
+        pts_ = [t for t in sel if t["alpha_star"] is not None]
         if pts_:
             yerr = [max(t["err"] or 0, t["boot_std"] or 0) for t in pts_]
-            ax.errorbar([t["a_over_g"] for t in pts_], [t["alpha_star_f"] for t in pts_], yerr=yerr, fmt="o-",
+            ax.errorbar([t["a_over_g"] for t in pts_], [t["alpha_star"] for t in pts_], yerr=yerr, fmt="o-",
                         color=col, capsize=3, label=lab)
             lab = None
-        below = [t for t in sel if t["alpha_star_f"] is None and t["bracket_hi"] is not None]
-        above = [t for t in sel if t["alpha_star_f"] is None and t["bracket_lo"] is not None]
+        below = [t for t in sel if t["alpha_star"] is None and t["bracket_hi"] is not None]
+        above = [t for t in sel if t["alpha_star"] is None and t["bracket_lo"] is not None]
         if below:
             ax.scatter([t["a_over_g"] for t in below], [t["bracket_hi"] for t in below], marker="v", color=col,
                        label=(lab + ": " if lab else "") + "alpha* below the smallest alpha")
@@ -636,7 +682,7 @@ def phase_diagram(out) -> list[Path]:
     ax.set_yscale("log")
     ax.set_ylim(amin / 1.5, amax * 1.5)
     ax.set_xlabel("a/g")
-    ax.set_ylabel("critical aspect ratio alpha* (f = 0.5)")
+    ax.set_ylabel("critical aspect ratio alpha* (half the seeds stable)")
     ax.set_title("critical aspect ratio", fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()

@@ -36,7 +36,8 @@ def test_short_simulation_writes_its_outputs(tmp_path):
     assert res.exit_code == 0, res.output
     summary = json.loads((out / "summary.json").read_text())
     for key in ("alpha", "n_rods", "freq", "amplitude", "gravity", "a_over_g", "contacts_per_rod",
-                "largest_cluster_fraction", "stable", "seed", "dt", "steps", "wall_time_s", "versions", "parameters"):
+                "largest_cluster_fraction", "height_kept", "persistence", "rods_left", "thresholds", "stable_rule",
+                "test_start", "stable", "seed", "dt", "steps", "wall_time_s", "versions", "parameters"):
         assert key in summary
     assert summary["n_rods"] == 30 and summary["seed"] == 7
     assert abs(summary["a_over_g"] - 4 * 3.141592653589793**2 * 100 * 0.001 / 0.5) < 1e-9

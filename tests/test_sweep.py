@@ -60,6 +60,9 @@ def test_sweep_local_cluster_resume_and_failure(tmp_path):
         assert 0 < float(r["largest_cluster_fraction"]) <= 1
         assert float(r["contacts_per_rod"]) >= 0
         assert r["stable"] in ("True", "False")
+        assert float(r["height_kept"]) > 0 and 0 <= float(r["persistence"]) <= 1 and 0 <= float(r["rods_left"]) <= 1
+        if r["stable"] == "True":  # the verdict's rule, read back from the row
+            assert float(r["persistence"]) >= 0.5 and float(r["largest_cluster_fraction"]) >= 0.5
         assert r["cv_e"] != ""
         ag = 4 * math.pi**2 * float(r["freq"]) ** 2 * float(r["amplitude"]) / float(r["gravity"])
         assert math.isclose(float(r["a_over_g"]), ag, rel_tol=1e-9)
@@ -101,10 +104,13 @@ def _synthetic(out):
             for seed in (0, 1):
                 f = 1 / (1 + (100 / a) ** 3) + 0.02 * seed
                 cv = 1.4 if f >= 0.5 else 0.8
+                # the verdict: alpha 25 and 50 collapse; alpha 100 holds for seed 1 only
+                stable = a > 100 or (a == 100 and seed == 1)
                 rows.append({"id": f"a{a}_f{freq}_s{seed}", "alpha": a, "freq": freq, "gravity": 0.5,
                              "static_load": 0.0, "seed": seed, "amplitude": 0.001, "a_over_g": ag,
                              "largest_cluster_fraction": f, "contacts_per_rod": 3.0, "cv_e": cv,
-                             "stable": f >= 0.5, "status": "ok"})
+                             "height_kept": 0.9 if stable else 0.3, "persistence": 1.0 if stable else 0.1,
+                             "rods_left": 0.0, "stable": stable, "status": "ok"})
     rows.append({"id": "broken", "alpha": 25, "freq": 1.0, "status": "error: something"})
     keys = list(rows[0])
     with open(out / "results.csv", "w", newline="") as fh:
@@ -118,7 +124,7 @@ def test_phase_diagram_from_synthetic(tmp_path):
     written = phase_diagram(tmp_path)
     names = {p.name for p in written}
     assert {"phase_cv_e.png", "phase_f_alpha.png", "phase_f_ag.png", "alpha_star.csv",
-            "phase_alpha_star.png"} <= names
+            "phase_alpha_star.png", "phase_verdict_alpha.png"} <= names
     for p in written:
         assert p.stat().st_size > 1000 or p.suffix == ".csv"
     table = list(csv.DictReader(open(tmp_path / "alpha_star.csv")))
@@ -126,12 +132,16 @@ def test_phase_diagram_from_synthetic(tmp_path):
     for t in table:
         a = float(t["alpha_star_f"])
         assert 50 < a < 110  # f = 0.5 at alpha = 100 (seed 0), slightly lower on the seed mean
-        assert float(t["bracket_lo"]) == 50 and float(t["bracket_hi"]) == 100 and float(t["err"]) == 25
-        assert t["boot_std"] != ""
+        assert float(t["bracket_lo_f"]) == 50 and float(t["bracket_hi_f"]) == 100 and float(t["err_f"]) == 25
+        assert t["boot_std_f"] != ""
+        # the verdict: half the seeds stable at alpha 100, all at 200: alpha* = 100 exactly
+        assert float(t["alpha_star"]) == pytest.approx(100.0)
+        assert float(t["bracket_lo"]) == 50 and float(t["bracket_hi"]) == 100
 
 
 def test_alpha_star_bounds():
     rows = [{"alpha": a, "ag": 1.0, "gravity": 0.5, "static_load": 0.0, "largest_cluster_fraction": 0.9,
              "stable": True} for a in (25, 50)]
     t = alpha_star(rows)[0]
-    assert t["alpha_star_f"] is None and t["bracket_hi"] == 25 and "below" in t["note"]
+    assert t["alpha_star"] is None and t["bracket_hi"] == 25 and "below" in t["note"]
+    assert t["alpha_star_f"] is None and t["bracket_hi_f"] == 25 and "below" in t["note_f"]
