@@ -41,14 +41,14 @@ TITLE = "Accuracy against cost: vertices per rod, time step, Gauss-Seidel iterat
 
 
 def _test_material():
-    from rodwarp.model import Material
+    from rodwarp.sim.model import Material
     from rodwarp.scenes import TEST_DENSITY, TEST_YOUNG
 
     return Material(young=TEST_YOUNG, density=TEST_DENSITY)
 
 
 def _default_iterations() -> int:
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.solver import RodSolver
 
     return int(inspect.signature(RodSolver).parameters["iterations"].default)
 
@@ -89,7 +89,7 @@ def _step_cost(model, solver, state, dt: float, k: int, repeats: int, device: st
 
 def _cantilever_model(n_edges: int, *, gravity, damping: float, tip_velocity: float = 0.0, copies: int = 1,
                       device: str = "cpu"):
-    from rodwarp.model import Model
+    from rodwarp.sim.model import Model
     from rodwarp.rodset import RodSet
     from rodwarp.scenes import TEST_RADIUS, cantilever
 
@@ -119,7 +119,7 @@ FREQ = {"dt": 2e-4, "duration": 1.2, "iterations": 2, "tip_velocity": 0.01}
 
 
 def _sag(n_edges: int, dt: float, bending: str, device: str):
-    from rodwarp.solver import RodSolver, run
+    from rodwarp.sim.solver import RodSolver, run
 
     model = _cantilever_model(n_edges, gravity=(0, 0, -9.81), damping=SAG["damping"], device=device)
     solver = RodSolver(model, iterations=SAG["iterations"], bending=bending, allow_unstable=True)
@@ -153,7 +153,7 @@ def _oscillation(ts, zs):
 
 
 def _frequency(n_edges: int, dt: float, bending: str, device: str):
-    from rodwarp.solver import RodSolver, run
+    from rodwarp.sim.solver import RodSolver, run
 
     model = _cantilever_model(n_edges, gravity=(0, 0, 0), damping=0.0, tip_velocity=FREQ["tip_velocity"], device=device)
     solver = RodSolver(model, iterations=FREQ["iterations"], bending=bending, allow_unstable=True)
@@ -173,7 +173,7 @@ def _frequency(n_edges: int, dt: float, bending: str, device: str):
 
 
 def _vertices(quick: bool, device: str) -> dict:
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.solver import RodSolver
     from rodwarp.scenes import cantilever_frequency, cantilever_sag
 
     edges = [2, 4, 9, 16, 32] if quick else [2, 3, 4, 6, 9, 12, 16, 24, 32]
@@ -229,7 +229,7 @@ def _vertices(quick: bool, device: str) -> dict:
 # ----------------------------------------------------------------------------------------------
 
 def _free_rod_model(device: str):
-    from rodwarp.model import Model
+    from rodwarp.sim.model import Model
     from rodwarp.rodset import RodSet
     from rodwarp.scenes import TEST_RADIUS
 
@@ -245,7 +245,7 @@ def _free_rod_model(device: str):
 
 
 def _free_rod(quick: bool, device: str) -> dict:
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.solver import RodSolver
 
     T = 0.5 if quick else 2.0
     repeats = common.n_repeats(quick)
@@ -268,7 +268,7 @@ def _free_rod(quick: bool, device: str) -> dict:
             e0 = solver.energy(model.state())["total"]
 
             def go():
-                from rodwarp.solver import run
+                from rodwarp.sim.solver import run
 
                 run(solver, model.state(), n * dt, dt, callback=lambda s, i: e.append(solver.energy(s)["total"]),
                     every=every)
@@ -336,7 +336,7 @@ def _pile_metrics(model, state) -> dict:
 
 
 def _pile_dt(quick: bool, device: str) -> dict:
-    from rodwarp.solver import RodSolver, run
+    from rodwarp.sim.solver import RodSolver, run
 
     alpha, d = 50.0, 0.02
     box = np.array([1.0, 1.0, 0.6])
@@ -398,9 +398,9 @@ def _pile_dt(quick: bool, device: str) -> dict:
 # ----------------------------------------------------------------------------------------------
 
 def _cabin(quick: bool, device: str) -> dict:
-    from rodwarp.model import STEEL, Model
+    from rodwarp.sim.model import STEEL, Model
     from rodwarp.scenes import log_cabin, tilted_gravity
-    from rodwarp.solver import RodSolver, run
+    from rodwarp.sim.solver import RodSolver, run
 
     its = [5, 10, 20, 30, 40, 60, 80]
     repeats = common.n_repeats(quick)
@@ -429,7 +429,7 @@ def _cabin(quick: bool, device: str) -> dict:
 
 
 def _pile_iterations(quick: bool, device: str) -> dict:
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.solver import RodSolver
 
     its = [5, 10, 20, 30, 40, 60, 80]
     k = 30 if quick else 60

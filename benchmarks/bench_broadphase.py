@@ -12,7 +12,7 @@ Methods, all on the same positions:
   figure is the ``broadphase + narrowphase`` stage time: midpoints into the hash grid, the
   Verlet candidate list (exact capsule filter at margin + skin) and the narrowphase over it
   (exact gaps, radix sort, warm-start lookup).  *rebuild*: the pair list is rebuilt from
-  scratch in the timed step (forced through the private ``solver._pairs_n = None``; a fresh
+  scratch in the timed step (forced through ``solver.invalidate_pairs()``; a fresh
   solver per repeat when that hook is gone); *reuse*: the list is still valid (typical step).
   Rodwarp's contacts are the step's contacts with gap < contact distance.
 * **cKDTree**: ``scipy.spatial.cKDTree`` on segment midpoints, ``query_pairs`` with rodwarp's
@@ -157,8 +157,8 @@ def _compare(ref_pairs, ref_gaps, pairs, gaps, cd) -> dict:
 
 
 def _point(n_tiles: int, quick: bool, device: str, limit_s: float, rate: list) -> dict:
-    from rodwarp.model import State
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.state import State
+    from rodwarp.sim.solver import RodSolver
 
     repeats = common.n_repeats(quick)
     tile = common.settled_tile(device)
@@ -168,23 +168,23 @@ def _point(n_tiles: int, quick: bool, device: str, limit_s: float, rate: list) -
     dt = solver.default_dt()
     A = model.state()
     B = State(model, A.contact_capacity)
-    solver.step(A, B, dt)  # untimed: allocations, first-step energy evaluation
+    solver.step(A, B, None, dt)  # untimed: allocations, first-step energy evaluation
     x = A.positions()
     cd = model.contact_distance
 
-    hook = hasattr(solver, "_pairs_n")
+    hook = hasattr(solver, "invalidate_pairs")
 
     def timed_step(rebuild: bool):
         s = solver
         if rebuild:
             if hook:
-                s._pairs_n = None
+                s.invalidate_pairs()
             else:
                 s = RodSolver(model)
         s.reset_timings()
         common.sync(device)
         t = time.perf_counter()
-        s.step(A, B, dt)
+        s.step(A, B, None, dt)
         common.sync(device)
         wall = time.perf_counter() - t
         tm = s.timings

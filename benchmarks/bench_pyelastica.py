@@ -277,7 +277,7 @@ def _pe_setting(ea, n: int, shift: bool, quick: bool) -> dict:
 def _rw_setting(n: int, dt: float, kind: str, device: str, repeats: int) -> dict:
     """One rodwarp (edges, dt) setting: sag or frequency error and cost per simulated second."""
     from benchmarks.bench_accuracy import _cantilever_model, _oscillation, _run_catching, _step_cost
-    from rodwarp.solver import RodSolver, run
+    from rodwarp.sim.solver import RodSolver, run
 
     sag0, f0 = _exact()
     row = {"code": "rodwarp", "n_edges": n, "dt_s": dt, "kind": kind}
@@ -319,7 +319,7 @@ def _cheapest(rows, err_key: str, cost_key: str, tol: float):
 def _batch_cost(ea, pe_row, rw_row, device: str, repeats: int) -> dict:
     """Per-rod cost per simulated second for BATCH independent cantilevers, both codes (sag setting)."""
     from benchmarks.bench_accuracy import _cantilever_model, _step_cost
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.solver import RodSolver
 
     out = {"rods": BATCH}
     if rw_row is not None:
@@ -483,7 +483,7 @@ def _pe_pile_sim(ea, X, U, planes, pairs, plane_rods, dt: float):
     """PyElastica simulator of the hand-over state (positions X and velocities U, (N, V, 3)) with
     rod-rod contact on ``pairs`` and contact with plane p for the rods in ``plane_rods[p]``."""
     p = STEEL_PILE
-    from rodwarp.model import STEEL
+    from rodwarp.sim.model import STEEL
 
     r = 0.5 * p["diameter_m"]
     E, rho = STEEL.young, STEEL.density
@@ -533,9 +533,9 @@ def _pe_state(rods):
 
 
 def _pile(ea, quick: bool, device: str) -> dict:
-    from rodwarp.model import STEEL, Model
+    from rodwarp.sim.model import STEEL, Model
     from rodwarp.packing import random_packing
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.solver import RodSolver
 
     p = STEEL_PILE
     repeats = common.n_repeats(quick)
@@ -667,7 +667,7 @@ def _pile(ea, quick: bool, device: str) -> dict:
 
 def _pe_free_steel(ea, dt: float):
     """One free steel rod (9 elements, d = 0.01 m, l = 1 m) under gravity: the stability probe of the pile."""
-    from rodwarp.model import STEEL
+    from rodwarp.sim.model import STEEL
 
     p = STEEL_PILE
     sim = _sim_class(ea)()

@@ -1,22 +1,40 @@
-"""Contact and Coulomb friction by projected Gauss-Seidel on velocities (Moreau-Jean).
+"""Contact and Coulomb friction at the rods' surfaces, by projected Gauss-Seidel on velocities.
 
-Each contact holds an accumulated impulse P (N s).  One visit solves the contact's local
-problem exactly: the velocity-weighted inverse mass of a point on a segment is isotropic
-(w I), so non-penetration decouples from friction and the Coulomb cone |P_t| <= mu P_n is
-met by projecting P_t onto a disc: the exact cone, no pyramid, and true sticking (the
-tangential relative velocity is driven to zero whenever the disc is not reached).
+Each contact holds an accumulated impulse P (N s) acting at the two surface points
+(x_a - r_a n on rod a, x_b + r_b n on rod b; n points from b to a). The relative velocity
+of the surface points includes each edge's spin omega about its tangent t:
 
-Contacts that share a vertex must not be visited concurrently.  On the CPU a launch runs its
-threads in order, which is plain sequential Gauss-Seidel; on a GPU the contacts are
-coloured first (``color_claim`` / ``color_commit``) and each colour is one launch.
+    u = v_a(s) - v_b(t) - r_a omega_a (t_a x n) - r_b omega_b (t_b x n),
+
+and a tangential impulse applies an axial torque, so friction rolls and spins rods. The
+local effective mass is
+
+    W = w I + (r_a^2 / I_a) g_a g_a^T + (r_b^2 / I_b) g_b g_b^T,     g = t x n,
+
+with w the centreline term (isotropic, from the tridiagonal inverse mass). Because every
+g is normal to n, the normal and tangential parts decouple: the normal impulse is solved in
+closed form, and the tangential one exactly on the Coulomb cone |P_t| <= mu P_n with the
+anisotropic 2 x 2 W_t: sticking when -W_t^-1 u_t lies inside the disc, else the sliding
+impulse P_t = -(W_t + gamma I)^-1 u_t with |P_t| = mu P_n (maximal dissipation), gamma found
+by Newton on 1 / |P_t(gamma)| (concave, so the iteration converges monotonically; one step
+when W_t is isotropic). No pyramid, true sticking.
+
+Contacts that share a vertex (hence an edge) must not be visited concurrently. On the CPU a
+launch runs its threads in order (sequential Gauss-Seidel); on a GPU rod-rod contacts are
+coloured first (``color_claim`` / ``color_commit``) and each colour is one launch, and wall
+contacts run one thread per rod.
 """
 
 import warp as wp
+
+from rodwarp.kernels.narrowphase import any_perpendicular
+from rodwarp.kernels.structs import RodContacts, RodFactors, RodModel, StepParams, WallContacts, Walls
 
 wp.set_module_options({"enable_backward": False})
 
 F0 = wp.float64(0.0)
 F1 = wp.float64(1.0)
+FAR = wp.float64(1.0e299)
 
 
 @wp.func
@@ -28,236 +46,292 @@ def approach_target(gap: wp.float64, dt: wp.float64, beta: wp.float64, max_push:
 
 
 @wp.func
+def coulomb_tangential(u: wp.vec3d, n: wp.vec3d, w: wp.float64, ka: wp.float64, ga: wp.vec3d, kb: wp.float64,
+                       gb: wp.vec3d, limit: wp.float64):
+    """Tangential impulse that leaves u + W P_t sticking, or sliding on the cone edge.
+
+    ``u`` is the tangential velocity without this contact's tangential impulse, W = w I +
+    ka ga ga^T + kb gb gb^T (restricted to the plane normal to n), ``limit`` = mu P_n.
+    """
+    if limit <= F0:
+        return wp.vec3d(F0, F0, F0)
+    e1 = any_perpendicular(n)
+    e2 = wp.cross(n, e1)
+    u1 = wp.dot(u, e1)
+    u2 = wp.dot(u, e2)
+    a1 = wp.dot(ga, e1)
+    a2 = wp.dot(ga, e2)
+    b1 = wp.dot(gb, e1)
+    b2 = wp.dot(gb, e2)
+    w11 = w + ka * a1 * a1 + kb * b1 * b1
+    w12 = ka * a1 * a2 + kb * b1 * b2
+    w22 = w + ka * a2 * a2 + kb * b2 * b2
+    det0 = w11 * w22 - w12 * w12
+    y1 = (w22 * u1 - w12 * u2) / det0
+    y2 = (w11 * u2 - w12 * u1) / det0
+    ny = wp.sqrt(y1 * y1 + y2 * y2)
+    if ny <= limit:
+        return -(e1 * y1 + e2 * y2)  # sticks: the exact impulse
+    gamma = F0
+    for it in range(40):
+        if ny <= limit * (F1 + wp.float64(1.0e-10)):
+            break
+        m11 = w11 + gamma
+        m22 = w22 + gamma
+        det = m11 * m22 - w12 * w12
+        # Newton on phi(gamma) = 1 / |y| - 1 / limit; phi' = y^T (W + gamma I)^-1 y / |y|^3
+        z1 = (m22 * y1 - w12 * y2) / det
+        z2 = (m11 * y2 - w12 * y1) / det
+        gamma = gamma + (ny / limit - F1) * ny * ny / (y1 * z1 + y2 * z2)
+        m11 = w11 + gamma
+        m22 = w22 + gamma
+        det = m11 * m22 - w12 * w12
+        y1 = (m22 * u1 - w12 * u2) / det
+        y2 = (m11 * u2 - w12 * u1) / det
+        ny = wp.sqrt(y1 * y1 + y2 * y2)
+    return -(e1 * y1 + e2 * y2) * (limit / ny)
+
+
+@wp.func
+def point_weights(w0: wp.float64, w1: wp.float64, c: wp.float64, s: wp.float64):
+    """Rows of the tridiagonal M^-1 at a point (1 - s, s) of an edge: the velocity change of
+    each end per unit impulse, and the point's own inverse mass."""
+    q0 = (F1 - s) * w0 + s * c
+    q1 = (F1 - s) * c + s * w1
+    return q0, q1, (F1 - s) * q0 + s * q1
+
+
+@wp.func
 def solve_rod_contact(
     k: int,
-    seg: wp.array(dtype=wp.vec2i),
-    seg_vertex: wp.array(dtype=wp.int32),
-    st: wp.array(dtype=wp.vec2d),
-    normal: wp.array(dtype=wp.vec3d),
-    gap: wp.array(dtype=wp.float64),
-    inv_mass: wp.array(dtype=wp.float64),
-    mu: wp.float64,
-    dt: wp.float64,
-    beta: wp.float64,
-    max_push: wp.float64,
-    impulse: wp.array(dtype=wp.vec3d),
+    model: RodModel,
+    contacts: RodContacts,
+    tangent: wp.array(dtype=wp.vec3d),
+    params: StepParams,
     v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
 ):
     """Exact local solve of rod-rod contact k; returns the velocity change it caused (m/s)."""
-    sp = seg[k]
-    ia = seg_vertex[sp[0]]
-    ib = seg_vertex[sp[1]]
-    s = st[k][0]
-    t = st[k][1]
-    a0 = F1 - s
-    a1 = s
-    b0 = F1 - t
-    b1 = t
-    wa0 = inv_mass[ia] * a0
-    wa1 = inv_mass[ia + 1] * a1
-    wb0 = inv_mass[ib] * b0
-    wb1 = inv_mass[ib + 1] * b1
-    w = wa0 * a0 + wa1 * a1 + wb0 * b0 + wb1 * b1
+    sp = contacts.seg[k]
+    ia = model.seg_vertex[sp[0]]
+    ib = model.seg_vertex[sp[1]]
+    s = contacts.st[k][0]
+    t = contacts.st[k][1]
+    qa0, qa1, wa = point_weights(model.inv_mass[ia], model.inv_mass[ia + 1], model.cross_inv_mass[ia], s)
+    qb0, qb1, wb = point_weights(model.inv_mass[ib], model.inv_mass[ib + 1], model.cross_inv_mass[ib], t)
+    w = wa + wb
     if w <= F0:
         return F0
-    n = normal[k]
-    u = v[ia] * a0 + v[ia + 1] * a1 - v[ib] * b0 - v[ib + 1] * b1
-    P = impulse[k]
+    n = contacts.normal[k]
+    ra = model.radius[model.vertex_rod[ia]]
+    rb = model.radius[model.vertex_rod[ib]]
+    ga = wp.cross(tangent[ia], n)
+    gb = wp.cross(tangent[ib], n)
+    ka = ra * ra * model.inv_inertia[ia]
+    kb = rb * rb * model.inv_inertia[ib]
+    u = (v[ia] * (F1 - s) + v[ia + 1] * s) - (v[ib] * (F1 - t) + v[ib + 1] * t) - ga * (ra * spin[ia]) - \
+        gb * (rb * spin[ib])
+    P = contacts.impulse[k]
     pn = wp.dot(P, n)
     pt = P - n * pn
-    target = approach_target(gap[k], dt, beta, max_push)
     un = wp.dot(u, n)
-    pn_new = wp.max(F0, pn + (target - un) / w)
-    u = u + n * ((pn_new - pn) * w)
-    ut = u - n * wp.dot(u, n)
-    pt_new = pt - ut / w
-    lim = mu * pn_new
-    ptl = wp.length(pt_new)
-    if ptl > lim:
-        if ptl > F0:
-            pt_new = pt_new * (lim / ptl)
+    pn_new = wp.max(F0, pn + (approach_target(contacts.gap[k], params.dt, params.beta, params.max_push) - un) / w)
+    # tangential velocity without this contact's tangential impulse
+    ut = u - n * un - (pt * w + ga * (ka * wp.dot(ga, pt)) + gb * (kb * wp.dot(gb, pt)))
+    pt_new = coulomb_tangential(ut, n, w, ka, ga, kb, gb, params.mu * pn_new)
     dP = n * (pn_new - pn) + (pt_new - pt)
-    v[ia] = v[ia] + dP * wa0
-    v[ia + 1] = v[ia + 1] + dP * wa1
-    v[ib] = v[ib] - dP * wb0
-    v[ib + 1] = v[ib + 1] - dP * wb1
-    impulse[k] = n * pn_new + pt_new
-    return wp.length(dP) * w
+    v[ia] = v[ia] + dP * qa0
+    v[ia + 1] = v[ia + 1] + dP * qa1
+    v[ib] = v[ib] - dP * qb0
+    v[ib + 1] = v[ib + 1] - dP * qb1
+    spin[ia] = spin[ia] - wp.dot(dP, ga) * (ra * model.inv_inertia[ia])
+    spin[ib] = spin[ib] - wp.dot(dP, gb) * (rb * model.inv_inertia[ib])
+    contacts.impulse[k] = n * pn_new + pt_new
+    du = dP * w + ga * (ka * wp.dot(ga, dP)) + gb * (kb * wp.dot(gb, dP))
+    return wp.length(du)
 
 
 @wp.kernel
 def solve_rod_contacts(
     ids: wp.array(dtype=wp.int32),
     use_ids: int,
-    seg: wp.array(dtype=wp.vec2i),
-    seg_vertex: wp.array(dtype=wp.int32),
-    st: wp.array(dtype=wp.vec2d),
-    normal: wp.array(dtype=wp.vec3d),
-    gap: wp.array(dtype=wp.float64),
-    inv_mass: wp.array(dtype=wp.float64),
-    mu: wp.float64,
-    dt: wp.float64,
-    beta: wp.float64,
-    max_push: wp.float64,
-    impulse: wp.array(dtype=wp.vec3d),
+    model: RodModel,
+    contacts: RodContacts,
+    tangent: wp.array(dtype=wp.vec3d),
+    params: StepParams,
     v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
     residual: wp.array(dtype=wp.float64),
 ):
     """One thread per contact of one colour (GPU) or of all contacts in order (CPU)."""
     k = wp.tid()
     if use_ids != 0:
         k = ids[k]
-    du = solve_rod_contact(k, seg, seg_vertex, st, normal, gap, inv_mass, mu, dt, beta, max_push, impulse, v)
-    wp.atomic_max(residual, 0, du)
+    wp.atomic_max(residual, 0, solve_rod_contact(k, model, contacts, tangent, params, v, spin))
 
 
 @wp.kernel
 def apply_rod_impulses(
-    count: int,
-    seg: wp.array(dtype=wp.vec2i),
-    seg_vertex: wp.array(dtype=wp.int32),
-    st: wp.array(dtype=wp.vec2d),
-    inv_mass: wp.array(dtype=wp.float64),
-    impulse: wp.array(dtype=wp.vec3d),
+    model: RodModel,
+    contacts: RodContacts,
+    tangent: wp.array(dtype=wp.vec3d),
     v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
 ):
     """Warm start: apply the reused impulses once before iterating (atomics: any order)."""
     k = wp.tid()
-    if k >= count:
+    if k >= contacts.count:
         return
-    sp = seg[k]
-    ia = seg_vertex[sp[0]]
-    ib = seg_vertex[sp[1]]
-    s = st[k][0]
-    t = st[k][1]
-    P = impulse[k]
-    wp.atomic_add(v, ia, P * ((F1 - s) * inv_mass[ia]))
-    wp.atomic_add(v, ia + 1, P * (s * inv_mass[ia + 1]))
-    wp.atomic_sub(v, ib, P * ((F1 - t) * inv_mass[ib]))
-    wp.atomic_sub(v, ib + 1, P * (t * inv_mass[ib + 1]))
+    sp = contacts.seg[k]
+    ia = model.seg_vertex[sp[0]]
+    ib = model.seg_vertex[sp[1]]
+    s = contacts.st[k][0]
+    t = contacts.st[k][1]
+    qa0, qa1, wa = point_weights(model.inv_mass[ia], model.inv_mass[ia + 1], model.cross_inv_mass[ia], s)
+    qb0, qb1, wb = point_weights(model.inv_mass[ib], model.inv_mass[ib + 1], model.cross_inv_mass[ib], t)
+    P = contacts.impulse[k]
+    n = contacts.normal[k]
+    wp.atomic_add(v, ia, P * qa0)
+    wp.atomic_add(v, ia + 1, P * qa1)
+    wp.atomic_sub(v, ib, P * qb0)
+    wp.atomic_sub(v, ib + 1, P * qb1)
+    ra = model.radius[model.vertex_rod[ia]]
+    rb = model.radius[model.vertex_rod[ib]]
+    wp.atomic_sub(spin, ia, wp.dot(P, wp.cross(tangent[ia], n)) * (ra * model.inv_inertia[ia]))
+    wp.atomic_sub(spin, ib, wp.dot(P, wp.cross(tangent[ib], n)) * (rb * model.inv_inertia[ib]))
 
 
-@wp.kernel
-def prepare_plane_contacts(
-    x: wp.array(dtype=wp.vec3d),
-    v: wp.array(dtype=wp.vec3d),
-    vertex_rod: wp.array(dtype=wp.int32),
-    rod_radius: wp.array(dtype=wp.float64),
-    inv_mass: wp.array(dtype=wp.float64),
-    plane_normal: wp.array(dtype=wp.vec3d),
-    plane_offset: wp.array(dtype=wp.float64),
-    plane_vel: wp.array(dtype=wp.vec3d),
-    n_planes: int,
-    base_margin: wp.float64,
-    dt: wp.float64,
-    warm: wp.float64,
-    plane_gap: wp.array(dtype=wp.float64),
-    plane_impulse: wp.array(dtype=wp.vec3d),
-    v_out: wp.array(dtype=wp.vec3d),
-    active: wp.array(dtype=wp.int32),
-    n_active: wp.array(dtype=wp.int32),
-):
-    """Per vertex: gaps to every plane at the start of the step; warm-started impulses;
-    the vertex joins the ``active`` list when any plane is within reach.
-
-    A capsule touches a plane first at a segment endpoint, so vertex spheres suffice.
-    Inactive contacts get gap = +inf and zero impulse.
-    """
-    i = wp.tid()
-    r = rod_radius[vertex_rod[i]]
-    vi = v[i]
-    dv = wp.vec3d(F0, F0, F0)
-    any_active = int(0)
-    for p in range(n_planes):
-        k = i * n_planes + p
-        n = plane_normal[p]
-        g = wp.dot(n, x[i]) - plane_offset[p] - r
-        closing = wp.max(-wp.dot(vi - plane_vel[p], n), F0)
-        if g < base_margin + closing * dt * wp.float64(2.0):
-            plane_gap[k] = g
-            P = plane_impulse[k] * warm
-            pn = wp.max(wp.dot(P, n), F0)
-            P = n * pn + (P - n * wp.dot(P, n))
-            plane_impulse[k] = P
-            dv = dv + P * inv_mass[i]
-            any_active = 1
-        else:
-            plane_gap[k] = wp.float64(1.0e300)
-            plane_impulse[k] = wp.vec3d(F0, F0, F0)
-    v_out[i] = v_out[i] + dv
-    if any_active != 0:
-        active[wp.atomic_add(n_active, 0, 1)] = i
+# ----------------------------------------------------------------------------- walls
 
 
 @wp.func
-def solve_vertex_planes(
-    i: int,
-    inv_mass: wp.array(dtype=wp.float64),
-    plane_normal: wp.array(dtype=wp.vec3d),
-    plane_vel: wp.array(dtype=wp.vec3d),
-    plane_mu: wp.array(dtype=wp.float64),
-    n_planes: int,
-    plane_gap: wp.array(dtype=wp.float64),
-    dt: wp.float64,
-    beta: wp.float64,
-    max_push: wp.float64,
-    plane_impulse: wp.array(dtype=wp.vec3d),
+def vertex_edge(model: RodModel, i: int):
+    """The edge whose spin a wall contact at vertex i acts on (a rod's last vertex: its last edge)."""
+    r = model.vertex_rod[i]
+    if i >= model.rod_start[r + 1] - 1:
+        return i - 1
+    return i
+
+
+@wp.func
+def apply_vertex_impulse(model: RodModel, i: int, e: int, P: wp.vec3d, g: wp.vec3d, rr: wp.float64,
+                         v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
+    """Impulse P at vertex i's surface point: M^-1 column i (with the rigid rods' cross terms)
+    and the axial torque on edge e (g = t_e x n, rr = the rod radius)."""
+    r = model.vertex_rod[i]
+    v[i] = v[i] + P * model.inv_mass[i]
+    if i + 1 < model.rod_start[r + 1]:
+        v[i + 1] = v[i + 1] + P * model.cross_inv_mass[i]
+    if i > model.rod_start[r]:
+        v[i - 1] = v[i - 1] + P * model.cross_inv_mass[i - 1]
+    spin[e] = spin[e] - wp.dot(P, g) * (rr * model.inv_inertia[e])
+    return 0
+
+
+@wp.kernel
+def prepare_wall_contacts(
+    model: RodModel,
+    x: wp.array(dtype=wp.vec3d),
+    tangent: wp.array(dtype=wp.vec3d),
+    walls: Walls,
+    params: StepParams,
+    contacts: WallContacts,
     v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
 ):
-    """Every active plane of vertex i in turn (same exact local solve as rod-rod contacts);
+    """One thread per rod: gaps of its vertex spheres to every wall at the start of the step,
+    warm-started impulses (applied), and the rod joins ``active`` when any is within reach.
+
+    A capsule touches a plane first at a segment endpoint, so vertex spheres suffice.
+    Contacts out of reach get gap = +inf and zero impulse.
+    """
+    r = wp.tid()
+    a = model.rod_start[r]
+    b = model.rod_start[r + 1]
+    rr = model.radius[r]
+    any_active = int(0)
+    for i in range(a, b):
+        e = vertex_edge(model, i)
+        for p in range(walls.n):
+            k = i * walls.n + p
+            n = walls.normal[p]
+            g = wp.dot(n, x[i]) - walls.offset[p] - rr
+            closing = wp.max(-wp.dot(v[i] - walls.vel[p], n), F0)
+            if walls.on[p] != 0 and g < params.contact_distance + closing * params.dt * wp.float64(2.0):
+                contacts.gap[k] = g
+                P = contacts.impulse[k] * params.warm
+                pn = wp.max(wp.dot(P, n), F0)
+                P = n * pn + (P - n * wp.dot(P, n))
+                contacts.impulse[k] = P
+                apply_vertex_impulse(model, i, e, P, wp.cross(tangent[e], n), rr, v, spin)
+                any_active = 1
+            else:
+                contacts.gap[k] = FAR
+                contacts.impulse[k] = wp.vec3d(F0, F0, F0)
+    if any_active != 0:
+        contacts.active[wp.atomic_add(contacts.n_active, 0, 1)] = r
+
+
+@wp.func
+def solve_rod_walls(
+    r: int,
+    model: RodModel,
+    tangent: wp.array(dtype=wp.vec3d),
+    walls: Walls,
+    params: StepParams,
+    contacts: WallContacts,
+    v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
+):
+    """Every wall contact of rod r in turn (same exact local solve as rod-rod contacts);
     returns the largest velocity change caused (m/s)."""
-    w = inv_mass[i]
+    a = model.rod_start[r]
+    b = model.rod_start[r + 1]
+    rr = model.radius[r]
     worst = F0
-    if w <= F0:
-        return worst
-    for p in range(n_planes):
-        k = i * n_planes + p
-        g = plane_gap[k]
-        if g > wp.float64(1.0e299):
-            continue
-        n = plane_normal[p]
-        u = v[i] - plane_vel[p]
-        P = plane_impulse[k]
-        pn = wp.dot(P, n)
-        pt = P - n * pn
-        target = approach_target(g, dt, beta, max_push)
-        pn_new = wp.max(F0, pn + (target - wp.dot(u, n)) / w)
-        u = u + n * ((pn_new - pn) * w)
-        ut = u - n * wp.dot(u, n)
-        pt_new = pt - ut / w
-        lim = plane_mu[p] * pn_new
-        ptl = wp.length(pt_new)
-        if ptl > lim:
-            if ptl > F0:
-                pt_new = pt_new * (lim / ptl)
-        dP = n * (pn_new - pn) + (pt_new - pt)
-        v[i] = v[i] + dP * w
-        plane_impulse[k] = n * pn_new + pt_new
-        worst = wp.max(worst, wp.length(dP) * w)
+    for i in range(a, b):
+        w = model.inv_mass[i]
+        e = vertex_edge(model, i)
+        kr = rr * rr * model.inv_inertia[e]
+        for p in range(walls.n):
+            k = i * walls.n + p
+            gap = contacts.gap[k]
+            if gap > FAR or w <= F0:
+                continue
+            n = walls.normal[p]
+            g = wp.cross(tangent[e], n)
+            u = v[i] - g * (rr * spin[e]) - walls.vel[p]
+            P = contacts.impulse[k]
+            pn = wp.dot(P, n)
+            pt = P - n * pn
+            un = wp.dot(u, n)
+            pn_new = wp.max(F0, pn + (approach_target(gap, params.dt, params.beta, params.max_push) - un) / w)
+            ut = u - n * un - (pt * w + g * (kr * wp.dot(g, pt)))
+            pt_new = coulomb_tangential(ut, n, w, kr, g, F0, g, walls.mu[p] * pn_new)
+            dP = n * (pn_new - pn) + (pt_new - pt)
+            apply_vertex_impulse(model, i, e, dP, g, rr, v, spin)
+            contacts.impulse[k] = n * pn_new + pt_new
+            worst = wp.max(worst, wp.length(dP * w + g * (kr * wp.dot(g, dP))))
     return worst
 
 
 @wp.kernel
-def solve_plane_contacts(
-    active: wp.array(dtype=wp.int32),
-    inv_mass: wp.array(dtype=wp.float64),
-    plane_normal: wp.array(dtype=wp.vec3d),
-    plane_vel: wp.array(dtype=wp.vec3d),
-    plane_mu: wp.array(dtype=wp.float64),
-    n_planes: int,
-    plane_gap: wp.array(dtype=wp.float64),
-    dt: wp.float64,
-    beta: wp.float64,
-    max_push: wp.float64,
-    plane_impulse: wp.array(dtype=wp.vec3d),
+def solve_wall_contacts(
+    model: RodModel,
+    tangent: wp.array(dtype=wp.vec3d),
+    walls: Walls,
+    params: StepParams,
+    contacts: WallContacts,
     v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
     residual: wp.array(dtype=wp.float64),
 ):
-    """One thread per vertex that touches a wall (``active`` lists them)."""
-    i = active[wp.tid()]
-    du = solve_vertex_planes(i, inv_mass, plane_normal, plane_vel, plane_mu, n_planes, plane_gap, dt, beta,
-                             max_push, plane_impulse, v)
-    wp.atomic_max(residual, 0, du)
+    """One thread per rod that touches a wall (``active`` lists them)."""
+    r = contacts.active[wp.tid()]
+    wp.atomic_max(residual, 0, solve_rod_walls(r, model, tangent, walls, params, contacts, v, spin))
+
+
+# ----------------------------------------------------------------------------- colouring
 
 
 @wp.kernel
@@ -300,3 +374,42 @@ def color_commit(
         color[k] = round_id
     else:
         wp.atomic_add(remaining, 0, 1)
+
+
+@wp.kernel
+def warm_start_rod_contacts(
+    count: int,
+    key: wp.array(dtype=wp.int64),
+    normal: wp.array(dtype=wp.vec3d),
+    prev_count: int,
+    prev_key: wp.array(dtype=wp.int64),
+    prev_impulse: wp.array(dtype=wp.vec3d),
+    warm: wp.float64,
+    impulse: wp.array(dtype=wp.vec3d),
+):
+    """Reuse last step's impulse of the same contact (keys are sorted: binary search).
+
+    The old impulse is split along the new normal; its tangential part is kept, as friction
+    that held last step should hold from the first iteration of this one.
+    """
+    k = wp.tid()
+    if k >= count:
+        return
+    target = key[k]
+    lo = int(0)
+    hi = prev_count
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if prev_key[mid] < target:
+            lo = mid + 1
+        else:
+            hi = mid
+    p = wp.vec3d(F0, F0, F0)
+    if lo < prev_count:
+        if prev_key[lo] == target:
+            old = prev_impulse[lo]
+            n = normal[k]
+            pn = wp.max(wp.dot(old, n), F0)
+            pt = old - n * wp.dot(old, n)
+            p = (n * pn + pt) * warm
+    impulse[k] = p

@@ -85,6 +85,7 @@ def simulate(
     density: float = typer.Option(7850.0, help="Density (kg/m^3)."),
     dt: Optional[float] = typer.Option(None, help="Time step (s); default from the scene's stability bound."),
     iterations: int = typer.Option(20, help="Most Gauss-Seidel sweeps per step (20: max overlap < 0.1 d in the default run)."),
+    rod_model: str = typer.Option("auto", help="auto (rigid when the rods' self-weight sag is below 0.01 d), rigid or elastic."),
     save_every: float = typer.Option(0.1, help="Metrics and frame interval (s of simulated time)."),
     checkpoint_every: float = typer.Option(1.0, help="Checkpoint interval (s of simulated time)."),
     resume: bool = typer.Option(False, help="Continue a killed run from its newest checkpoint in --out."),
@@ -102,7 +103,7 @@ def simulate(
         alpha=alpha, freq=freq, amplitude=amplitude, gravity=gravity, duration=duration,
         entangle_duration=entangle_duration, entangle_freq=entangle_freq, entangle_amplitude=entangle_amplitude,
         static_load=static_load, n_rods=n_rods, length=length, vertices=vertices, box=_parse_box(box), mu=mu,
-        young=young, density=density, dt=dt, iterations=iterations, save_every=save_every,
+        young=young, density=density, dt=dt, iterations=iterations, rod_model=rod_model, save_every=save_every,
         checkpoint_every=checkpoint_every, seed=seed, device=device, initial=str(initial) if initial else None,
         entangle=entangle,
     )

@@ -7,9 +7,10 @@ import warp as wp
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from rodwarp.kernels import contacts as contact_kernels
-from rodwarp.model import Model, State
+from rodwarp.kernels import narrowphase
 from rodwarp.rodset import Contacts
+from rodwarp.sim.model import Model
+from rodwarp.sim.state import State
 
 
 def rod_contacts(model: Model, state: State, tolerance: float | None = None) -> Contacts:
@@ -35,8 +36,9 @@ def rod_contacts(model: Model, state: State, tolerance: float | None = None) -> 
     dev = model.device
     gap = wp.zeros(n, dtype=wp.float64, device=dev)
     scratch = wp.zeros(1, dtype=wp.float64, device=dev)
-    wp.launch(contact_kernels.contact_overlap, dim=n, device=dev, inputs=[
-        n, state.contact_seg, model.seg_vertex, model.vertex_rod, model.rod_radius, state.x, gap, scratch])
+    wp.launch(narrowphase.contact_overlap, dim=n, device=dev, inputs=[
+        n, state.contact_seg, model.arrays.seg_vertex, model.arrays.vertex_rod, model.arrays.radius, state.x, gap,
+        scratch])
     g = gap.numpy()
     seg = state.contact_seg.numpy()[:n]
     st = state.contact_st.numpy()[:n]
@@ -87,14 +89,8 @@ def largest_cluster_fraction(n_rods: int, c: Contacts) -> float:
     return float(np.count_nonzero(largest_cluster(n_rods, c)) / n_rods)
 
 
-def centroid_height(model: Model, state: State, floor: float | None = None) -> float:
-    """Mass-weighted mean height of all vertices above the floor (m).
-
-    ``floor`` is the floor plane's height z (m); by default the model's floor at the
-    state's time (:meth:`Model.floor_height`), or z = 0 when the model has no floor.
-    """
-    if floor is None:
-        floor = model.floor_height(state.time)
-        floor = 0.0 if floor is None else floor
+def centroid_height(model: Model, state: State, floor: float = 0.0) -> float:
+    """Mass-weighted mean height of all vertices above the floor plane z = ``floor`` (m)
+    (``Control.floor_height`` gives the floor of a scene at a time)."""
     x = state.x.numpy()
     return float(np.average(x[:, 2], weights=model.mass_np) - floor)

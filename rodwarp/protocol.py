@@ -55,6 +55,7 @@ class ProtocolParams:
     density: float = 7850.0
     dt: float | None = None
     iterations: int = 20
+    rod_model: str = "auto"
     save_every: float = 0.1
     checkpoint_every: float = 1.0
     seed: int = 0
@@ -87,6 +88,8 @@ class ProtocolParams:
             bad(f"--n-rods must be >= 1, got {self.n_rods}")
         if self.mu < 0:
             bad(f"--mu must be >= 0, got {self.mu:g}")
+        if self.rod_model not in ("auto", "rigid", "elastic"):
+            bad(f"--rod-model must be auto, rigid or elastic, got '{self.rod_model}'")
         if self.iterations < 1:
             bad(f"--iterations must be >= 1, got {self.iterations}")
         if self.save_every <= 0:
@@ -114,6 +117,21 @@ class ProtocolParams:
         return 4 * math.pi**2 * self.freq**2 * self.amplitude / self.gravity
 
 
+def _straight(rods, tol: float = 1e-3) -> bool:
+    """Every rod's vertices (and rest vertices) lie within ``tol`` radii of its chord."""
+    for pts in (rods.points, rods.rest_points):
+        if pts is None:
+            continue
+        off = rods.offsets
+        rid = np.repeat(np.arange(rods.n_rods), np.diff(off))
+        p0, p1 = pts[off[:-1]], pts[off[1:] - 1]
+        chord = p1 - p0
+        dev = np.linalg.norm(np.cross(pts - p0[rid], chord[rid]), axis=1) / np.linalg.norm(chord, axis=1)[rid]
+        if np.any(dev > tol * rods.radii[rid]):
+            return False
+    return True
+
+
 def _versions() -> dict:
     import warp
 
@@ -123,25 +141,67 @@ def _versions() -> dict:
             "python": platform.python_version(), "platform": platform.platform()}
 
 
-def _build(params: ProtocolParams, rods, device):
+#: rigid rods when the self-weight sag of a simply supported rod, 5 q l^4 / (384 E I), is below
+#: this fraction of a diameter (the knee of benchmarks/bench_rigid.py; docs/engine.md)
+RIGID_SAG = 0.01
+
+
+def rod_model_rule(params: ProtocolParams) -> dict:
+    """Which rod model the experiment uses and why.
+
+    ``auto`` picks rigid rods when their bending under the scene's largest static load, the
+    self-weight sag 5 q l^4 / (384 E I) of a simply supported rod with q = rho A g_eff
+    (static load included), is below ``RIGID_SAG`` diameters; elastic otherwise, and always
+    for an input with curved rods (rigid rods must be straight).
+
+    Returns
+    -------
+    dict
+        ``rod_model`` (the choice), ``requested``, ``sag_over_d``, ``threshold`` and ``rule``.
+    """
+    d = params.diameter
+    r = d / 2
+    g_eff = params.gravity * (1.0 + 4.0 * params.static_load / math.pi)
+    q = params.density * math.pi * r**2 * g_eff
+    EI = params.young * math.pi * r**4 / 4
+    sag = 5 * q * params.length**4 / (384 * EI) / d
+    choice = params.rod_model
+    if choice == "auto":
+        choice = "rigid" if sag < RIGID_SAG else "elastic"
+    return {"rod_model": choice, "requested": params.rod_model, "sag_over_d": sag, "threshold": RIGID_SAG,
+            "rule": f"rigid when the self-weight sag 5 q l^4 / (384 E I) < {RIGID_SAG:g} d, else elastic"}
+
+
+def _build(params: ProtocolParams, rods, device, rod_model: str):
     """Model and solver of the experiment (deterministic given the parameters and rods)."""
-    from rodwarp.model import Material, Model
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim import Material, Model, RodSolver
 
     g_eff = params.gravity * (1.0 + 4.0 * params.static_load / math.pi)
     model = Model(rods, Material(params.young, params.density), gravity=(0.0, 0.0, -g_eff), mu=params.mu,
-                  device=device)
+                  rod_model=rod_model, device=device)
     if rods.box is not None:
         lo, hi = np.asarray(rods.box[0], float), np.asarray(rods.box[1], float)
     else:  # an input without a container: the floor under its lowest point, walls around it
         bb = rods.bounding_box()
         lo, hi = bb[0], bb[1]
-    model.add_box(lo, hi + np.array([0, 0, 0.5 * params.length]), walls=("floor", "ceiling", "x-", "x+", "y-", "y+"),
-                  moving=True)
+    model.add_box(lo, hi + np.array([0, 0, 0.5 * params.length]), walls=("floor", *SIDE_WALLS), moving=True)
     return model, RodSolver(model, iterations=params.iterations), (lo, hi)
 
 
-def _default_dt(params: ProtocolParams, rods, device) -> float:
+#: walls removed for the stability test (the floor stays and vibrates)
+SIDE_WALLS = ("ceiling", "x-", "x+", "y-", "y+")
+
+
+def stage_control(model, name: str, amp: float, freq: float, t0: float):
+    """Control of a stage: entangling in the closed container, the stability test on the floor alone."""
+    control = model.control()
+    if name == "stability":
+        control.remove_walls(SIDE_WALLS)
+    control.set_drive(amp, freq, phase_time=t0)
+    return control
+
+
+def _default_dt(params: ProtocolParams, model, solver) -> float:
     """One step for the whole run: the smaller of the solver's defaults under the entangling
     and the stability-test drives (s).
 
@@ -150,11 +210,9 @@ def _default_dt(params: ProtocolParams, rods, device) -> float:
     converged: at alpha = 100, f = 10 Hz, 2.5e-3 s let rods overlap by 0.25 d (the run was
     stopped) where 1e-3 s kept the largest overlap at 0.015 d for less total cost.
     """
-    model, solver, _ = _build(params, rods, device)
-    _enter_stage(model, "entangle", params.entangle_amplitude, params.entangle_freq, 0.0)
-    dt = solver.default_dt()
-    _enter_stage(model, "stability", params.amplitude, params.freq, 0.0)
-    return min(dt, solver.default_dt())
+    return min(solver.default_dt(stage_control(model, "entangle", params.entangle_amplitude, params.entangle_freq,
+                                               0.0)),
+               solver.default_dt(stage_control(model, "stability", params.amplitude, params.freq, 0.0)))
 
 
 def _stages(params: ProtocolParams):
@@ -163,13 +221,6 @@ def _stages(params: ProtocolParams):
         stages.append(("entangle", params.entangle_duration, params.entangle_amplitude, params.entangle_freq))
     stages.append(("stability", params.duration, params.amplitude, params.freq))
     return stages
-
-
-def _enter_stage(model, name, amp, freq, t0):
-    if name == "stability":
-        # side walls and lid removed, the floor kept and vibrated
-        model.remove_planes(["ceiling", "x-", "x+", "y-", "y+"])
-    model.set_drive(amp, freq, phase_time=t0)
 
 
 def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resume: bool = False,
@@ -195,7 +246,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     from rodwarp import _warp
     from rodwarp import verdict as vd
     from rodwarp.metrics import centroid_height, contacts_per_rod, largest_cluster, rod_contacts
-    from rodwarp.model import State
+    from rodwarp.sim.state import State
     from rodwarp.outputs import Trajectory, latest_checkpoint, plot_snapshots, save_checkpoint, write_pvd, write_vtp
     from rodwarp.packing import orientation_statistics, random_packing
     from rodwarp.rodset import load
@@ -230,9 +281,14 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
             old.unlink()
         rods.save(outdir / "initial.npz")
     orient = orientation_statistics(rods)
-    model, solver, (box_lo, box_hi) = _build(params, rods, device)
+    rule = rod_model_rule(params)
+    if rule["rod_model"] == "rigid" and params.rod_model == "auto" and not _straight(rods):
+        rule.update(rod_model="elastic", rule=rule["rule"] + " (the input has curved rods: elastic)")
+    model, solver, (box_lo, box_hi) = _build(params, rods, device, rule["rod_model"])
+    sim_rods = model.rods  # the simulated rods (two vertices per rod for rigid rods)
     stages = _stages(params)
-    protocol_dt = _default_dt(params, rods, device)
+    protocol_dt = _default_dt(params, model, solver)
+    control = None
 
     state = model.state()
     other = State(model)
@@ -244,7 +300,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     stage_t0 = {}
     start_stage, start_k = 0, 0
     vtk_entries: list = []
-    snaps = [("start", rods.points.copy())]
+    snaps = [("start", sim_rods.points.copy())]
     if ck is not None:
         arrays, meta = ck
         rows = meta["rows"]
@@ -257,18 +313,15 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         for name in [s[0] for s in stages[:start_stage]]:
             if name == "entangle" and "after_entangle" in arrays:
                 snaps.append(("after entangling", arrays["after_entangle"]))
-        for si in range(start_stage + 1):
-            name, dur, amp, freq = stages[si]
-            if si < start_stage or start_k > 0:
-                _enter_stage(model, name, amp, freq, stage_t0[name])
-        state.ensure_plane_storage()
-        other.ensure_plane_storage()
+        if start_k > 0:
+            name, dur, amp, freq = stages[start_stage]
+            control = stage_control(model, name, amp, freq, stage_t0[name])
         state.load_numpy({k[6:]: v for k, v in arrays.items() if k.startswith("state_")})
 
     frames_per = {}
     for name, dur, amp, freq in stages:
         frames_per[name] = int(math.ceil(dur / params.save_every)) + 1
-    traj = Trajectory(outdir / "trajectory.zarr", 1 + sum(frames_per.values()), rods.offsets, rods.radii,
+    traj = Trajectory(outdir / "trajectory.zarr", 1 + sum(frames_per.values()), sim_rods.offsets, sim_rods.radii,
                       resume=ck is not None)
     frame = ck[1]["frame"] if ck is not None else 0
     (outdir / "vtk").mkdir(exist_ok=True)
@@ -277,7 +330,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         nonlocal frame
         c = rod_contacts(model, st)
         x = st.positions()
-        floor = model.floor_height(st.time)
+        floor = control.floor_height(st.time)
         floor = 0.0 if floor is None else floor
         in_big = largest_cluster(model.n_rods, c)
         h = vd.centroid_height_above(x, model.mass_np, floor)
@@ -299,7 +352,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         })
         traj.write(frame, st.time, x)
         fname = f"vtk/frame_{frame:05d}.vtp"
-        write_vtp(outdir / fname, x, rods.offsets, rods.radii, st.time)
+        write_vtp(outdir / fname, x, sim_rods.offsets, sim_rods.radii, st.time)
         vtk_entries.append((st.time, fname))
         write_pvd(outdir / "trajectory.pvd", vtk_entries)
         frame += 1
@@ -329,12 +382,10 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
             k0 = start_k if si == start_stage else 0
             if k0 == 0:
                 stage_t0[name] = state.time
-                _enter_stage(model, name, amp, freq, state.time)
-                state.ensure_plane_storage()
-                other.ensure_plane_storage()
+                control = stage_control(model, name, amp, freq, state.time)
                 if name == "stability":
-                    state.plane_impulse.zero_()
-                    floor = model.floor_height(state.time)
+                    state.wall_impulse.zero_()
+                    floor = control.floor_height(state.time)
                     pile_ref = vd.pile_reference(state.time, state.positions(), model.vertex_rod_np, model.mass_np,
                                                  model.n_rods, 0.0 if floor is None else floor,
                                                  float(np.max(rods.rod_lengths())), model.min_diameter)
@@ -348,7 +399,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
                 sample(name, state, None)
             t0 = time.perf_counter()
             for k in range(k0, n):
-                info = solver.step(state, other, dt)
+                info = solver.step(state, other, control, dt)
                 state, other = other, state
                 steps += 1
                 if (k + 1) % every == 0 or k == n - 1:
@@ -365,12 +416,12 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
 
     wall = time.perf_counter() - t_wall
     c = rod_contacts(model, state)
-    final = rods.with_points(state.positions(), velocities=state.velocities())
+    final = sim_rods.with_points(state.positions(), velocities=state.velocities())
     final.contacts = c
     final.attrs.update({"time": state.time})
     final.save(outdir / "final.npz")
     snaps.append(("end", state.positions()))
-    plot_snapshots(outdir / "snapshots.png", snaps, rods.offsets, box=(box_lo, box_hi))
+    plot_snapshots(outdir / "snapshots.png", snaps, sim_rods.offsets, box=(box_lo, box_hi))
 
     verdict = vd.judge_rows(rows, pile_ref.time, thresholds).to_dict()
     summary = {
@@ -383,6 +434,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         "stable_rule": verdict["rule"], "test_start": pile_ref.to_dict(),
         "centroid_height_ratio": centroid_height(model, state) / y0,
         "max_penetration_over_d": max(r["max_penetration_over_d"] for r in rows),
+        "rod_model": rule["rod_model"], "rod_model_rule": rule,
         "seed": params.seed, "device": device, "dt": dts, "steps": steps, "wall_time_s": wall,
         "resumed": bool(resume), "initial_orientation": orient,
         "parameters": asdict(params), "versions": _versions(),

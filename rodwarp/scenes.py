@@ -91,3 +91,18 @@ def straightened(points) -> np.ndarray:
     out = np.zeros_like(pts)
     out[1:, 0] = np.cumsum(h)
     return out
+
+
+def leaning_rod(phi_deg: float, length: float = 1.0, radius: float = TEST_RADIUS, n_vertices: int = 10):
+    """A rod leaning at ``phi_deg`` to the floor z = 0 against the wall x = 0 (the ladder
+    problem): its end spheres touch both. Returns the rod set; the walls are the caller's."""
+    phi = math.radians(phi_deg)
+    bottom = np.array([length * math.cos(phi) + radius, 0.0, radius])
+    top = np.array([radius, 0.0, length * math.sin(phi) + radius])
+    return RodSet.from_polylines([np.linspace(bottom, top, n_vertices)], radius)
+
+
+def ladder_min_angle(mu_floor: float, mu_wall: float) -> float:
+    """Smallest angle to the floor (deg) at which a uniform ladder stands:
+    tan(phi) = (1 - mu_f mu_w) / (2 mu_f)."""
+    return math.degrees(math.atan2(1.0 - mu_floor * mu_wall, 2.0 * mu_floor))

@@ -5,12 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from rodwarp.model import Material, Model
+from rodwarp.sim.model import Material, Model
 from rodwarp.rodset import RodSet
 from rodwarp.scenes import (
     TEST_DENSITY, TEST_RADIUS, TEST_YOUNG, cantilever, cantilever_frequency, cantilever_sag, straightened,
 )
-from rodwarp.solver import RodSolver, run
+from rodwarp.sim.solver import RodSolver, run
 
 TEST_MAT = Material(young=TEST_YOUNG, density=TEST_DENSITY)
 

@@ -106,17 +106,20 @@ def test_a_centroid_below_the_floor_is_refused():
         vd.pile_reference(0.0, x, vr, m, 3, 1.0, 1.0, d)
 
 
-def test_model_floor_height_follows_the_plane_and_the_drive():
-    from rodwarp.model import Model
+def test_floor_height_follows_the_wall_and_the_drive():
     from rodwarp.rodset import RodSet
+    from rodwarp.sim import Model
 
     rods = RodSet.from_straight([[0, 0, 3.0]], [[1, 0, 0]], 1.0, 0.01)
     model = Model(rods, rod_contacts=False)
-    assert model.floor_height(0.0) is None
+    assert model.control().floor_height(0.0) is None
     model.add_box([-1, -1, 2.5], [1, 1, 4.0], walls=("floor",), moving=True)
-    model.set_drive(0.001, 10.0)
-    assert model.floor_height(0.0) == pytest.approx(2.5)
-    assert model.floor_height(0.025) == pytest.approx(2.501)  # a quarter period: the crest
+    control = model.control()
+    control.set_drive(0.001, 10.0)
+    assert control.floor_height(0.0) == pytest.approx(2.5)
+    assert control.floor_height(0.025) == pytest.approx(2.501)  # a quarter period: the crest
+    control.remove_walls(["floor"])
+    assert control.floor_height(0.0) is None
 
 
 def test_raised_floor_run_reports_heights_above_its_floor(tmp_path):

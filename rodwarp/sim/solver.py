@@ -1,0 +1,580 @@
+"""Projected Gauss-Seidel solver: implicit elastics, exact Coulomb contact at the rods' surfaces.
+
+One step of :meth:`RodSolver.step` (all on the model's device):
+
+1. frames at the start of the step: edge tangents, reference twists, and the rest
+   curvature of curved rods in the current material frame;
+2. velocity predictor, one thread per rod: damping, gravity, applied torques and, for
+   symplectic (explicit) bending, the bending force;
+3. contacts at the start-of-step positions (:class:`~rodwarp.sim.contacts.ContactPipeline`):
+   speculative, sorted, warm-started; walls of the control within reach, warm-started;
+4. ``iterations`` Gauss-Seidel sweeps over rod-rod contacts, wall contacts and exact per-rod
+   solves of bending, twist and edge-length constraints; every block uses the same mass
+   metric, so the converged step is implicit Euler with exact Coulomb contact and its fixed
+   point is the static equilibrium;
+5. x' = x + dt v', theta' = theta + dt omega', directors transported with their edges.
+
+``state_in`` is never modified, so a step that fails its checks leaves the last good state.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from rodwarp.errors import RodwarpError, SimulationBlowUp
+from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, solve
+from rodwarp.kernels.structs import RodFactors, StepParams, WallContacts, Walls
+from rodwarp.sim.contacts import ContactPipeline
+from rodwarp.sim.model import Model
+from rodwarp.sim.state import State
+
+
+@dataclass
+class StepInfo:
+    """Diagnostics of one step.
+
+    Attributes
+    ----------
+    contact_residual : float
+        Largest velocity change (m/s) that any contact caused in the last Gauss-Seidel sweep;
+        0 for a fully converged solve.
+    stretch_residual : float
+        Largest edge-length error (m) before the last stretch projection.
+    """
+
+    step: int
+    time: float
+    dt: float
+    iterations: int  # sweeps actually run
+    n_contacts: int
+    contact_residual: float
+    stretch_residual: float
+    max_speed: float
+    theta: float
+
+
+class RodSolver:
+    """Advance a :class:`~rodwarp.sim.model.Model` from ``state_in`` to ``state_out``.
+
+    Parameters
+    ----------
+    model : Model
+        The scene.
+    iterations : int
+        Most Gauss-Seidel sweeps per step (contacts, walls, bending, twist, stretching each).
+    tolerance : float
+        Stop sweeping early once a sweep changes no contact velocity by more than this
+        (m/s) and no edge length is off by more than 1e-6 of the shortest edge; 0 always
+        runs ``iterations`` sweeps. Checked every second sweep.
+    bending : {"auto", "implicit", "explicit"}
+        Bending integration. ``auto`` uses symplectic (explicit) bending when the step is
+        below its stability bound, which conserves energy, and implicit Euler above it.
+        Curved rods always bend implicitly (their bending is coupled to twist).
+    coloring : {"auto", "on", "off"}
+        Colour rod-rod contacts so that each colour can be solved in parallel without data
+        races. ``auto`` colours on CUDA only; a CPU launch is already sequential.
+    warm_start : float
+        Fraction of last step's impulses reused (0 disables warm starting).
+    baumgarte : float
+        Fraction of an existing overlap removed per step.
+    penetration_limit : float
+        A step whose deepest rod overlap exceeds this fraction of the smallest diameter
+        raises :class:`SimulationBlowUp`.
+    speed_limit : float, optional
+        Speeds above this (m/s) are treated as a blow-up; default 20 x the scene's
+        characteristic speed (free fall over the scene height, drive speed, initial speeds
+        and the speed the initial elastic energy could give all rods).
+    allow_unstable : bool
+        Accept a step above the stability bound with a warning instead of an error.
+    energy_check_every : int
+        Steps between energy-jump checks (0 disables them).
+    skin : float, optional
+        Extra reach of the broadphase pair list (m); the list is rebuilt when a vertex has
+        moved by half of it. Default d_min + h_max / 5 (measured knee, benchmarks).
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        *,
+        iterations: int = 40,
+        tolerance: float = 1e-6,
+        bending: str = "auto",
+        coloring: str = "auto",
+        warm_start: float = 1.0,
+        baumgarte: float = 0.5,
+        penetration_limit: float = 0.25,
+        speed_limit: float | None = None,
+        allow_unstable: bool = False,
+        energy_check_every: int = 10,
+        skin: float | None = None,
+    ):
+        if iterations < 1:
+            raise RodwarpError(f"iterations must be >= 1, got {iterations}")
+        if bending not in ("auto", "implicit", "explicit"):
+            raise RodwarpError(f"bending must be auto, implicit or explicit, got '{bending}'")
+        if bending == "explicit" and model.curved:
+            raise RodwarpError("explicit bending is not available for curved rods (their bending is coupled to "
+                               "twist); use bending='implicit' or 'auto'")
+        if coloring not in ("auto", "on", "off"):
+            raise RodwarpError(f"coloring must be auto, on or off, got '{coloring}'")
+        self.model = model
+        self.iterations = int(iterations)
+        self.tolerance = float(tolerance)
+        self.length_tolerance = 1e-6 * float(model.rest_length_np[model.rest_length_np > 0].min())
+        self.bending = bending
+        self.coloring = coloring == "on" or (coloring == "auto" and wp.get_device(model.device).is_cuda)
+        self.warm_start = float(warm_start)
+        self.baumgarte = float(baumgarte)
+        self.penetration_limit = float(penetration_limit)
+        self.allow_unstable = bool(allow_unstable)
+        self._speed_limit = speed_limit
+        self._v_elastic = None
+        self._eb_dt = None
+        self._last_mech = None
+        self.energy_check_every = int(energy_check_every)
+        self._default_control = None
+        d = model.device
+        V = model.n_vertices
+        f = self.factors = RodFactors()
+        f.implicit_bending = 1
+        for name, dtype in (("bcoef", wp.vec4d), ("btarget", wp.vec3d), ("bdiag", wp.float64), ("boff1", wp.float64),
+                            ("boff2", wp.float64), ("blam", wp.vec3d), ("brhs", wp.vec3d), ("bdl", wp.vec3d),
+                            ("sdir", wp.vec3d), ("sdiag", wp.float64), ("soff", wp.float64), ("slam", wp.float64),
+                            ("srhs", wp.float64), ("tangent", wp.vec3d), ("ref_twist", wp.float64),
+                            ("tdiag", wp.float64), ("toff", wp.float64), ("tlam", wp.float64), ("trhs", wp.float64),
+                            ("gcouple", wp.vec3d), ("clam", wp.vec4d), ("crhs", wp.vec4d), ("cdl", wp.vec4d)):
+            setattr(f, name, wp.zeros(V, dtype=dtype, device=d))
+        Vc = V if model.curved else 1
+        for name in ("cd", "cinv", "cl1", "cl2"):
+            setattr(f, name, wp.zeros(Vc, dtype=wp.mat44d, device=d))
+        self._bfactor_dt = None
+        self._scalar = wp.zeros(4, dtype=wp.float64, device=d)
+        self._energy_out = wp.zeros(5, dtype=wp.float64, device=d)
+        self._residual = wp.zeros(1, dtype=wp.float64, device=d)
+        self._sresidual = wp.zeros(1, dtype=wp.float64, device=d)
+        skin = model.min_diameter + 0.2 * float(model.rest_length_np.max()) if skin is None else float(skin)
+        self.contacts = ContactPipeline(model, skin, self._launch, lambda: self.timings)
+        self._wall_gap = wp.zeros(V * max(len(model.planes), 1), dtype=wp.float64, device=d)
+        self._active = wp.zeros(max(model.n_rods, 1), dtype=wp.int32, device=d)
+        self._n_active = wp.zeros(1, dtype=wp.int32, device=d)
+        self._solve_out = wp.zeros(3, dtype=wp.float64, device=d)
+        # sequential devices run the whole solve in one launch (same order, no launch overhead)
+        self.fused = (not self.coloring) and not wp.get_device(model.device).is_cuda
+        self.last_info: StepInfo | None = None
+        # per-stage kernel seconds (elastics, broadphase, narrowphase, friction, checks) when
+        # profiling; None (no synchronisation, no overhead) otherwise
+        self.timings: dict | None = None
+
+    @property
+    def skin(self) -> float:
+        return self.contacts.skin
+
+    @property
+    def pair_builds(self) -> int:
+        return self.contacts.builds
+
+    @property
+    def colors_used(self) -> int:
+        return self.contacts.colors_used
+
+    def invalidate_pairs(self) -> None:
+        """Force the broadphase to rebuild its pair list at the next step (benchmarks)."""
+        self.contacts.pairs_n = None
+
+    def _control(self, control):
+        if control is not None:
+            return control
+        if self._default_control is None:
+            self._default_control = self.model.control()
+        return self._default_control
+
+    # ------------------------------------------------------------------ stability
+    def explicit_bending_dt(self) -> float:
+        if self._eb_dt is None:
+            self._eb_dt = self._explicit_bending_dt()
+        return self._eb_dt
+
+    def _explicit_bending_dt(self) -> float:
+        """Largest stable step of symplectic (explicit) bending (s): 2 / omega_max.
+
+        omega_max^2 is bounded by the Gershgorin row sums of M^-1 K, which is exact for the
+        uniform stencil (16 E I / (rho A h^4)).
+        """
+        m = self.model
+        rows = np.zeros(m.n_vertices)
+        offs = m.rods.offsets
+        h = m.rest_length_np
+        free = (~m.pinned).astype(np.float64)
+        for r in range(m.n_rods):
+            a, b = offs[r], offs[r + 1]
+            if b - a < 3:
+                continue
+            i = np.arange(a + 1, b - 1)
+            cm = 1.0 / h[i - 1]
+            cp = 1.0 / h[i]
+            c0 = cm + cp
+            k = m.bend_stiffness_np[r] * 2.0 / (h[i - 1] + h[i])
+            # pinned vertices do not move, so their columns do not enter the eigenproblem
+            tot = cm * free[i - 1] + c0 * free[i] + cp * free[i + 1]
+            np.add.at(rows, i - 1, k * cm * tot)
+            np.add.at(rows, i, k * c0 * tot)
+            np.add.at(rows, i + 1, k * cp * tot)
+        fr = ~m.pinned
+        lam = np.max(rows[fr] / m.mass_np[fr]) if np.any(fr) else 0.0
+        return math.inf if lam <= 0 else 2.0 / math.sqrt(lam)
+
+    def explicit_stretch_dt(self) -> float:
+        """Explicit axial limit h_min / sqrt(E / rho) (s); rodwarp's constraints do not need it."""
+        m = self.model
+        h = m.rest_length_np
+        # edges with both ends pinned (a clamp's ghost edge) never move: leave them out
+        moving = (h > 0) & ~(m.pinned & np.roll(m.pinned, -1))
+        return float(h[moving].min() / m.material.wave_speed)
+
+    def characteristic_speed(self, control=None) -> float:
+        """Free-fall speed over the scene height plus the drive's peak speed (m/s)."""
+        m = self.model
+        control = self._control(control)
+        bb = m.box if m.box is not None else m.rods.bounding_box()
+        g = float(np.linalg.norm(m.gravity))
+        # the fall height is the scene's extent along gravity, not its widest side
+        down = m.gravity / g if g > 0 else np.array([0.0, 0.0, -1.0])
+        height = float(np.abs(bb[1] - bb[0]) @ np.abs(down))
+        v0 = 0.0 if m.rods.velocities is None else float(np.linalg.norm(m.rods.velocities, axis=1).max())
+        return math.sqrt(2.0 * g * height) + control.drive.peak_speed + v0 + 1e-3
+
+    def contact_dt(self, control=None) -> float:
+        """Resolution bound of the contact model (s): a rod moving at the characteristic speed
+        crosses at most one diameter per step, so speculative contacts see every approach
+        and the linearised normals stay valid; and gravity alone moves a resting vertex by at
+        most 1% of a diameter per step (g dt^2 <= 0.01 d), which keeps frictional stacks from
+        creeping at the default Gauss-Seidel effort."""
+        d = self.model.min_diameter
+        b = d / self.characteristic_speed(control)
+        g = float(np.linalg.norm(self.model.gravity))
+        if g > 0:
+            b = min(b, math.sqrt(0.01 * d / g))
+        return b
+
+    def max_stable_dt(self, bending: str | None = None, control=None) -> float:
+        """Stability bound of this scene for the chosen bending integration (s)."""
+        mode = bending or self.bending
+        b = self.contact_dt(control)
+        if mode == "explicit":
+            b = min(b, self.explicit_bending_dt())
+        return b
+
+    def default_dt(self, control=None, safety: float = 0.5) -> float:
+        """Default step: ``safety`` x the stability bound, and at least 40 steps per drive period."""
+        control = self._control(control)
+        dt = safety * self.max_stable_dt(control=control)
+        f = control.drive.frequency
+        if f > 0:
+            dt = min(dt, 1.0 / (40.0 * f))
+        return dt
+
+    def theta_for(self, dt: float) -> float:
+        if self.bending == "implicit" or self.model.curved:
+            return 1.0
+        if self.bending == "explicit":
+            return 0.0
+        return 0.0 if dt <= 0.8 * self.explicit_bending_dt() else 1.0
+
+    def check_dt(self, dt: float, control=None) -> None:
+        """Refuse (or, with ``allow_unstable``, flag) a step above the stability bound."""
+        if not (dt > 0 and math.isfinite(dt)):
+            raise RodwarpError(f"time step must be a positive number, got {dt}")
+        bound = self.max_stable_dt(control=control)
+        if dt > bound:
+            msg = (f"time step {dt:.3g} s exceeds this scene's stability bound {bound:.3g} s "
+                   f"({self._bound_reason(control)}); use dt <= {bound:.3g} s")
+            if not self.allow_unstable:
+                raise RodwarpError(msg + " or allow_unstable=True")
+            warnings.warn(msg, stacklevel=3)
+
+    def _bound_reason(self, control=None) -> str:
+        if self.bending == "explicit" and self.explicit_bending_dt() < self.contact_dt(control):
+            return "explicit bending, 2/omega_max"
+        return "contact resolution, d_min / characteristic speed"
+
+    # ------------------------------------------------------------------ profiling
+    def _launch(self, stage: str, kernel, **kw) -> None:
+        if self.timings is None:
+            wp.launch(kernel, **kw)
+            return
+        wp.synchronize_device(self.model.device)
+        t = time.perf_counter()
+        wp.launch(kernel, **kw)
+        wp.synchronize_device(self.model.device)
+        self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - t
+
+    def reset_timings(self) -> None:
+        """Start (or restart) accumulating kernel time per stage in ``self.timings`` (s)."""
+        self.timings = {}
+
+    # ------------------------------------------------------------------ step
+    def _walls(self, control, t: float, dt: float) -> Walls:
+        normals, offsets, vel, mus, on = control.wall_kinematics(t, dt)
+        dev = self.model.device
+        w = Walls()
+        w.n = len(self.model.planes)
+        w.normal = wp.array(normals, dtype=wp.vec3d, device=dev)
+        w.offset = wp.array(offsets, dtype=wp.float64, device=dev)
+        w.vel = wp.array(vel, dtype=wp.vec3d, device=dev)
+        w.mu = wp.array(mus, dtype=wp.float64, device=dev)
+        w.on = wp.array(on, dtype=wp.int32, device=dev)
+        return w
+
+    def step(self, state_in: State, state_out: State, control=None, dt: float | None = None, *,
+             check: bool = True) -> StepInfo:
+        """Advance ``state_in`` by ``dt`` seconds into ``state_out`` under ``control``.
+
+        Parameters
+        ----------
+        state_in, state_out : State
+            Distinct states of this model; ``state_in`` is not modified.
+        control : Control, optional
+            Walls in place, drive and torques; default: every wall in place, no drive.
+        dt : float
+            Time step (s).
+
+        Raises
+        ------
+        RodwarpError
+            ``dt`` above the stability bound (unless ``allow_unstable``).
+        SimulationBlowUp
+            Non-finite or runaway velocities, or rods overlapping deeper than
+            ``penetration_limit`` diameters; ``state_in`` is left untouched.
+        """
+        if dt is None:
+            raise RodwarpError("step needs a time step dt (s)")
+        m = self.model
+        dev = m.device
+        control = self._control(control)
+        if check:
+            self.check_dt(dt, control)
+            if self._v_elastic is None:
+                e = self.energy(state_in)
+                self._v_elastic = math.sqrt(2.0 * (e["bending"] + e["stretching"] + e["twist"]) / m.total_mass())
+        theta = self.theta_for(dt)
+        fdt = wp.float64(dt)
+        V, N = m.n_vertices, m.n_rods
+        state_in.ensure_wall_storage()
+        state_out.ensure_wall_storage()
+        P = len(m.planes)
+        if self._wall_gap.shape[0] != V * max(P, 1):
+            self._wall_gap = wp.zeros(V * max(P, 1), dtype=wp.float64, device=dev)
+        f = self.factors
+        f.implicit_bending = int(theta != 0.0)
+        rs_in = state_in.rod_state()
+
+        self._launch("elastics", frames.step_frames, dim=N, device=dev, inputs=[m.arrays, rs_in, f])
+        self._launch("elastics", elastics.velocity_predictor, dim=N, device=dev, inputs=[
+            m.arrays, rs_in, f.btarget, control.torque(), wp.vec3d(*m.gravity), wp.float64(m.damping), fdt,
+            int(theta == 0.0), state_out.v, state_out.spin])
+
+        self._scalar.zero_()
+        self._launch("checks", broadphase.max_speed, dim=V, device=dev, inputs=[state_out.v, self._scalar])
+        sc = self._scalar.numpy()
+        if sc[1] != 0.0:
+            raise self._blowup(state_in, dt, theta, "non-finite velocity after the elastic predictor", control)
+        vmax = float(sc[0])
+
+        n_contacts = self.contacts.detect(state_in, state_out, vmax, dt) if m.rod_contacts and m.n_segments > 1 else 0
+        state_out.contact_count = n_contacts
+        contacts = state_out.rod_contacts(n_contacts)
+
+        params = StepParams()
+        params.dt = fdt
+        params.mu = wp.float64(m.mu)
+        params.beta = wp.float64(self.baumgarte)
+        params.max_push = wp.float64(max(self.characteristic_speed(control), 1e-3))
+        params.contact_distance = wp.float64(m.contact_distance)
+        params.warm = wp.float64(self.warm_start)
+
+        if n_contacts:
+            self.contacts.warm_start(state_in, state_out, n_contacts, self.warm_start)
+            self._launch("friction", friction.apply_rod_impulses, dim=n_contacts, device=dev, inputs=[
+                m.arrays, contacts, f.tangent, state_out.v, state_out.spin])
+            if self.coloring:
+                self.contacts.color(state_out, n_contacts)
+
+        walls = self._walls(control, state_in.time, dt)
+        wc = WallContacts()
+        wc.gap, wc.impulse, wc.active, wc.n_active = self._wall_gap, state_out.wall_impulse, self._active, \
+            self._n_active
+        self._n_active.zero_()
+        if P:
+            state_out.wall_impulse.assign(state_in.wall_impulse)
+            self._launch("friction", friction.prepare_wall_contacts, dim=N, device=dev, inputs=[
+                m.arrays, state_in.x, f.tangent, walls, params, wc, state_out.v, state_out.spin])
+
+        f.blam.zero_()
+        f.slam.zero_()
+        f.tlam.zero_()
+        if m.curved:
+            f.clam.zero_()
+            self._launch("elastics", elastics.curved_factor, dim=N, device=dev, inputs=[m.arrays, fdt, f])
+        if theta != 0.0 and self._bfactor_dt != dt:
+            self._launch("elastics", elastics.bending_factor, dim=N, device=dev, inputs=[m.arrays, fdt, f])
+            self._bfactor_dt = dt
+        self._launch("elastics", elastics.stretch_twist_factor, dim=N, device=dev, inputs=[
+            m.arrays, state_in.x, fdt, f])
+
+        if self.fused:
+            self._launch("solve", solve.gauss_seidel_sequential, dim=1, device=dev, inputs=[
+                self.iterations, wp.float64(self.tolerance), wp.float64(self.length_tolerance), m.arrays, rs_in,
+                contacts, walls, wc, f, params, state_out.v, state_out.spin, self._solve_out])
+            res, sres, used = (float(x) for x in self._solve_out.numpy())
+            used = int(used)
+        else:
+            res, sres, used = self._sweeps(rs_in, state_out, contacts, walls, wc, params, P)
+
+        self._launch("elastics", elastics.integrate_positions, dim=V, device=dev,
+                     inputs=[state_in.x, state_out.v, fdt, state_out.x])
+        self._launch("elastics", frames.advance_frames, dim=V, device=dev, inputs=[
+            m.arrays, state_in.x, state_out.x, state_in.director, state_in.theta, state_out.spin, fdt,
+            state_out.director, state_out.theta])
+        state_out.time = state_in.time + dt
+        state_out.step_index = state_in.step_index + 1
+
+        self._scalar.zero_()
+        self._launch("checks", broadphase.max_speed, dim=V, device=dev, inputs=[state_out.v, self._scalar])
+        if n_contacts:
+            self._launch("checks", narrowphase.contact_overlap, dim=n_contacts, device=dev, inputs=[
+                n_contacts, state_out.contact_seg, m.arrays.seg_vertex, m.arrays.vertex_rod, m.arrays.radius,
+                state_out.x, self.contacts.gap_check, self._scalar[2:3]])
+        sc = self._scalar.numpy()
+        vmax_out = float(sc[0])
+        if check:
+            if sc[1] != 0.0:
+                raise self._blowup(state_in, dt, theta, "non-finite velocity", control)
+            limit = self.speed_limit_for(control)
+            if vmax_out > limit:
+                raise self._blowup(state_in, dt, theta, f"speed {vmax_out:.3g} m/s above the limit {limit:.3g} m/s",
+                                   control)
+            depth = float(sc[2])
+            if depth > self.penetration_limit * m.min_diameter:
+                raise self._blowup(state_in, dt, theta, f"rods overlap by {depth / m.min_diameter:.2f} d", control)
+            if self.energy_check_every and state_out.step_index % self.energy_check_every == 0:
+                self._check_energy(state_in, state_out, dt, theta, control)
+        info = StepInfo(state_out.step_index, state_out.time, dt, used, n_contacts,
+                        float(res), float(sres), vmax_out, theta)
+        self.last_info = info
+        return info
+
+    def _sweeps(self, rs_in, state_out, contacts, walls, wc, params, P):
+        """Gauss-Seidel sweeps as separate launches (coloured contacts; the GPU path)."""
+        m = self.model
+        dev = m.device
+        f = self.factors
+        n_active = int(self._n_active.numpy()[0]) if P else 0
+        n_contacts = contacts.count
+        ids = self.contacts.color_ids
+        used = 0
+        for it in range(self.iterations):
+            measure = it == self.iterations - 1 or (self.tolerance > 0 and it % 2 == 1)
+            if measure:
+                self._residual.zero_()
+                self._sresidual.zero_()
+            if n_contacts:
+                args = [m.arrays, contacts, f.tangent, params, state_out.v, state_out.spin, self._residual]
+                if self.coloring:
+                    for c0, c1 in self.contacts.color_ranges:
+                        self._launch("friction", friction.solve_rod_contacts, dim=c1 - c0, device=dev,
+                                     inputs=[ids[c0:c1], 1, *args])
+                else:
+                    self._launch("friction", friction.solve_rod_contacts, dim=n_contacts, device=dev,
+                                 inputs=[ids, 0, *args])
+            if n_active:
+                self._launch("friction", friction.solve_wall_contacts, dim=n_active, device=dev, inputs=[
+                    m.arrays, f.tangent, walls, params, wc, state_out.v, state_out.spin, self._residual])
+            self._launch("elastics", elastics.rod_projection, dim=m.n_rods, device=dev, inputs=[
+                m.arrays, rs_in, state_out.v, state_out.spin, f, params.dt, self._sresidual])
+            used = it + 1
+            if measure and self.tolerance > 0 and it < self.iterations - 1:
+                if (self._residual.numpy()[0] < self.tolerance
+                        and self._sresidual.numpy()[0] < self.length_tolerance):
+                    break
+        return float(self._residual.numpy()[0]), float(self._sresidual.numpy()[0]), used
+
+    def _check_energy(self, state_in: State, state_out: State, dt: float, theta: float, control) -> None:
+        """Energy-jump test: kinetic + elastic energy may not grow 4x between checks beyond
+        what the scene can supply (all mass at the characteristic speed)."""
+        e = self.energy(state_out)
+        mech = e["kinetic"] + e["bending"] + e["stretching"] + e["twist"]
+        floor = 0.5 * self.model.total_mass() * self.characteristic_speed(control) ** 2
+        prev = self._last_mech
+        self._last_mech = mech
+        if not math.isfinite(mech):
+            raise self._blowup(state_in, dt, theta, "non-finite energy", control)
+        if prev is not None and mech > 4.0 * prev + floor:
+            raise self._blowup(state_in, dt, theta,
+                               f"energy jump from {prev:.3g} J to {mech:.3g} J within {self.energy_check_every} steps",
+                               control)
+
+    @property
+    def speed_limit(self) -> float:
+        return self.speed_limit_for(None)
+
+    def speed_limit_for(self, control) -> float:
+        if self._speed_limit is not None:
+            return self._speed_limit
+        return 20.0 * (self.characteristic_speed(control) + (self._v_elastic or 0.0))
+
+    def _blowup(self, state_in: State, dt: float, theta: float, what: str, control=None) -> SimulationBlowUp:
+        step = state_in.step_index + 1
+        t = state_in.time + dt
+        eb = self.explicit_bending_dt()
+        if theta == 0.0 and dt > eb:
+            cause = f"explicit bending at dt = {dt:.3g} s above its bound {eb:.3g} s; use bending='implicit' or a smaller step"
+        elif "overlap" in what:
+            cause = (f"contacts under-resolved (tunnelling or too few iterations: {self.iterations}); "
+                     f"lower dt (now {dt:.3g} s, contact bound {self.contact_dt(control):.3g} s) or raise iterations")
+        else:
+            cause = (f"step {dt:.3g} s too large for this scene (bound {self.max_stable_dt(control=control):.3g} s) "
+                     f"or too few iterations")
+        return SimulationBlowUp(f"simulation blew up at step {step} (t = {t:.6g} s): {what}; likely cause: {cause}",
+                                step=step, time=t, cause=cause)
+
+    # ------------------------------------------------------------------ diagnostics
+    def energy(self, state: State) -> dict:
+        """Kinetic (translation and spin), potential (gravity), bending, stretching and twist
+        energy (J) of ``state``."""
+        m = self.model
+        rs = state.rod_state()
+        self._launch("checks", frames.step_frames, dim=m.n_rods, device=m.device, inputs=[m.arrays, rs, self.factors])
+        self._energy_out.zero_()
+        self._launch("checks", elastics.elastic_energy, dim=m.n_rods, device=m.device, inputs=[
+            m.arrays, rs, self.factors.btarget, self.factors.ref_twist, wp.vec3d(*m.gravity), self._energy_out])
+        k, p, b, s, tw = (float(x) for x in self._energy_out.numpy())
+        return {"kinetic": k, "potential": p, "bending": b, "stretching": s, "twist": tw,
+                "total": k + p + b + s + tw}
+
+
+def run(solver: RodSolver, state: State, duration: float, dt: float, *, control=None, callback=None,
+        every: int = 1) -> State:
+    """Step ``state`` forward by ``duration`` seconds with step ``dt``; returns the final state.
+
+    Two states are ping-ponged; ``callback(state, info)`` is called every ``every`` steps
+    with the state just written. The input ``state`` object is updated in place at the end.
+    """
+    n = int(round(duration / dt))
+    a = state
+    b = State(solver.model, a.contact_capacity)
+    b.copy_from(a)
+    for k in range(n):
+        info = solver.step(a, b, control, dt)
+        a, b = b, a
+        if callback is not None and (k + 1) % every == 0:
+            callback(a, info)
+    if a is not state:
+        state.copy_from(a)
+    return state
