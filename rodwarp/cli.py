@@ -86,6 +86,7 @@ def simulate(
     dt: Optional[float] = typer.Option(None, help="Time step (s); default from the scene's stability bound."),
     iterations: int = typer.Option(20, help="Most Gauss-Seidel sweeps per step (20: max overlap < 0.1 d in the default run)."),
     rod_model: str = typer.Option("auto", help="auto (rigid when the rods' self-weight sag is below 0.01 d), rigid or elastic."),
+    rolling: bool = typer.Option(True, help="Rods spin about their axes; --no-rolling locks the spin (friction on the centreline only)."),
     save_every: float = typer.Option(0.1, help="Metrics and frame interval (s of simulated time)."),
     checkpoint_every: float = typer.Option(1.0, help="Checkpoint interval (s of simulated time)."),
     resume: bool = typer.Option(False, help="Continue a killed run from its newest checkpoint in --out."),
@@ -103,7 +104,7 @@ def simulate(
         alpha=alpha, freq=freq, amplitude=amplitude, gravity=gravity, duration=duration,
         entangle_duration=entangle_duration, entangle_freq=entangle_freq, entangle_amplitude=entangle_amplitude,
         static_load=static_load, n_rods=n_rods, length=length, vertices=vertices, box=_parse_box(box), mu=mu,
-        young=young, density=density, dt=dt, iterations=iterations, rod_model=rod_model, save_every=save_every,
+        young=young, density=density, dt=dt, iterations=iterations, rod_model=rod_model, rolling=rolling, save_every=save_every,
         checkpoint_every=checkpoint_every, seed=seed, device=device, initial=str(initial) if initial else None,
         entangle=entangle,
     )

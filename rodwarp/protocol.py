@@ -56,6 +56,7 @@ class ProtocolParams:
     dt: float | None = None
     iterations: int = 20
     rod_model: str = "auto"
+    rolling: bool = True
     save_every: float = 0.1
     checkpoint_every: float = 1.0
     seed: int = 0
@@ -178,7 +179,7 @@ def _build(params: ProtocolParams, rods, device, rod_model: str):
 
     g_eff = params.gravity * (1.0 + 4.0 * params.static_load / math.pi)
     model = Model(rods, Material(params.young, params.density), gravity=(0.0, 0.0, -g_eff), mu=params.mu,
-                  rod_model=rod_model, device=device)
+                  rod_model=rod_model, rolling=params.rolling, device=device)
     if rods.box is not None:
         lo, hi = np.asarray(rods.box[0], float), np.asarray(rods.box[1], float)
     else:  # an input without a container: the floor under its lowest point, walls around it

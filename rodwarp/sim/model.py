@@ -197,6 +197,10 @@ class Model:
         conserves energy. Turn on to measure axial deformation.
     rod_model : {"elastic", "rigid"}
         See the module docstring; ``"rigid"`` needs straight rods.
+    rolling : bool
+        Let rods spin about their axes (friction at the surface rolls them). False locks the
+        spin (an infinite axial inertia): friction then acts on the centreline only, the
+        model of the seed paper's disMech, kept for comparison.
     device : str
         ``cpu``, ``cuda``, ``cuda:N`` or ``auto``.
     """
@@ -214,6 +218,7 @@ class Model:
         rod_contacts: bool = True,
         extensible: bool = False,
         rod_model: str = "elastic",
+        rolling: bool = True,
         device: str = "cpu",
     ):
         _warp.init()
@@ -228,6 +233,7 @@ class Model:
         if rod_model not in ROD_MODELS:
             raise RodwarpError(f"rod model must be elastic or rigid, got '{rod_model}'")
         self.rod_model = rod_model
+        self.rolling = bool(rolling)
         self.material = material
         self.gravity = np.asarray(gravity, dtype=np.float64).reshape(3)
         self.mu = float(mu)
@@ -284,7 +290,7 @@ class Model:
             inv_mass = np.where(pin_in, 0.0, 1.0 / mass)
         compliance = np.where(last | (not extensible), 0.0, rest_length / (material.young * area[vertex_rod]))
         inertia = 0.5 * edge_mass * r[vertex_rod] ** 2
-        clamped = last | (pin_in & np.roll(pin_in, -1))
+        clamped = last | (pin_in & np.roll(pin_in, -1)) | (not rolling)
         inv_inertia = np.where(clamped | (inertia <= 0), 0.0, 1.0 / np.where(inertia > 0, inertia, 1.0))
         # twist between edges i-1 and i at interior vertex i: l_i / (G J), J = pi r^4 / 2
         interior = ~first & ~last
