@@ -71,3 +71,26 @@ def test_pile_cpu_and_cuda_agree_with_coloring():
     _, s_cpu, _ = small_pile("cpu", "on")
     _, s_gpu, _ = small_pile("cuda", "on")
     assert np.max(np.abs(s_cpu.positions() - s_gpu.positions())) < 1e-9
+
+
+KERNEL_MODULES = ("frames", "elastics", "friction", "narrowphase", "broadphase", "solve", "fields", "acn", "packing")
+
+
+@pytest.mark.parametrize("name", KERNEL_MODULES)
+def test_kernels_compile_for_cuda_without_a_gpu(name):
+    """Every kernel module also compiles for a GPU (sm_90, through NVRTC): the CUDA code path is
+    checked on machines without one. Skips where Warp ships no NVRTC."""
+    import importlib
+    import os
+
+    import warp as wp
+
+    from rodwarp import _warp
+
+    _warp.init()
+    if 90 not in (wp.get_cuda_supported_archs() or []):
+        pytest.skip("this Warp build cannot compile for sm_90 (no NVRTC)")
+    mod = importlib.import_module(f"rodwarp.kernels.{name}")
+    out = os.path.join(_warp.kernel_cache_dir(), "aot_sm90")
+    wp.compile_aot_module(mod, arch=90, module_dir=out, use_ptx=True)
+    assert any(f.endswith(".ptx") for f in os.listdir(out))
