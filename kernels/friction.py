@@ -1,23 +1,30 @@
 """Contact and Coulomb friction at the rods' surfaces, by projected Gauss-Seidel on velocities.
 
 Each contact holds an accumulated impulse P (N s) acting at the two surface points
-(x_a - r_a n on rod a, x_b + r_b n on rod b; n points from b to a). The relative velocity
-of the surface points includes each edge's spin omega about its tangent t:
+(x_a(s) - r_a n on rod a, x_b(t) + r_b n on rod b; n points from b to a); the local problem
+of one contact is solved exactly, so a sweep is block Gauss-Seidel with exact blocks.
 
-    u = v_a(s) - v_b(t) - r_a omega_a (t_a x n) - r_b omega_b (t_b x n),
+The velocity of a surface point, and how it responds to an impulse there (the mobility W,
+3 x 3), come from the rod model:
 
-and a tangential impulse applies an axial torque, so friction rolls and spins rods. The
-local effective mass is
+* elastic rods: the centreline velocity interpolated on the edge plus the edge's spin omega
+  about its tangent t acting on the surface offset o (= -r n on rod a): u = v(s) + omega t x o;
+  W = w I + (1 / I_edge) (t x o)(t x o)^T, w the point's entry of the tridiagonal inverse mass;
+* rigid rods: the exact rigid-body mobility of the capsule at the point, lever r from its
+  centre of mass: W = I / m - [r]x I^-1 [r]x with I^-1 = (I - t t^T) / I_perp + t t^T / I_axis,
+  and the impulse applied as a rigid-body velocity change (translation, rotation across the
+  axis on the two vertices, spin about it), so contacts never fight the rod's length
+  constraint (a two-vertex rod with its vertex inverse masses would, and Gauss-Seidel would
+  converge slowly on every axial load: a rod standing on its end, a pile's side walls).
 
-    W = w I + (r_a^2 / I_a) g_a g_a^T + (r_b^2 / I_b) g_b g_b^T,     g = t x n,
-
-with w the centreline term (isotropic, from the tridiagonal inverse mass). Because every
-g is normal to n, the normal and tangential parts decouple: the normal impulse is solved in
-closed form, and the tangential one exactly on the Coulomb cone |P_t| <= mu P_n with the
-anisotropic 2 x 2 W_t: sticking when -W_t^-1 u_t lies inside the disc, else the sliding
-impulse P_t = -(W_t + gamma I)^-1 u_t with |P_t| = mu P_n (maximal dissipation), gamma found
-by Newton on 1 / |P_t(gamma)| (concave, so the iteration converges monotonically; one step
-when W_t is isotropic). No pyramid, true sticking.
+The contact problem with W = W_a + W_b: the normal impulse keeps the normal velocity above
+its target (speculative: close an open gap at most to touching) with P_n >= 0; the
+tangential impulse satisfies the Coulomb cone |P_t| <= mu P_n exactly: it sticks when
+-W_t^-1 u_t lies inside the disc, else it slides on the cone's edge with maximal dissipation,
+P_t = -(W_t + gamma I)^-1 u_t, gamma from Newton's method on 1 / |P_t(gamma)| (concave, so the
+iteration converges monotonically; one step when W_t is isotropic). No pyramid, true
+sticking. When W couples the normal and tangential parts (rigid rods, contacts off the
+segments' interiors) the two are alternated to convergence within the contact.
 
 Contacts that share a vertex (hence an edge) must not be visited concurrently. On the CPU a
 launch runs its threads in order (sequential Gauss-Seidel); on a GPU rod-rod contacts are
@@ -28,50 +35,38 @@ contacts run one thread per rod.
 import warp as wp
 
 from rodwarp.kernels.narrowphase import any_perpendicular
-from rodwarp.kernels.structs import RodContacts, RodFactors, RodModel, StepParams, WallContacts, Walls
+from rodwarp.kernels.structs import RodContacts, RodModel, StepParams, WallContacts, Walls
 
 wp.set_module_options({"enable_backward": False})
 
 F0 = wp.float64(0.0)
 F1 = wp.float64(1.0)
+HALF = wp.float64(0.5)
 FAR = wp.float64(1.0e299)
 
 
 @wp.func
-def approach_target(gap: wp.float64, dt: wp.float64, beta: wp.float64, max_push: wp.float64):
-    """Lowest normal relative velocity allowed this step (m/s)."""
+def approach_target(gap: wp.float64, params: StepParams):
+    """Lowest normal relative velocity allowed this step (m/s): close an open gap at most to
+    touching; push an overlap deeper than the slop apart by beta of its excess per step."""
     if gap >= F0:
-        return -gap / dt
-    return wp.min(-beta * gap / dt, max_push)
+        return -gap / params.dt
+    return wp.min(params.beta * wp.max(-gap - params.slop, F0) / params.dt, params.max_push)
 
 
 @wp.func
-def coulomb_tangential(u: wp.vec3d, n: wp.vec3d, w: wp.float64, ka: wp.float64, ga: wp.vec3d, kb: wp.float64,
-                       gb: wp.vec3d, limit: wp.float64):
-    """Tangential impulse that leaves u + W P_t sticking, or sliding on the cone edge.
-
-    ``u`` is the tangential velocity without this contact's tangential impulse, W = w I +
-    ka ga ga^T + kb gb gb^T (restricted to the plane normal to n), ``limit`` = mu P_n.
-    """
+def coulomb_2d(u1: wp.float64, u2: wp.float64, w11: wp.float64, w12: wp.float64, w22: wp.float64,
+               limit: wp.float64):
+    """Tangential impulse (p1, p2) with u + W p = 0 when |p| <= limit (sticking), else on the
+    disc's edge with u + W p anti-parallel to p (sliding with maximal dissipation)."""
     if limit <= F0:
-        return wp.vec3d(F0, F0, F0)
-    e1 = any_perpendicular(n)
-    e2 = wp.cross(n, e1)
-    u1 = wp.dot(u, e1)
-    u2 = wp.dot(u, e2)
-    a1 = wp.dot(ga, e1)
-    a2 = wp.dot(ga, e2)
-    b1 = wp.dot(gb, e1)
-    b2 = wp.dot(gb, e2)
-    w11 = w + ka * a1 * a1 + kb * b1 * b1
-    w12 = ka * a1 * a2 + kb * b1 * b2
-    w22 = w + ka * a2 * a2 + kb * b2 * b2
+        return wp.vec2d(F0, F0)
     det0 = w11 * w22 - w12 * w12
     y1 = (w22 * u1 - w12 * u2) / det0
     y2 = (w11 * u2 - w12 * u1) / det0
     ny = wp.sqrt(y1 * y1 + y2 * y2)
     if ny <= limit:
-        return -(e1 * y1 + e2 * y2)  # sticks: the exact impulse
+        return wp.vec2d(-y1, -y2)  # sticks: the exact impulse
     gamma = F0
     for it in range(40):
         if ny <= limit * (F1 + wp.float64(1.0e-10)):
@@ -89,7 +84,39 @@ def coulomb_tangential(u: wp.vec3d, n: wp.vec3d, w: wp.float64, ka: wp.float64, 
         y1 = (m22 * u1 - w12 * u2) / det
         y2 = (m11 * u2 - w12 * u1) / det
         ny = wp.sqrt(y1 * y1 + y2 * y2)
-    return -(e1 * y1 + e2 * y2) * (limit / ny)
+    sc = limit / ny
+    return wp.vec2d(-y1 * sc, -y2 * sc)
+
+
+@wp.func
+def solve_local(u: wp.vec3d, W: wp.mat33d, n: wp.vec3d, P: wp.vec3d, target: wp.float64, mu: wp.float64):
+    """The exact impulse of one contact: u the contact velocity with the current impulse P
+    applied, W the contact's mobility; returns the new impulse."""
+    uf = u - W * P  # the velocity this contact's impulse acts on
+    e1 = any_perpendicular(n)
+    e2 = wp.cross(n, e1)
+    Wn = W * n
+    wnn = wp.dot(n, Wn)
+    if wnn <= F0:
+        return P
+    w11 = wp.dot(e1, W * e1)
+    w12 = wp.dot(e1, W * e2)
+    w22 = wp.dot(e2, W * e2)
+    # coupling of normal and tangential parts (zero for an elastic contact at the segments' interiors)
+    coupled = wp.abs(wp.dot(e1, Wn)) + wp.abs(wp.dot(e2, Wn)) > wp.float64(1.0e-12) * wnn
+    pn = wp.dot(P, n)
+    pt = P - n * pn
+    for it in range(2):
+        pn_new = wp.max(F0, (target - wp.dot(uf + W * pt, n)) / wnn)
+        c = uf + Wn * pn_new
+        q = coulomb_2d(wp.dot(c, e1), wp.dot(c, e2), w11, w12, w22, mu * pn_new)
+        pt_new = e1 * q[0] + e2 * q[1]
+        change = wp.abs(pn_new - pn) + wp.length(pt_new - pt)
+        pn = pn_new
+        pt = pt_new
+        if not coupled or change <= wp.float64(1.0e-9) * (pn + wp.length(pt)):
+            break
+    return n * pn + pt
 
 
 @wp.func
@@ -101,10 +128,124 @@ def point_weights(w0: wp.float64, w1: wp.float64, c: wp.float64, s: wp.float64):
     return q0, q1, (F1 - s) * q0 + s * q1
 
 
+@wp.struct
+class ContactSide:
+    """One rod's side of a contact: where the impulse acts and how the rod responds."""
+
+    i: int  # first vertex of the edge
+    rigid: int
+    s: wp.float64  # parameter on the edge
+    q0: wp.float64  # elastic: velocity change of the edge's ends per unit impulse
+    q1: wp.float64
+    t: wp.vec3d  # edge tangent at the start of the step
+    g: wp.vec3d  # elastic: t x (surface offset), the spin's lever
+    lever: wp.vec3d  # rigid: from the centre of mass to the point
+    arm0: wp.vec3d  # rigid: from the centre of mass to the two vertices
+    arm1: wp.vec3d
+    iinv: wp.mat33d  # rigid: inverse inertia tensor
+    im: wp.float64  # rigid: 1 / m
+    ispin: wp.float64  # inverse axial inertia of the edge
+    W: wp.mat33d  # mobility of the point (m / (N s))
+
+
+@wp.func
+def contact_side(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d), i: int,
+                 s: wp.float64, off: wp.vec3d):
+    """The side of a contact at x(s) + off on the edge starting at vertex i."""
+    c = ContactSide()
+    c.i = i
+    c.s = s
+    t = tangent[i]
+    c.t = t
+    r = model.vertex_rod[i]
+    c.ispin = model.inv_inertia[i]
+    c.rigid = model.rigid[r]
+    if c.rigid != 0:
+        xc = (x[i] + x[i + 1]) * HALF
+        c.arm0 = x[i] - xc
+        c.arm1 = x[i + 1] - xc
+        c.lever = c.arm0 + (x[i + 1] - x[i]) * s + off
+        ip = model.rod_inv_iperp[r]
+        c.iinv = wp.diag(wp.vec3d(ip, ip, ip)) + wp.outer(t, t) * (c.ispin - ip)
+        c.im = model.rod_inv_mass[r]
+        R = wp.skew(c.lever)
+        c.W = wp.diag(wp.vec3d(c.im, c.im, c.im)) - R * c.iinv * R
+    else:
+        q0, q1, w = point_weights(model.inv_mass[i], model.inv_mass[i + 1], model.cross_inv_mass[i], s)
+        c.q0 = q0
+        c.q1 = q1
+        c.g = wp.cross(t, off)
+        c.W = wp.diag(wp.vec3d(w, w, w)) + wp.outer(c.g, c.g) * c.ispin
+    return c
+
+
+@wp.func
+def side_velocity(c: ContactSide, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64),
+                  rest_length: wp.float64):
+    """Velocity of the side's material point (m/s)."""
+    i = c.i
+    if c.rigid != 0:
+        # rigid body: v_c + omega x lever, omega = rotation across the axis + spin about it
+        w = wp.cross(c.t, v[i + 1] - v[i]) / rest_length + c.t * spin[i]
+        return (v[i] + v[i + 1]) * HALF + wp.cross(w, c.lever)
+    return v[i] * (F1 - c.s) + v[i + 1] * c.s + c.g * spin[i]
+
+
+@wp.func
+def side_apply(c: ContactSide, P: wp.vec3d, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
+    """Apply impulse P at the side's point (a rigid-body velocity change for rigid rods)."""
+    i = c.i
+    if c.rigid != 0:
+        dvc = P * c.im
+        dw = c.iinv * wp.cross(c.lever, P)
+        ws = wp.dot(dw, c.t)
+        wperp = dw - c.t * ws
+        v[i] = v[i] + dvc + wp.cross(wperp, c.arm0)
+        v[i + 1] = v[i + 1] + dvc + wp.cross(wperp, c.arm1)
+        spin[i] = spin[i] + ws
+    else:
+        v[i] = v[i] + P * c.q0
+        v[i + 1] = v[i + 1] + P * c.q1
+        spin[i] = spin[i] + wp.dot(P, c.g) * c.ispin
+    return 0
+
+
+@wp.func
+def side_apply_atomic(c: ContactSide, P: wp.vec3d, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
+    """``side_apply`` with atomic adds, for launches whose threads may share a rod."""
+    i = c.i
+    if c.rigid != 0:
+        dvc = P * c.im
+        dw = c.iinv * wp.cross(c.lever, P)
+        ws = wp.dot(dw, c.t)
+        wperp = dw - c.t * ws
+        wp.atomic_add(v, i, dvc + wp.cross(wperp, c.arm0))
+        wp.atomic_add(v, i + 1, dvc + wp.cross(wperp, c.arm1))
+        wp.atomic_add(spin, i, ws)
+    else:
+        wp.atomic_add(v, i, P * c.q0)
+        wp.atomic_add(v, i + 1, P * c.q1)
+        wp.atomic_add(spin, i, wp.dot(P, c.g) * c.ispin)
+    return 0
+
+
+@wp.func
+def rod_contact_sides(k: int, model: RodModel, x: wp.array(dtype=wp.vec3d), contacts: RodContacts,
+                      tangent: wp.array(dtype=wp.vec3d)):
+    sp = contacts.seg[k]
+    ia = model.seg_vertex[sp[0]]
+    ib = model.seg_vertex[sp[1]]
+    n = contacts.normal[k]
+    a = contact_side(model, x, tangent, ia, contacts.st[k][0], n * (-model.radius[model.vertex_rod[ia]]))
+    b = contact_side(model, x, tangent, ib, contacts.st[k][1], n * model.radius[model.vertex_rod[ib]])
+    return a, b
+
+
 @wp.func
 def solve_rod_contact(
     k: int,
     model: RodModel,
+    x: wp.array(dtype=wp.vec3d),
     contacts: RodContacts,
     tangent: wp.array(dtype=wp.vec3d),
     params: StepParams,
@@ -112,43 +253,16 @@ def solve_rod_contact(
     spin: wp.array(dtype=wp.float64),
 ):
     """Exact local solve of rod-rod contact k; returns the velocity change it caused (m/s)."""
-    sp = contacts.seg[k]
-    ia = model.seg_vertex[sp[0]]
-    ib = model.seg_vertex[sp[1]]
-    s = contacts.st[k][0]
-    t = contacts.st[k][1]
-    qa0, qa1, wa = point_weights(model.inv_mass[ia], model.inv_mass[ia + 1], model.cross_inv_mass[ia], s)
-    qb0, qb1, wb = point_weights(model.inv_mass[ib], model.inv_mass[ib + 1], model.cross_inv_mass[ib], t)
-    w = wa + wb
-    if w <= F0:
-        return F0
-    n = contacts.normal[k]
-    ra = model.radius[model.vertex_rod[ia]]
-    rb = model.radius[model.vertex_rod[ib]]
-    ga = wp.cross(tangent[ia], n)
-    gb = wp.cross(tangent[ib], n)
-    ka = ra * ra * model.inv_inertia[ia]
-    kb = rb * rb * model.inv_inertia[ib]
-    u = (v[ia] * (F1 - s) + v[ia + 1] * s) - (v[ib] * (F1 - t) + v[ib + 1] * t) - ga * (ra * spin[ia]) - \
-        gb * (rb * spin[ib])
+    a, b = rod_contact_sides(k, model, x, contacts, tangent)
+    W = a.W + b.W
+    u = side_velocity(a, v, spin, model.rest_length[a.i]) - side_velocity(b, v, spin, model.rest_length[b.i])
     P = contacts.impulse[k]
-    pn = wp.dot(P, n)
-    pt = P - n * pn
-    un = wp.dot(u, n)
-    pn_new = wp.max(F0, pn + (approach_target(contacts.gap[k], params.dt, params.beta, params.max_push) - un) / w)
-    # tangential velocity without this contact's tangential impulse
-    ut = u - n * un - (pt * w + ga * (ka * wp.dot(ga, pt)) + gb * (kb * wp.dot(gb, pt)))
-    pt_new = coulomb_tangential(ut, n, w, ka, ga, kb, gb, params.mu * pn_new)
-    dP = n * (pn_new - pn) + (pt_new - pt)
-    v[ia] = v[ia] + dP * qa0
-    v[ia + 1] = v[ia + 1] + dP * qa1
-    v[ib] = v[ib] - dP * qb0
-    v[ib + 1] = v[ib + 1] - dP * qb1
-    spin[ia] = spin[ia] - wp.dot(dP, ga) * (ra * model.inv_inertia[ia])
-    spin[ib] = spin[ib] - wp.dot(dP, gb) * (rb * model.inv_inertia[ib])
-    contacts.impulse[k] = n * pn_new + pt_new
-    du = dP * w + ga * (ka * wp.dot(ga, dP)) + gb * (kb * wp.dot(gb, dP))
-    return wp.length(du)
+    P_new = solve_local(u, W, contacts.normal[k], P, approach_target(contacts.gap[k], params), params.mu)
+    dP = P_new - P
+    side_apply(a, dP, v, spin)
+    side_apply(b, -dP, v, spin)
+    contacts.impulse[k] = P_new
+    return wp.length(W * dP)
 
 
 @wp.kernel
@@ -156,6 +270,7 @@ def solve_rod_contacts(
     ids: wp.array(dtype=wp.int32),
     use_ids: int,
     model: RodModel,
+    x: wp.array(dtype=wp.vec3d),
     contacts: RodContacts,
     tangent: wp.array(dtype=wp.vec3d),
     params: StepParams,
@@ -167,12 +282,13 @@ def solve_rod_contacts(
     k = wp.tid()
     if use_ids != 0:
         k = ids[k]
-    wp.atomic_max(residual, 0, solve_rod_contact(k, model, contacts, tangent, params, v, spin))
+    wp.atomic_max(residual, 0, solve_rod_contact(k, model, x, contacts, tangent, params, v, spin))
 
 
 @wp.kernel
 def apply_rod_impulses(
     model: RodModel,
+    x: wp.array(dtype=wp.vec3d),
     contacts: RodContacts,
     tangent: wp.array(dtype=wp.vec3d),
     v: wp.array(dtype=wp.vec3d),
@@ -182,23 +298,10 @@ def apply_rod_impulses(
     k = wp.tid()
     if k >= contacts.count:
         return
-    sp = contacts.seg[k]
-    ia = model.seg_vertex[sp[0]]
-    ib = model.seg_vertex[sp[1]]
-    s = contacts.st[k][0]
-    t = contacts.st[k][1]
-    qa0, qa1, wa = point_weights(model.inv_mass[ia], model.inv_mass[ia + 1], model.cross_inv_mass[ia], s)
-    qb0, qb1, wb = point_weights(model.inv_mass[ib], model.inv_mass[ib + 1], model.cross_inv_mass[ib], t)
+    a, b = rod_contact_sides(k, model, x, contacts, tangent)
     P = contacts.impulse[k]
-    n = contacts.normal[k]
-    wp.atomic_add(v, ia, P * qa0)
-    wp.atomic_add(v, ia + 1, P * qa1)
-    wp.atomic_sub(v, ib, P * qb0)
-    wp.atomic_sub(v, ib + 1, P * qb1)
-    ra = model.radius[model.vertex_rod[ia]]
-    rb = model.radius[model.vertex_rod[ib]]
-    wp.atomic_sub(spin, ia, wp.dot(P, wp.cross(tangent[ia], n)) * (ra * model.inv_inertia[ia]))
-    wp.atomic_sub(spin, ib, wp.dot(P, wp.cross(tangent[ib], n)) * (rb * model.inv_inertia[ib]))
+    side_apply_atomic(a, P, v, spin)
+    side_apply_atomic(b, -P, v, spin)
 
 
 # ----------------------------------------------------------------------------- walls
@@ -206,26 +309,12 @@ def apply_rod_impulses(
 
 @wp.func
 def vertex_edge(model: RodModel, i: int):
-    """The edge whose spin a wall contact at vertex i acts on (a rod's last vertex: its last edge)."""
+    """The edge a wall contact at vertex i belongs to, and its parameter there (a rod's last
+    vertex: the end of its last edge)."""
     r = model.vertex_rod[i]
     if i >= model.rod_start[r + 1] - 1:
-        return i - 1
-    return i
-
-
-@wp.func
-def apply_vertex_impulse(model: RodModel, i: int, e: int, P: wp.vec3d, g: wp.vec3d, rr: wp.float64,
-                         v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
-    """Impulse P at vertex i's surface point: M^-1 column i (with the rigid rods' cross terms)
-    and the axial torque on edge e (g = t_e x n, rr = the rod radius)."""
-    r = model.vertex_rod[i]
-    v[i] = v[i] + P * model.inv_mass[i]
-    if i + 1 < model.rod_start[r + 1]:
-        v[i + 1] = v[i + 1] + P * model.cross_inv_mass[i]
-    if i > model.rod_start[r]:
-        v[i - 1] = v[i - 1] + P * model.cross_inv_mass[i - 1]
-    spin[e] = spin[e] - wp.dot(P, g) * (rr * model.inv_inertia[e])
-    return 0
+        return i - 1, F1
+    return i, F0
 
 
 @wp.kernel
@@ -251,7 +340,7 @@ def prepare_wall_contacts(
     rr = model.radius[r]
     any_active = int(0)
     for i in range(a, b):
-        e = vertex_edge(model, i)
+        e, se = vertex_edge(model, i)
         for p in range(walls.n):
             k = i * walls.n + p
             n = walls.normal[p]
@@ -263,7 +352,7 @@ def prepare_wall_contacts(
                 pn = wp.max(wp.dot(P, n), F0)
                 P = n * pn + (P - n * wp.dot(P, n))
                 contacts.impulse[k] = P
-                apply_vertex_impulse(model, i, e, P, wp.cross(tangent[e], n), rr, v, spin)
+                side_apply(contact_side(model, x, tangent, e, se, n * (-rr)), P, v, spin)
                 any_active = 1
             else:
                 contacts.gap[k] = FAR
@@ -276,6 +365,7 @@ def prepare_wall_contacts(
 def solve_rod_walls(
     r: int,
     model: RodModel,
+    x: wp.array(dtype=wp.vec3d),
     tangent: wp.array(dtype=wp.vec3d),
     walls: Walls,
     params: StepParams,
@@ -290,34 +380,28 @@ def solve_rod_walls(
     rr = model.radius[r]
     worst = F0
     for i in range(a, b):
-        w = model.inv_mass[i]
-        e = vertex_edge(model, i)
-        kr = rr * rr * model.inv_inertia[e]
+        e, se = vertex_edge(model, i)
         for p in range(walls.n):
             k = i * walls.n + p
             gap = contacts.gap[k]
-            if gap > FAR or w <= F0:
+            if gap > FAR:
                 continue
             n = walls.normal[p]
-            g = wp.cross(tangent[e], n)
-            u = v[i] - g * (rr * spin[e]) - walls.vel[p]
+            c = contact_side(model, x, tangent, e, se, n * (-rr))
+            u = side_velocity(c, v, spin, model.rest_length[e]) - walls.vel[p]
             P = contacts.impulse[k]
-            pn = wp.dot(P, n)
-            pt = P - n * pn
-            un = wp.dot(u, n)
-            pn_new = wp.max(F0, pn + (approach_target(gap, params.dt, params.beta, params.max_push) - un) / w)
-            ut = u - n * un - (pt * w + g * (kr * wp.dot(g, pt)))
-            pt_new = coulomb_tangential(ut, n, w, kr, g, F0, g, walls.mu[p] * pn_new)
-            dP = n * (pn_new - pn) + (pt_new - pt)
-            apply_vertex_impulse(model, i, e, dP, g, rr, v, spin)
-            contacts.impulse[k] = n * pn_new + pt_new
-            worst = wp.max(worst, wp.length(dP * w + g * (kr * wp.dot(g, dP))))
+            P_new = solve_local(u, c.W, n, P, approach_target(gap, params), walls.mu[p])
+            dP = P_new - P
+            side_apply(c, dP, v, spin)
+            contacts.impulse[k] = P_new
+            worst = wp.max(worst, wp.length(c.W * dP))
     return worst
 
 
 @wp.kernel
 def solve_wall_contacts(
     model: RodModel,
+    x: wp.array(dtype=wp.vec3d),
     tangent: wp.array(dtype=wp.vec3d),
     walls: Walls,
     params: StepParams,
@@ -328,7 +412,7 @@ def solve_wall_contacts(
 ):
     """One thread per rod that touches a wall (``active`` lists them)."""
     r = contacts.active[wp.tid()]
-    wp.atomic_max(residual, 0, solve_rod_walls(r, model, tangent, walls, params, contacts, v, spin))
+    wp.atomic_max(residual, 0, solve_rod_walls(r, model, x, tangent, walls, params, contacts, v, spin))
 
 
 # ----------------------------------------------------------------------------- colouring

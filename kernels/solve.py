@@ -42,10 +42,10 @@ def gauss_seidel_sequential(
         cres = F0
         sres = F0
         for k in range(contacts.count):
-            cres = wp.max(cres, solve_rod_contact(k, model, contacts, factors.tangent, params, v, spin))
+            cres = wp.max(cres, solve_rod_contact(k, model, state.x, contacts, factors.tangent, params, v, spin))
         for q in range(na):
-            cres = wp.max(cres, solve_rod_walls(wall_contacts.active[q], model, factors.tangent, walls, params,
-                                                wall_contacts, v, spin))
+            cres = wp.max(cres, solve_rod_walls(wall_contacts.active[q], model, state.x, factors.tangent, walls,
+                                                params, wall_contacts, v, spin))
         for r in range(model.n_rods):
             sres = wp.max(sres, project_rod(r, model, state, v, spin, factors, params.dt))
         used = it + 1

@@ -43,6 +43,9 @@ class RodModel:
     rest_twist: wp.array(dtype=wp.float64)  # interior vertex (rad)
     rest_kappa: wp.array(dtype=wp.vec2d)  # interior vertex: rest curvature in the material frame
     curved: wp.array(dtype=wp.int32)  # rod: 1 when its rest shape is curved
+    rigid: wp.array(dtype=wp.int32)  # rod: 1 for a rigid (two-vertex) rod
+    rod_inv_mass: wp.array(dtype=wp.float64)  # rod: 1 / m (0 when fixed)
+    rod_inv_iperp: wp.array(dtype=wp.float64)  # rod: 1 / I_perp of a rigid rod (0 when fixed)
 
 
 @wp.struct
@@ -124,7 +127,8 @@ class RodFactors:
 class StepParams:
     dt: wp.float64
     mu: wp.float64  # rod-rod friction coefficient
-    beta: wp.float64  # Baumgarte fraction of an overlap removed per step
+    beta: wp.float64  # Baumgarte fraction of an overlap (beyond the slop) removed per step
+    slop: wp.float64  # overlap left alone (m): no push, so a resting contact's problem repeats
     max_push: wp.float64  # largest separation speed an overlap may cause (m/s)
     contact_distance: wp.float64  # base speculative margin (m)
     warm: wp.float64  # fraction of last step's impulses reused

@@ -364,6 +364,17 @@ class Model:
         st.rest_twist = f64(np.zeros(V))
         st.rest_kappa = wp.array(rest_kappa, dtype=wp.vec2d, device=d)
         st.curved = wp.array(curved, dtype=wp.int32, device=d)
+        rigid = np.full(N, 1 if rod_model == "rigid" else 0, dtype=np.int32)
+        st.rigid = wp.array(rigid, dtype=wp.int32, device=d)
+        rod_mass = self.rod_masses()
+        fixed = np.logical_or.reduceat(pin_in, offsets[:-1]) if N else np.zeros(0, bool)
+        st.rod_inv_mass = f64(np.where(fixed, 0.0, 1.0 / rod_mass))
+        if rod_model == "rigid":
+            Lr = rest_length[offsets[:-1]]
+            iperp = rod_mass * (Lr**2 / 12.0 + r**2 / 4.0)
+            st.rod_inv_iperp = f64(np.where(fixed, 0.0, 1.0 / iperp))
+        else:
+            st.rod_inv_iperp = f64(np.zeros(N))
 
     @staticmethod
     def _as_rigid(rods: RodSet, pinned: np.ndarray):

@@ -82,7 +82,11 @@ class RodSolver:
     warm_start : float
         Fraction of last step's impulses reused (0 disables warm starting).
     baumgarte : float
-        Fraction of an existing overlap removed per step.
+        Fraction of an existing overlap (beyond the slop) removed per step.
+    slop : float
+        Overlap left alone, in units of the smallest diameter: a resting contact is not
+        pushed apart, so its velocity problem repeats from step to step, warm starting holds
+        and the sweep converges.
     penetration_limit : float
         A step whose deepest rod overlap exceeds this fraction of the smallest diameter
         raises :class:`SimulationBlowUp`.
@@ -96,7 +100,8 @@ class RodSolver:
         Steps between energy-jump checks (0 disables them).
     skin : float, optional
         Extra reach of the broadphase pair list (m); the list is rebuilt when a vertex has
-        moved by half of it. Default d_min + h_max / 5 (measured knee, benchmarks).
+        moved by half of it. Default d_min + min(h_max, 10 d_min) / 5 (measured knees,
+        benchmarks).
     """
 
     def __init__(
@@ -109,6 +114,7 @@ class RodSolver:
         coloring: str = "auto",
         warm_start: float = 1.0,
         baumgarte: float = 0.5,
+        slop: float = 0.01,
         penetration_limit: float = 0.25,
         speed_limit: float | None = None,
         allow_unstable: bool = False,
@@ -132,6 +138,7 @@ class RodSolver:
         self.coloring = coloring == "on" or (coloring == "auto" and wp.get_device(model.device).is_cuda)
         self.warm_start = float(warm_start)
         self.baumgarte = float(baumgarte)
+        self.slop = float(slop)
         self.penetration_limit = float(penetration_limit)
         self.allow_unstable = bool(allow_unstable)
         self._speed_limit = speed_limit
@@ -159,7 +166,11 @@ class RodSolver:
         self._energy_out = wp.zeros(5, dtype=wp.float64, device=d)
         self._residual = wp.zeros(1, dtype=wp.float64, device=d)
         self._sresidual = wp.zeros(1, dtype=wp.float64, device=d)
-        skin = model.min_diameter + 0.2 * float(model.rest_length_np.max()) if skin is None else float(skin)
+        if skin is None:
+            # measured knees: d + h/5 for ten-vertex rods; capped at 10 d for long (rigid) segments,
+            # whose candidate list would otherwise hold every rod within a fifth of a length
+            dmin = model.min_diameter
+            skin = dmin + 0.2 * min(float(model.rest_length_np.max()), 10.0 * dmin)
         self.contacts = ContactPipeline(model, skin, self._launch, lambda: self.timings)
         self._wall_gap = wp.zeros(V * max(len(model.planes), 1), dtype=wp.float64, device=d)
         self._active = wp.zeros(max(model.n_rods, 1), dtype=wp.int32, device=d)
@@ -395,6 +406,7 @@ class RodSolver:
         params.dt = fdt
         params.mu = wp.float64(m.mu)
         params.beta = wp.float64(self.baumgarte)
+        params.slop = wp.float64(self.slop * m.min_diameter)
         params.max_push = wp.float64(max(self.characteristic_speed(control), 1e-3))
         params.contact_distance = wp.float64(m.contact_distance)
         params.warm = wp.float64(self.warm_start)
@@ -402,7 +414,7 @@ class RodSolver:
         if n_contacts:
             self.contacts.warm_start(state_in, state_out, n_contacts, self.warm_start)
             self._launch("friction", friction.apply_rod_impulses, dim=n_contacts, device=dev, inputs=[
-                m.arrays, contacts, f.tangent, state_out.v, state_out.spin])
+                m.arrays, state_in.x, contacts, f.tangent, state_out.v, state_out.spin])
             if self.coloring:
                 self.contacts.color(state_out, n_contacts)
 
@@ -485,7 +497,7 @@ class RodSolver:
                 self._residual.zero_()
                 self._sresidual.zero_()
             if n_contacts:
-                args = [m.arrays, contacts, f.tangent, params, state_out.v, state_out.spin, self._residual]
+                args = [m.arrays, rs_in.x, contacts, f.tangent, params, state_out.v, state_out.spin, self._residual]
                 if self.coloring:
                     for c0, c1 in self.contacts.color_ranges:
                         self._launch("friction", friction.solve_rod_contacts, dim=c1 - c0, device=dev,
@@ -495,7 +507,7 @@ class RodSolver:
                                  inputs=[ids, 0, *args])
             if n_active:
                 self._launch("friction", friction.solve_wall_contacts, dim=n_active, device=dev, inputs=[
-                    m.arrays, f.tangent, walls, params, wc, state_out.v, state_out.spin, self._residual])
+                    m.arrays, rs_in.x, f.tangent, walls, params, wc, state_out.v, state_out.spin, self._residual])
             self._launch("elastics", elastics.rod_projection, dim=m.n_rods, device=dev, inputs=[
                 m.arrays, rs_in, state_out.v, state_out.spin, f, params.dt, self._sresidual])
             used = it + 1
