@@ -117,12 +117,13 @@ def _case_fov(seed):
 
 
 def _case_cupping(seed):
-    # beam hardening as reconstructions show it: a bright rim (and dark centre)
-    return _packing((160, 160, 160), seed, cupping=-0.3), {}
+    # beam hardening as reconstructions show it: a bright rim (and dark centre); a background
+    # 3.3 times the contrast, so that 30% lifts the corners by a whole contrast
+    return _packing((160, 160, 160), seed, cupping=-0.3, background=40000, foreground=52000), {}
 
 
 def _case_cupping_rings(seed):
-    return _packing((160, 160, 160), seed, cupping=-0.15, ring=0.3), {}
+    return _packing((160, 160, 160), seed, cupping=-0.15, ring=0.3, background=40000, foreground=52000), {}
 
 
 def _case_mixed_radii(seed):
@@ -188,8 +189,8 @@ CASES = {
     "cnr2": (_case_cnr2, "the same at CNR 2"),
     "faces": (_case_faces, "rods cut by the volume faces (a 160^3 crop of a 224^3 packing)"),
     "fov": (_case_fov, "zeros outside a circular field of view (radius 76 voxels)"),
-    "cupping": (_case_cupping, "cupping (beam hardening) 30%: bright rim"),
-    "cupping_rings": (_case_cupping_rings, "cupping 15% and ring artefacts (0.3 of the contrast)"),
+    "cupping": (_case_cupping, "cupping (beam hardening) 30%: bright rim, background 3.3x the contrast"),
+    "cupping_rings": (_case_cupping_rings, "cupping 15% and ring artefacts (0.3 of the contrast), background 3.3x the contrast"),
     "mixed_radii": (_case_mixed_radii, "radii mixed uniformly in 2..5 voxels"),
     "bundles": (_case_bundles, "10 bundles of 3-5 parallel touching rods, 128^3"),
     "thin": (_case_thin, "thin rods: r 1.5 voxels at blur 1.2"),

@@ -146,6 +146,19 @@ class SegmentParams:
         Overlap added on every side of a chunk; ``None``: ``max(4 smooth_sigma + 2, 3 r + 2)``.
     stats_block : int
         Edge of the blocks used for the level and coarse-radius statistics.
+    dark : bool or None
+        Rods darker than the background (grey values are negated first); ``None`` detects it
+        from the histogram (:mod:`rodwarp.segment_prep`).
+    fov : bool or None
+        Field-of-view mask (a constant outside the reconstruction circle): ``None`` detects
+        it, ``False`` never masks.
+    background : bool or None
+        Removal of the background trend about the rotation axis (cupping, rings): ``None``
+        when it exceeds half the noise, ``True`` always, ``False`` never.
+    shape : str
+        ``"straight"`` (straight rods, two vertices each), ``"curved"`` (filaments traced as
+        polylines, :mod:`rodwarp.segment_curved`) or ``"auto"`` (curved when the skeleton's
+        branches bend, see :func:`segment_volume`).
     """
 
     diameter: float | None = None
@@ -175,6 +188,10 @@ class SegmentParams:
     chunk: int | None = None
     chunk_halo: int | None = None
     stats_block: int = 96
+    dark: bool | None = None
+    fov: bool | None = None
+    background: bool | None = None
+    shape: str = "auto"
 
     def validate(self) -> None:
         def pos(name, v, allow_zero=False):
@@ -214,6 +231,11 @@ class SegmentParams:
             raise _fail(f"chunk must be an integer >= 16 voxels or None, got {self.chunk!r}")
         if self.chunk_halo is not None and (not isinstance(self.chunk_halo, (int, np.integer)) or self.chunk_halo < 0):
             raise _fail(f"chunk_halo must be a non-negative integer or None, got {self.chunk_halo!r}")
+        if self.shape not in ("straight", "curved", "auto"):
+            raise _fail(f"shape must be 'straight', 'curved' or 'auto', got {self.shape!r}")
+        for name in ("dark", "fov", "background"):
+            if getattr(self, name) not in (None, True, False):
+                raise _fail(f"segment parameter {name} must be true, false or None (detect), got {getattr(self, name)!r}")
         lo, hi = self.radius_range
         if not (0 <= lo < hi):
             raise _fail(f"radius_range must be (low, high) with 0 <= low < high, got {self.radius_range!r}")
@@ -235,7 +257,11 @@ class SegmentResult:
     timings : dict
         Seconds per stage (``stats``, ``detect``, ``merge``, ``refine``, ``contacts``, ``total``).
     quality : dict
-        Fit and detection figures (see :func:`segment_volume`).
+        Fit and detection figures (see :func:`segment_volume`); ``quality["flags"]`` lists, in
+        words, what makes the output untrustworthy (empty when nothing does).
+    spacing : float
+        Edge of the working voxel in the units of the ``voxel_size`` given (1 without one):
+        physical coordinates are ``rods.points * spacing``.
     """
 
     rods: RodSet
@@ -243,6 +269,7 @@ class SegmentResult:
     diameter: float
     timings: dict = field(default_factory=dict)
     quality: dict = field(default_factory=dict)
+    spacing: float = 1.0
 
 
 # ----------------------------------------------------------------------------------------------
@@ -666,7 +693,7 @@ def _dp_split(q: np.ndarray, tol: float) -> list[tuple[int, int]]:
     return out
 
 
-def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=None):
+def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=None, quality=None):
     """Straight skeleton pieces, junction neighbourhoods removed: [(centre, dir, t0, t1, n)] (block xyz).
 
     ``cut_faces``: per axis (z, y, x) a pair of flags, True where the block face is interior to
@@ -713,6 +740,7 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
     deg = np.diff(csr.indptr)
     tol = max(1.5, 0.5 * r0)
     seeds = []
+    bend_stats = [0, 0]
     for k in range(ncomp):
         mem = order[bounds[k]:bounds[k + 1]]
         if len(mem) < P.min_seed_voxels:
@@ -727,6 +755,10 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
             pos = {int(v): i for i, v in enumerate(mem)}
             ordered = np.array([pos[int(v)] for v in path if int(v) in pos])
             pieces = [ordered[a:b + 1] for a, b in _dp_split(q[ordered], tol)]
+        if len(mem) >= 6.0 * r0:  # for shape="auto": how much of the skeleton bends
+            bend_stats[0] += len(mem)
+            if len(pieces) > 1:
+                bend_stats[1] += len(mem)
         for idx_p in pieces:
             if len(idx_p) < P.min_seed_voxels:
                 continue
@@ -738,6 +770,9 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
             seeds.append((c, u, float(t.min()), float(t.max()), len(idx_p)))
     # longest first; ties broken by position (deterministic)
     seeds.sort(key=lambda s: (-(s[3] - s[2]), -s[4], tuple(np.round(s[0], 6))))
+    if quality is not None:
+        quality["_branch_voxels"] = quality.get("_branch_voxels", 0) + bend_stats[0]
+        quality["_bent_voxels"] = quality.get("_bent_voxels", 0) + bend_stats[1]
     return seeds, len(idx), len(junc)
 
 
@@ -896,7 +931,7 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Stats, P: SegmentParams, qua
     cut = None
     if volume_shape is not None:
         cut = [(origin_zyx[a] > 0, origin_zyx[a] + raw.shape[a] < volume_shape[a]) for a in range(3)]
-    seeds, n_sk, n_j = _skeleton_seeds(mask, r0, P, cut)
+    seeds, n_sk, n_j = _skeleton_seeds(mask, r0, P, cut, quality)
     quality["skeleton_voxels"] = quality.get("skeleton_voxels", 0) + n_sk
     quality["skeleton_junctions"] = quality.get("skeleton_junctions", 0) + n_j
     quality["seeds"] = quality.get("seeds", 0) + len(seeds)
@@ -1679,7 +1714,8 @@ def _chunks(shape, chunk, halo):
 
 
 def segment_volume(volume, params: SegmentParams | None = None,
-                   progress: Callable[[str, int, int], None] | None = None) -> SegmentResult:
+                   progress: Callable[[str, int, int], None] | None = None, *,
+                   voxel_size=None) -> SegmentResult:
     """Segment straight rods and their contacts from a greyscale CT volume.
 
     Parameters
@@ -1693,6 +1729,11 @@ def segment_volume(volume, params: SegmentParams | None = None,
     progress : callable(stage, done, total), optional
         Called as stages advance (``"stats"``, ``"detect"``, ``"merge"``, ``"refine"``,
         ``"contacts"``).
+    voxel_size : float or sequence of 3 floats, optional
+        Voxel edge (one value) or edges along (z, y, x), any unit.  Anisotropic volumes are
+        resampled onto an isotropic grid of the smallest edge first
+        (:mod:`rodwarp.segment_prep`); the result's coordinates are in units of that edge
+        (``SegmentResult.spacing``), with voxel (0, 0, 0) at the origin.
 
     Returns
     -------
@@ -1721,15 +1762,27 @@ def segment_volume(volume, params: SegmentParams | None = None,
         if progress is not None:
             progress(stage, done, total)
 
-    reader = _Reader(volume)
+    from rodwarp.segment_prep import _Corrected, prepare_volume
+
+    tic = time.perf_counter()
+    _Reader(volume)  # shape and dtype checks first, with their own messages
+    prep = prepare_volume(volume, voxel_size, dark=P.dark, fov=P.fov, background=P.background, quality=quality)
+    vol = prep.volume
+    if isinstance(vol, _Corrected) and isinstance(volume, np.ndarray):
+        vol = vol[:, :, :]  # in memory anyway: gathers from an array are much faster
+    reader = _Reader(vol)
+    timings["prepare"] = time.perf_counter() - tic
     tic = time.perf_counter()
     note("stats", 0, 1)
     st = _global_stats(reader, P)
     note("stats", 1, 1)
     timings["stats"] = time.perf_counter() - tic
+    noise = prep.notes.get("noise") or st.noise
     quality.update(background=st.bg, foreground=st.fg, threshold=st.threshold,
-                   cnr=(st.fg - st.bg) / st.noise if st.noise > 0 else float("inf"),
+                   cnr=(st.fg - st.bg) / noise if noise > 0 else float("inf"),
                    coarse_radius=st.r0)
+    if P.shape == "curved":
+        return _finish_curved(reader, st, P, quality, timings, t_all, prep, progress)
 
     # detection
     tic = time.perf_counter()
@@ -1746,6 +1799,12 @@ def segment_volume(volume, params: SegmentParams | None = None,
     fg_tot = quality.pop("_fg", 0)
     quality["foreground_explained"] = quality.pop("_fg_explained", 0) / fg_tot if fg_tot else 0.0
     quality["candidates"] = len(lines)
+    bv = quality.pop("_branch_voxels", 0)
+    quality["bend_fraction"] = quality.pop("_bent_voxels", 0) / bv if bv else 0.0
+    if P.shape == "auto" and quality["bend_fraction"] > AUTO_BEND_FRACTION:
+        quality["shape"] = "curved"
+        return _finish_curved(reader, st, P, quality, timings, t_all, prep, progress)
+    quality["shape"] = "straight"
     if not lines:
         raise _fail(f"no rods found: {quality.get('seeds', 0)} skeleton seeds gave no rod-like "
                     f"fit (coarse radius {st.r0:.2f} voxels); {_HINT}")
@@ -1810,7 +1869,76 @@ def segment_volume(volume, params: SegmentParams | None = None,
     timings["total"] = time.perf_counter() - t_all
     out.attrs = {"source": "rodwarp.segment", "diameter_voxels": 2 * r_glob,
                  "params": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(P).items()}}
-    return SegmentResult(rods=out, contacts=contacts, diameter=2.0 * r_glob, timings=timings, quality=quality)
+    _flags(quality, "straight")
+    return SegmentResult(rods=out, contacts=contacts, diameter=2.0 * r_glob, timings=timings, quality=quality,
+                         spacing=prep.spacing)
+
+
+#: ``shape="auto"`` traces filaments when more than this share of the long skeleton branches
+#: bends away from its chord (straight packings: below 0.1, arcs and wires: above 0.5)
+AUTO_BEND_FRACTION = 0.3
+
+
+def _finish_curved(reader, st, P, quality, timings, t_all, prep, progress):
+    """The curved-filament path of :func:`segment_volume` (polylines, per-filament radii)."""
+    from rodwarp.geometry import detect_contacts
+    from rodwarp.segment_curved import _resample, trace_filaments
+
+    quality["shape"] = "curved"
+    tic = time.perf_counter()
+    raw = reader.read((0, 0, 0), reader.shape)
+    polys, radii = trace_filaments(raw, st, P, quality, progress)
+    timings["detect"] = timings.get("detect", 0.0) + time.perf_counter() - tic
+    if not polys:
+        raise _fail(f"no filaments found: {quality.get('branches', 0)} skeleton branches gave no filament longer "
+                    f"than {P.min_length:g} radii (coarse radius {st.r0:.2f} voxels); {_HINT}")
+    tic = time.perf_counter()
+    # vertices every 2 voxels (or the radius): enough for the curvature a skeleton resolves
+    step = max(2.0, 0.75 * st.r0)
+    polys = [_resample(p, step) for p in polys]
+    key = [tuple(np.round(p.mean(0), 3)[::-1]) for p in polys]
+    order = sorted(range(len(polys)), key=lambda k: key[k])
+    polys = [polys[k] for k in order]
+    radii = np.asarray(radii)[order]
+    out = RodSet.from_polylines(polys, radii, units="voxel")
+    contacts = detect_contacts(out, tolerance=P.contact_tolerance)
+    out.contacts = contacts
+    r_glob = float(np.median(radii))
+    quality["radius_spread"] = float(np.std(radii))
+    quality["rods_rejected"] = {}
+    timings["contacts"] = time.perf_counter() - tic
+    timings["total"] = time.perf_counter() - t_all
+    out.attrs = {"source": "rodwarp.segment", "shape": "curved", "diameter_voxels": 2 * r_glob,
+                 "params": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(P).items()}}
+    _flags(quality, "curved")
+    return SegmentResult(rods=out, contacts=contacts, diameter=2.0 * r_glob, timings=timings, quality=quality,
+                         spacing=prep.spacing)
+
+
+def _flags(quality: dict, shape: str) -> None:
+    """Quality flags: short sentences naming what makes the output untrustworthy (empty: none)."""
+    flags = []
+    fe = quality.get("foreground_explained")
+    if fe is not None and fe < 0.9:
+        flags.append(f"only {100 * fe:.0f}% of the foreground lies near a traced rod: rods may be missing "
+                     f"(bundles, curved filaments: try --shape curved) or the background is uneven")
+    res = quality.get("fit_residual")
+    if res is not None and np.isfinite(res) and res > 0.75:
+        flags.append(f"mean fit residual {res:.2f} voxels: axes do not follow the image (curved rods? "
+                     f"try --shape curved)")
+    rej = quality.get("rods_rejected") or {}
+    n_rej = sum(v for k, v in rej.items() if k != "duplicate")
+    cand = quality.get("candidates") or 0
+    if cand and n_rej > 0.3 * cand:
+        why = ", ".join(f"{k} {v}" for k, v in sorted(rej.items()) if k != "duplicate")
+        flags.append(f"{n_rej} of {cand} candidates rejected ({why}): check --diameter and the contrast")
+    if shape == "straight" and quality.get("bend_fraction", 0.0) > 0.15:
+        flags.append(f"{100 * quality['bend_fraction']:.0f}% of the skeleton bends: the rods may be curved "
+                     f"(--shape curved)")
+    cnr = quality.get("cnr")
+    if cnr is not None and np.isfinite(cnr) and cnr < 1.5:
+        flags.append(f"contrast-to-noise {cnr:.1f} is below 1.5: expect missed rods and false contacts")
+    quality["flags"] = flags
 
 
 # ----------------------------------------------------------------------------------------------
