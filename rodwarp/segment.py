@@ -137,8 +137,11 @@ class SegmentParams:
         Rods whose axis intensity plateau (normalised) is below this are rejected.
     radius_range : tuple of float
         Rods whose own greyscale radius falls outside this range (x the global r) are rejected.
-    per_rod_radius : bool
-        Report each rod's own greyscale radius (noisier) instead of the global one.
+    per_rod_radius : bool or None
+        Give each rod its own greyscale radius (sub-voxel, from the intensity mass per unit
+        length) in the output, the contact gaps and the acceptance tests, instead of the
+        global one.  ``None``: when the radii are mixed (a broad distance-transform ridge, or
+        a robust spread of the rods' own radii above ``MIXED_RADIUS_CV``).
     chunk : int or None
         Detection runs on overlapping cubes of this edge (voxels) read one at a time; ``None``
         processes the whole volume at once.  The refinement reads only the voxels around each rod.
@@ -184,7 +187,7 @@ class SegmentParams:
     min_length: float = 4.0
     min_fill: float = 0.6
     radius_range: tuple = (0.6, 1.5)
-    per_rod_radius: bool = False
+    per_rod_radius: bool | None = None
     chunk: int | None = None
     chunk_halo: int | None = None
     stats_block: int = 96
@@ -524,6 +527,7 @@ class _Stats:
     threshold: float    # binarisation level of the smoothed image
     r0: float
     noise: float
+    mixed: bool = False  # radii spread widely (the distance-transform ridge is broad)
 
 
 def _otsu(values: np.ndarray) -> float:
@@ -532,6 +536,9 @@ def _otsu(values: np.ndarray) -> float:
 
 
 RIDGE_BIAS = 0.55
+#: interquartile range of the distance-transform ridge, relative to its median, above which
+#: the scan holds mixed radii (one radius: 0.06-0.11 on phantoms of radius 1.5-3; radii 2-5: 0.41)
+MIXED_RIDGE_SPREAD = 0.3
 
 
 def _global_stats(reader: _Reader, P: SegmentParams) -> _Stats:
@@ -643,8 +650,16 @@ def _global_stats(reader: _Reader, P: SegmentParams) -> _Stats:
         # the half-level surface of the blurred, smoothed rod lies about sigma^2 / 2r inside
         # it (coarse: calibrated on phantoms of radius 3 to 20, blur 1, smoothing 1 and 2)
         m = float(np.median(ridge))
+        q25, q75 = (float(v) for v in np.percentile(ridge, [25, 75]))
+        # one radius: the ridge spreads by about a voxel's aliasing (< 0.15 of the median);
+        # mixed radii: the coarse radius is the lower quartile's, so the thinner rods still
+        # fill the fitting discs
+        mixed = (q75 - q25) > MIXED_RIDGE_SPREAD * m
+        if mixed:
+            m = q25
         r0 = max(0.75, m + RIDGE_BIAS - 0.7 * (1.0 + P.smooth_sigma ** 2) / max(m, 1.0))
-    return _Stats(bg=bg, fg=fg, fg_smooth=fg_s, threshold=thr, r0=r0, noise=noise)
+    return _Stats(bg=bg, fg=fg, fg_smooth=fg_s, threshold=thr, r0=r0, noise=noise,
+                  mixed=bool(P.diameter is None and mixed))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -755,9 +770,10 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
             pos = {int(v): i for i, v in enumerate(mem)}
             ordered = np.array([pos[int(v)] for v in path if int(v) in pos])
             pieces = [ordered[a:b + 1] for a, b in _dp_split(q[ordered], tol)]
-        if len(mem) >= 6.0 * r0:  # for shape="auto": how much of the skeleton bends
+        if len(mem) >= 8.0 * r0:  # for shape="auto": how much of the skeleton bends
+            # (a tolerance of a radius, at least 2 voxels: noise and thin rods wiggle less)
             bend_stats[0] += len(mem)
-            if len(pieces) > 1:
+            if len(pieces) > 1 and len(_dp_split(q[ordered], max(2.0, r0))) > 1:
                 bend_stats[1] += len(mem)
         for idx_p in pieces:
             if len(idx_p) < P.min_seed_voxels:
@@ -786,6 +802,8 @@ class _Tracer:
         self.fit_offs = _disc_offsets(max(r0, 1.0))
         self.probe_offs = _disc_offsets(max(0.5 * r0, 0.75))
         self.mom_offs = _disc_offsets(1.6 * r0 + 1.0)
+
+    mixed = False
 
     def _slices(self, c, u, ts, offs):
         e1, e2 = _basis(u)
@@ -883,7 +901,9 @@ class _Tracer:
         if res is None:
             return None
         c, u, t0, t1, fill = res
-        if fill < 0.4:
+        # a thinner rod fills less of the fitting disc: with mixed radii accept down to a
+        # quarter (a rod of half the coarse radius)
+        if fill < (0.25 if self.mixed else 0.4):
             return None
         c, u, t0, t1 = self.march(c, u, t0, t1, max_len, avoid)
         res = self.fit(c, u, t0, t1, P.fit_iterations, avoid)
@@ -926,6 +946,7 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Stats, P: SegmentParams, qua
     mask = g > level
     r0 = st.r0
     tr = _Tracer(g, origin_zyx, r0, P)
+    tr.mixed = st.mixed
     max_len = float(np.linalg.norm(raw.shape)) + 2.0
     lines: list[tuple[np.ndarray, np.ndarray]] = []
     cut = None
@@ -1187,7 +1208,7 @@ def _merge_lines(lines, r, angle_deg, dist, gap, dup_radius=0.75, dup_fraction=0
 # ----------------------------------------------------------------------------------------------
 
 class _Rod:
-    __slots__ = ("p0", "p1", "r", "plateau", "resid", "mass", "mass_r", "ok", "why", "prev")
+    __slots__ = ("p0", "p1", "r", "plateau", "resid", "mass", "mass_r", "ok", "why", "prev", "own_r")
 
     def __init__(self, p0, p1, r):
         self.p0 = np.asarray(p0, float)
@@ -1199,6 +1220,7 @@ class _Rod:
         self.mass_r = np.nan    # radius from the mass: sqrt(mass / (pi C))
         self.ok = True
         self.why = ""
+        self.own_r = False
 
     @property
     def length(self):
@@ -1244,6 +1266,7 @@ class _Refiner:
         self.st = st
         self.P = P
         self.C = 1.0          # fitted contrast (plateau) relative to fg - bg
+        self.mixed = False    # per-rod radii
         self.sigma = 1.0      # fitted blur
         self.r = r_glob       # global radius
         self.delta = None     # end offset
@@ -1330,7 +1353,10 @@ class _Refiner:
         dens = np.where(n_all > 0, math.pi * R * R / np.maximum(n_all, 1), 0.0)
         m_corr = m * dens
         area0 = math.pi * r * r * self.C
-        ok = (m_corr > 0.4 * area0) & (n_all > 0.3 * math.pi * R * R)
+        # until a rod has its own radius, a thin one in a scan of mixed radii holds less mass
+        # than the global radius promises
+        f_min = 0.15 if (self.st.mixed and not getattr(rod, "own_r", False)) else 0.4
+        ok = (m_corr > f_min * area0) & (n_all > 0.3 * math.pi * R * R)
         if ok.sum() < 3:
             rod.ok, rod.why = False, "no interior"
             return
@@ -1564,12 +1590,36 @@ def _gap_filler(reader, st, r):
     return filled
 
 
-def _check_rod(rod, r_glob, C, P):
-    """Mark a rod as failed when it is too short, too faint or of the wrong thickness."""
-    lo_r, hi_r = P.radius_range
-    if rod.ok and rod.length < P.min_length * r_glob:
+_LEVELS: dict = {}
+
+
+def _axis_level(r, sigma, rho_e):
+    """Mean of a unit-contrast blurred disc profile over the end-profile disc (the plateau a
+    rod of radius r shows under blur sigma; about 1 for thick rods, well below for thin ones)."""
+    key = (round(float(r), 2), round(float(sigma), 2), round(float(rho_e), 2))
+    if key not in _LEVELS:
+        rr = (np.arange(12) + 0.5) / 12 * rho_e
+        w = rr * _end_weight(rr, rho_e)
+        _LEVELS[key] = float((_blur_model(-np.inf, rr, r, sigma, n_r=24, n_th=32) * w).sum() / w.sum())
+    return _LEVELS[key]
+
+
+def _check_rod(rod, r_glob, C, P, sigma=None, mixed=False):
+    """Mark a rod as failed when it is too short, too faint or of the wrong thickness.
+
+    The faint test compares the axis plateau with what a rod of this radius shows under the
+    fitted blur (``min_fill`` of it), so thin rods are judged by their own standard, not by
+    the plateau of thick ones.  With mixed radii the length and radius tests use the rod's
+    own radius and a wide range (0.3 to 3 times the median radius).
+    """
+    lo_r, hi_r = P.radius_range if not mixed else (min(P.radius_range[0], 0.3), max(P.radius_range[1], 3.0))
+    r_own = rod.r if mixed else r_glob
+    if rod.ok and rod.length < P.min_length * r_own:
         rod.ok, rod.why = False, "short"
-    if rod.ok and np.isfinite(rod.plateau) and rod.plateau < P.min_fill * C:
+    expect = C
+    if sigma is not None:
+        expect = C * _axis_level(r_own, sigma, min(P.end_radius, max(0.5, 0.8 * r_own)))
+    if rod.ok and np.isfinite(rod.plateau) and rod.plateau < P.min_fill * expect:
         rod.ok, rod.why = False, "faint"
     if rod.ok and np.isfinite(rod.mass) and not (lo_r * r_glob <= math.sqrt(rod.mass / (math.pi * C)) <= hi_r * r_glob):
         rod.ok, rod.why = False, "radius"
@@ -1611,8 +1661,21 @@ def _refine(reader, st, P, lines, progress, quality, reasons):
             if r_given is None and masses:
                 ref.r = math.sqrt(float(np.median(masses)) / (math.pi * ref.C))
             ref.min_len = P.min_length * ref.r
+            # mixed radii: detected from the ridge, or from the spread of the rods' own radii
+            own = np.array([math.sqrt(rod.mass / (math.pi * ref.C)) for rod in rods
+                            if rod.ok and np.isfinite(rod.mass) and rod.mass > 0])
+            cv = 1.4826 * float(np.median(np.abs(own - np.median(own)))) / float(np.median(own)) if own.size >= 3 \
+                else 0.0
+            quality["radius_cv"] = cv
+            if P.per_rod_radius is None:
+                ref.mixed = r_given is None and (st.mixed or cv > MIXED_RADIUS_CV)
+            else:
+                ref.mixed = bool(P.per_rod_radius) and r_given is None
             for rod in rods:
                 rod.r = ref.r
+                if ref.mixed and np.isfinite(rod.mass) and rod.mass > 0:
+                    rod.r = float(np.clip(math.sqrt(rod.mass / (math.pi * ref.C)), 0.5, 3.0 * ref.r))
+                    rod.own_r = True
             ref.set_end_model(ref.r, ref.sigma, cap)
         nbl = _neighbours(rods, 2.0 * P.window_margin + 1.0)
         for k in sorted(active):
@@ -1621,7 +1684,10 @@ def _refine(reader, st, P, lines, progress, quality, reasons):
         n_refined += len(active)
         if it >= fit_it:
             for k in active:
-                _check_rod(rods[k], ref.r, ref.C, P)
+                _check_rod(rods[k], ref.r, ref.C, P, ref.sigma, ref.mixed)
+                if ref.mixed and rods[k].ok and np.isfinite(rods[k].mass) and rods[k].mass > 0:
+                    rods[k].r = float(np.clip(math.sqrt(rods[k].mass / (math.pi * ref.C)), 0.5, 3.0 * ref.r))
+                    rods[k].own_r = True
         moved = {}
         for k, rod in enumerate(rods):
             if k in active:
@@ -1655,7 +1721,7 @@ def _refine(reader, st, P, lines, progress, quality, reasons):
 # stage 5: contacts
 # ----------------------------------------------------------------------------------------------
 
-def _contacts(rods_out: RodSet, reader: _Reader, st: _Stats, C: float, P: SegmentParams):
+def _contacts(rods_out: RodSet, reader: _Reader, st: _Stats, C: float, P: SegmentParams, sigma=None):
     from rodwarp.geometry import detect_contacts, segment_closest_params
 
     cand = detect_contacts(rods_out, tolerance=P.contact_tolerance)
@@ -1689,7 +1755,9 @@ def _contacts(rods_out: RodSet, reader: _Reader, st: _Stats, C: float, P: Segmen
             continue
         val = (val - st.bg) * scale
         prof = val.reshape(len(ss), len(disc)).mean(1)
-        keep[k] = bool(prof.min() >= P.contact_min_fill)
+        # thin rods are dimmer under blur, and so is the contact between two of them
+        lv = 1.0 if sigma is None else min(1.0, _axis_level(min(ri, rj), sigma, min(P.end_radius, max(0.5, 0.8 * min(ri, rj)))))
+        keep[k] = bool(prof.min() >= P.contact_min_fill * lv)
     rejected = int((~keep).sum())
     return Contacts(cand.rod_i[keep], cand.rod_j[keep], cand.point[keep], cand.gap[keep]), rejected
 
@@ -1824,16 +1892,19 @@ def segment_volume(volume, params: SegmentParams | None = None,
         rods, ref = _refine(reader, st, P, lines, progress, quality, reasons)
         r_glob = ref.r
         C = ref.C
+        sigma_fit, mixed = ref.sigma, ref.mixed
     else:
         rods = [_Rod(a, b, st.r0) for a, b in lines]
         r_glob, C = st.r0, 1.0
+        sigma_fit, mixed = None, False
         for rod in rods:  # coarse ends run out to the half level of a cap: pull them back
             if P.end_model == "capsule":  # (0.55 r measured on phantoms, blur 1, smoothing 1)
                 u = _unit(rod.p1 - rod.p0)
                 if rod.length > 2 * r_glob:
                     rod.p0, rod.p1 = rod.p0 + 0.55 * r_glob * u, rod.p1 - 0.55 * r_glob * u
+    quality["per_rod_radius"] = bool(mixed)
     for rod in rods:
-        _check_rod(rod, r_glob, C, P)
+        _check_rod(rod, r_glob, C, P, sigma_fit, mixed)
         if not rod.ok:
             reasons[rod.why] = reasons.get(rod.why, 0) + 1
     good = [r for r in rods if r.ok]
@@ -1853,7 +1924,7 @@ def segment_volume(volume, params: SegmentParams | None = None,
     for rod in good:
         rod.mass_r = math.sqrt(rod.mass / (math.pi * C)) if np.isfinite(rod.mass) else np.nan
         polys.append(np.stack([rod.p0, rod.p1]))
-        radii.append(rod.mass_r if (P.per_rod_radius and np.isfinite(rod.mass_r)) else r_glob)
+        radii.append(rod.mass_r if (mixed and np.isfinite(rod.mass_r)) else r_glob)
         res.append(rod.resid)
         mr.append(rod.mass_r)
     out = RodSet.from_polylines(polys, np.asarray(radii), units="voxel")
@@ -1861,7 +1932,7 @@ def segment_volume(volume, params: SegmentParams | None = None,
     quality["radius_spread"] = float(np.nanstd(mr)) if np.any(np.isfinite(mr)) else float("nan")
 
     tic = time.perf_counter()
-    contacts, rej = _contacts(out, reader, st, C, P)
+    contacts, rej = _contacts(out, reader, st, C, P, sigma_fit)
     out.contacts = contacts
     quality["contacts_rejected_by_image"] = rej
     note("contacts", 1, 1)
@@ -1877,6 +1948,9 @@ def segment_volume(volume, params: SegmentParams | None = None,
 #: ``shape="auto"`` traces filaments when more than this share of the long skeleton branches
 #: bends away from its chord (straight packings: below 0.1, arcs and wires: above 0.5)
 AUTO_BEND_FRACTION = 0.3
+#: robust coefficient of variation of the rods' own radii above which radii are per rod
+#: (one radius at CNR 2-5: below 0.05)
+MIXED_RADIUS_CV = 0.1
 
 
 def _finish_curved(reader, st, P, quality, timings, t_all, prep, progress):
