@@ -110,8 +110,12 @@ def score(case, out: dict) -> dict:
     if "error" in out:
         row.update(error=out["error"], rod_f1=0.0, contact_precision=None, contact_recall=None)
         return row
-    found, con = out["rods"], out["contacts"]
-    truth = case.truth
+    from rodwarp.phantom_cases import scored_subset
+
+    shape_xyz = np.asarray(case.volume.shape[::-1], float) * np.asarray(case.voxel_size[::-1], float)
+    found, con = scored_subset(out["rods"], out["contacts"], shape_xyz, case.face_margin)
+    truth, tc = scored_subset(case.truth, case.truth.contacts, shape_xyz, case.face_margin)
+    truth.contacts = tc
     if case.curved:
         m = match_polylines(found, truth)
     else:

@@ -23,7 +23,7 @@ import numpy as np
 from rodwarp import phantom as ph
 from rodwarp.rodset import RodSet
 
-__all__ = ["ScanCase", "CASES", "make_case", "crop_straight"]
+__all__ = ["ScanCase", "CASES", "make_case", "crop_straight", "scored_subset"]
 
 
 @dataclass
@@ -42,6 +42,9 @@ class ScanCase:
         Voxel edge lengths (z, y, x) in the truth's units ((1, 1, 1) unless anisotropic).
     curved : bool
         The truth holds curved filaments (score with ``match_polylines``).
+    face_margin : float or None
+        Rods (found or true) whose axis midpoint lies within this of a volume face graze it
+        and are left out of the scores (:func:`scored_subset`).
     notes : str
         What the case contains.
     params : dict
@@ -53,6 +56,7 @@ class ScanCase:
     truth: RodSet
     voxel_size: tuple = (1.0, 1.0, 1.0)
     curved: bool = False
+    face_margin: float | None = None
     notes: str = ""
     params: dict = field(default_factory=dict)
 
@@ -107,7 +111,8 @@ def _case_faces(seed):
     vol = np.ascontiguousarray(vol[o:o + 160, o:o + 160, o:o + 160])
     # rods cut by the faces end at the last voxel centre inside (x = -0 .. 159)
     cut = crop_straight(truth, (o, o, o), (o + 159, o + 159, o + 159), min_length=12.0)
-    return (cut, vol), {}
+    # rods grazing a face (axis midpoint within r + 1 of it) are half outside: not scored
+    return (cut, vol), {"face_margin": 4.0}
 
 
 def _case_fov(seed):
@@ -211,4 +216,27 @@ def make_case(name: str, seed: int = 0) -> ScanCase:
     fn, notes = CASES[name]
     (truth, vol), extra = fn(int(seed))
     return ScanCase(name=name, volume=vol, truth=truth, voxel_size=tuple(extra.get("voxel_size", (1.0, 1.0, 1.0))),
-                    curved=bool(extra.get("curved", False)), notes=notes, params={"seed": int(seed)})
+                    curved=bool(extra.get("curved", False)), face_margin=extra.get("face_margin"), notes=notes,
+                    params={"seed": int(seed)})
+
+
+def scored_subset(rods: RodSet, contacts, shape_xyz, margin: float | None):
+    """The rods whose axis midpoint lies at least ``margin`` inside the box ``[0, n - 1]`` of
+    every axis, and the contacts among them (re-indexed); everything when ``margin`` is None."""
+    from rodwarp.rodset import Contacts
+
+    if margin is None or rods.n_rods == 0:
+        return rods, contacts
+    hi = np.asarray(shape_xyz, float) - 1.0
+    mid = np.array([0.5 * (rods.rod(k)[0] + rods.rod(k)[-1]) for k in range(rods.n_rods)])
+    keep = np.all((mid >= margin) & (mid <= hi - margin), axis=1)
+    idx = np.flatnonzero(keep)
+    if len(idx) == 0:
+        return rods, contacts
+    new = -np.ones(rods.n_rods, np.int64)
+    new[idx] = np.arange(len(idx))
+    sub = RodSet.from_polylines([rods.rod(k) for k in idx], rods.radii[idx], units=rods.units)
+    if contacts is None:
+        return sub, None
+    ok = keep[contacts.rod_i] & keep[contacts.rod_j]
+    return sub, Contacts(new[contacts.rod_i[ok]], new[contacts.rod_j[ok]], contacts.point[ok], contacts.gap[ok])
