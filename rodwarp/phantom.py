@@ -928,8 +928,12 @@ def truth_paths(path_tif) -> tuple[Path, Path]:
 
 
 def write_phantom(path_tif, volume: np.ndarray, rods: RodSet, contacts: Contacts | None = None,
-                  voxel_size: float | None = None, params: dict | None = None) -> dict:
+                  voxel_size: float | None = None, params: dict | None = None, z_thickness: int = 1) -> dict:
     """Write a phantom TIFF and its ground truth beside it, each atomically.
+
+    The TIFF records its voxel size (ImageJ resolution and spacing): ``voxel_size`` metres
+    for rods in metric units, else 1 um per voxel width (so that the slice spacing of
+    ``z_thickness`` voxel widths is on record); the truth is in voxel widths along every axis.
 
     Writes ``path_tif`` (multi-page, ZYX), ``<stem>_truth.npz`` (the rods in voxel units with
     ``contacts``) and ``<stem>_truth.json`` (``params``, seed and voxel size, shape, counts).
@@ -959,11 +963,16 @@ def write_phantom(path_tif, volume: np.ndarray, rods: RodSet, contacts: Contacts
     if voxel_size is not None:
         rv.attrs["voxel_size"] = float(voxel_size)
     npz, js = truth_paths(path_tif)
-    write_tiff(path_tif, vol)
+    m = 1e-6
+    if rods.units != "voxel" and voxel_size is not None:
+        from rodwarp.rodset import UNITS
+        m = float(voxel_size) * UNITS[rods.units]
+    write_tiff(path_tif, vol, voxel_size=(int(z_thickness) * m, m, m))
     rv.save(npz)
     meta = {"shape": list(vol.shape), "dtype": str(vol.dtype),
             "voxel_size": None if voxel_size is None else float(voxel_size),
             "seed": params.get("seed"), "n_rods": rv.n_rods, "n_contacts": len(contacts),
+            "voxel_size_zyx_m": [int(z_thickness) * m, m, m],
             "truth_rods": npz.name, "coordinates": "voxel units: x = column, y = row, z = slice; "
                                                    "voxel (0,0,0) centred at the origin",
             "params": params}

@@ -755,7 +755,7 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
     deg = np.diff(csr.indptr)
     tol = max(1.5, 0.5 * r0)
     seeds = []
-    bend_stats = [0, 0]
+    bend_stats = [0, 0, 0]
     for k in range(ncomp):
         mem = order[bounds[k]:bounds[k + 1]]
         if len(mem) < P.min_seed_voxels:
@@ -773,8 +773,17 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
         if len(mem) >= 8.0 * r0:  # for shape="auto": how much of the skeleton bends
             # (a tolerance of a radius, at least 2 voxels: noise and thin rods wiggle less)
             bend_stats[0] += len(mem)
-            if len(pieces) > 1 and len(_dp_split(q[ordered], max(2.0, r0))) > 1:
-                bend_stats[1] += len(mem)
+            pc2 = _dp_split(q[ordered], max(2.0, r0)) if len(pieces) > 1 else []
+            if len(pc2) > 1:
+                # a skeleton path from one straight rod into another (a crossing, an end on a
+                # side) is two chords meeting at a sharp corner; a curve needs more chords, or
+                # turns gently between two
+                d = np.array([q[ordered[b]] - q[ordered[a]] for a, b in pc2])
+                d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+                turn = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", d[1:], d[:-1]), -1.0, 1.0)))
+                if len(pc2) >= 3 or turn.max() < 20.0:
+                    bend_stats[1] += len(mem)
+                    bend_stats[2] += 1
         for idx_p in pieces:
             if len(idx_p) < P.min_seed_voxels:
                 continue
@@ -789,6 +798,7 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
     if quality is not None:
         quality["_branch_voxels"] = quality.get("_branch_voxels", 0) + bend_stats[0]
         quality["_bent_voxels"] = quality.get("_bent_voxels", 0) + bend_stats[1]
+        quality["_bent_branches"] = quality.get("_bent_branches", 0) + bend_stats[2]
     return seeds, len(idx), len(junc)
 
 
@@ -1869,7 +1879,10 @@ def segment_volume(volume, params: SegmentParams | None = None,
     quality["candidates"] = len(lines)
     bv = quality.pop("_branch_voxels", 0)
     quality["bend_fraction"] = quality.pop("_bent_voxels", 0) / bv if bv else 0.0
-    if P.shape == "auto" and quality["bend_fraction"] > AUTO_BEND_FRACTION:
+    quality["bent_branches"] = quality.pop("_bent_branches", 0)
+    # (below a contrast-to-noise of 1.5 the skeleton of the noise itself bends: stay straight)
+    if P.shape == "auto" and quality["bend_fraction"] > AUTO_BEND_FRACTION and quality["bent_branches"] >= 3 \
+            and quality["cnr"] >= 1.5:
         quality["shape"] = "curved"
         return _finish_curved(reader, st, P, quality, timings, t_all, prep, progress)
     quality["shape"] = "straight"
@@ -1946,7 +1959,8 @@ def segment_volume(volume, params: SegmentParams | None = None,
 
 
 #: ``shape="auto"`` traces filaments when more than this share of the long skeleton branches
-#: bends away from its chord (straight packings: below 0.1, arcs and wires: above 0.5)
+#: (and at least 3 of them) bends smoothly away from its chord (straight packings: below 0.1,
+#: arcs and wires: above 0.5)
 AUTO_BEND_FRACTION = 0.3
 #: robust coefficient of variation of the rods' own radii above which radii are per rod
 #: (one radius at CNR 2-5: below 0.05)
@@ -1979,7 +1993,6 @@ def _finish_curved(reader, st, P, quality, timings, t_all, prep, progress):
     out.contacts = contacts
     r_glob = float(np.median(radii))
     quality["radius_spread"] = float(np.std(radii))
-    quality["rods_rejected"] = {}
     timings["contacts"] = time.perf_counter() - tic
     timings["total"] = time.perf_counter() - t_all
     out.attrs = {"source": "rodwarp.segment", "shape": "curved", "diameter_voxels": 2 * r_glob,
