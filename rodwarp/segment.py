@@ -936,11 +936,12 @@ def _lines_cover(lines, pt, radius):
 
 
 def _rasterize(lines, shape_zyx, origin_zyx, radius):
-    """Boolean block mask of voxels within ``radius`` of any segment."""
+    """Boolean block mask of voxels within ``radius`` (one value, or one per segment) of any segment."""
     cov = np.zeros(shape_zyx, bool)
     o = np.asarray(origin_zyx)
-    for p0, p1 in lines:
-        zyx, _, _, _ = _window_voxels(p0[::-1] - o, p1[::-1] - o, radius, shape_zyx)
+    rad = np.broadcast_to(np.asarray(radius, float), (len(lines),))
+    for (p0, p1), R in zip(lines, rad):
+        zyx, _, _, _ = _window_voxels(p0[::-1] - o, p1[::-1] - o, float(R), shape_zyx)
         if len(zyx):
             cov[zyx[:, 0], zyx[:, 1], zyx[:, 2]] = True
     return cov
@@ -967,6 +968,31 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Stats, P: SegmentParams, qua
     quality["skeleton_junctions"] = quality.get("skeleton_junctions", 0) + n_j
     quality["seeds"] = quality.get("seeds", 0) + len(seeds)
     o_xyz = np.asarray(origin_zyx, float)[::-1]
+    raw_s = []
+    r_kid = r0
+    kid_r: dict[int, float] = {}  # lines traced as rods of a bundle: their own radius
+
+    def cover_radius():
+        # a bundle's rods cover only themselves, so that one the fit missed is seeded again
+        return np.array([kid_r.get(i, r0) + 1.5 for i in range(len(lines))])
+
+    def _bundle_offsets(c, u, t0, t1):
+        """Offsets (k >= 3, 2) of the rods of a bundle around axis c, u, or None."""
+        nonlocal r_kid
+        from rodwarp.segment_bundles import cross_section, fit_discs, looks_bundled
+
+        if not raw_s:  # the raw block, normalised, sampled only once a bundle is suspected
+            raw_s.append(_BlockSampler((raw - np.float32(st.bg)) * np.float32(1.0 / (st.fg - st.bg)), origin_zyx))
+        e1, e2 = _basis(u)
+        img, g1 = cross_section(raw_s[0], c, u, e1, e2, t0, t1, 2.5 * r0 + 2.0, h=1.0)
+        if img is None or not looks_bundled(img, 1.0):
+            return None
+        fit = fit_discs(img, g1)
+        if fit is None or len(fit[0]) < 3:
+            return None
+        # the kids' own radius (a bundle's binarised outline inflates the coarse one)
+        r_kid = min(r0, max(0.75, fit[1]))
+        return fit[0]
 
     def run(seed_list):
         for c, u, t0, t1, _ in seed_list:
@@ -978,6 +1004,40 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Stats, P: SegmentParams, qua
             c2, u2, a, b, fill = res
             if b - a < 3.0 * r0:  # a rod crossed sideways is about 2 r long
                 continue
+            kids_xy = _bundle_offsets(c2, u2, a, b)
+            if kids_xy is not None:
+                # a bundle: one child per rod, fitted alternately, each ignoring its siblings
+                e1, e2 = _basis(u2)
+                kids = [(c2 + x * e1 + y * e2, u2, a, b) for x, y in kids_xy]
+
+                def kseg(kd):
+                    return (kd[0] + kd[2] * kd[1], kd[0] + kd[3] * kd[1])
+
+                def sibs(i_k):
+                    return [kseg(kd) for j, kd in enumerate(kids) if j != i_k and kd is not None]
+
+                # the children are traced with discs of their own radius
+                tk = _Tracer(g, origin_zyx, r_kid, P)
+                for rnd in range(2):
+                    for i_k in range(len(kids)):
+                        if kids[i_k] is not None:
+                            fk = tk.fit(*kids[i_k], P.fit_iterations, sibs(i_k))
+                            kids[i_k] = None if fk is None else fk[:4]
+                got = 0
+                for i_k in range(len(kids)):
+                    if kids[i_k] is None or _lines_cover(lines, kids[i_k][0], 0.75 * r_kid):
+                        continue
+                    ch = tk.trace(*kids[i_k], max_len, sibs(i_k))
+                    if ch is None or ch[3] - ch[2] < 3.0 * r_kid or _lines_cover(lines, ch[0], 0.75 * r_kid):
+                        continue
+                    kids[i_k] = ch[:4]
+                    lines.append(kseg(kids[i_k]))
+                    kid_r[len(lines) - 1] = r_kid
+                    got += 1
+                if got:
+                    quality["bundles_split"] = quality.get("bundles_split", 0) + 1
+                    quality["bundle_rods"] = quality.get("bundle_rods", 0) + got
+                    continue
             mom = tr.moments(c2, u2, a, b)
             if mom is not None:
                 ev, evec = np.linalg.eigh(mom[0])
@@ -1019,7 +1079,7 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Stats, P: SegmentParams, qua
 
     run([(s[0] + o_xyz, s[1], s[2], s[3], s[4]) for s in seeds])
     for _ in range(P.residual_passes):
-        cov = _rasterize(lines, mask.shape, origin_zyx, r0 + 1.5)
+        cov = _rasterize(lines, mask.shape, origin_zyx, cover_radius())
         resid = mask & ~cov
         resid = ndimage.binary_erosion(resid, iterations=1)
         lab, nlab = ndimage.label(resid, structure=np.ones((3, 3, 3)))
@@ -1045,7 +1105,7 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Stats, P: SegmentParams, qua
         new.sort(key=lambda s: (-(s[3] - s[2]), -s[4], tuple(np.round(s[0], 6))))
         quality["residual_seeds"] = quality.get("residual_seeds", 0) + len(new)
         run(new)
-    cov = _rasterize(lines, mask.shape, origin_zyx, r0 + 1.5)
+    cov = _rasterize(lines, mask.shape, origin_zyx, cover_radius())
     quality["_fg"] = quality.get("_fg", 0) + int(mask.sum())
     quality["_fg_explained"] = quality.get("_fg_explained", 0) + int((mask & cov).sum())
     return lines
