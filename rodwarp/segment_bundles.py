@@ -30,6 +30,8 @@ __all__ = ["cross_section", "looks_bundled", "fit_discs"]
 #: examined as a bundle (one rod: 0.94-1.02 on phantoms, 5th to 95th percentile; bundles of 3-5
 #: rods: 0.71-0.85)
 BUNDLE_DEPTH_RATIO = 0.88
+#: smallest area radius (voxels) of a cross-section examined as a bundle (three rods of radius 2.3)
+MIN_AREA_RADIUS = 4.0
 #: largest number of rods fitted in one cross-section
 MAX_RODS = 7
 
@@ -66,7 +68,9 @@ def looks_bundled(img: np.ndarray, h: float) -> bool:
     m = lab == k
     depth = float(ndimage.distance_transform_edt(m).max()) * h
     area_r = math.sqrt(float(m.sum()) * h * h / math.pi)
-    return depth < BUNDLE_DEPTH_RATIO * area_r and area_r > 1.5
+    # below an area radius of 4 voxels the depth is a few grid steps: too coarse to judge (and
+    # a pair side by side, the commonest case there, is split by the tracer's moment test)
+    return depth < BUNDLE_DEPTH_RATIO * area_r and area_r >= MIN_AREA_RADIUS
 
 
 _PROFILES: dict = {}
