@@ -1,10 +1,13 @@
-"""CT segmentation on the CPU: straight rod centrelines, radii and contacts from a greyscale volume.
+"""CT segmentation on the CPU: rod centrelines, radii and contacts from a greyscale volume.
 
 The volume is indexed ``(z, y, x)`` = (slice, row, column); every point this module returns is
-``(x, y, z)`` in voxel units with the centre of voxel ``(0, 0, 0)`` at the origin.  Rods are
-assumed brighter than the background (steel in X-ray CT).
+``(x, y, z)`` in (working) voxel units with the centre of voxel ``(0, 0, 0)`` at the origin.
 
 Pipeline (:func:`segment_volume`; each stage is timed in ``SegmentResult.timings``):
+
+0. **prepare** (:mod:`rodwarp.segment_prep`) -- field-of-view mask, background trend (cupping,
+   rings), dark rods (negated, so that rods are brighter than the background from here on),
+   anisotropic voxels resampled onto an isotropic grid.
 
 1. **stats** -- a smoothed, strided sample of the volume gives an Otsu split; the (up to) four
    blocks with the most foreground give the background and foreground levels (medians far
@@ -17,8 +20,12 @@ Pipeline (:func:`segment_volume`; each stage is timed in ``SegmentResult.timings
    intensity-weighted centroid/line fits inside a cylinder of one radius around the current
    axis, then *marched*: the axis is extended block by block while a small disc on the axis
    stays filled, refitting as it grows.  Two rods lying side by side (whose skeleton runs
-   between them) are recognised by an elongated cross-section and split.  Foreground left
-   unexplained by the traced rods seeds a second round.
+   between them) are recognised by an elongated cross-section and split; a bundle of three or
+   more (a cross-section much shallower than it is wide) is split by fitting k blurred discs
+   to its greyscale cross-section (:mod:`rodwarp.segment_bundles`).  Foreground left
+   unexplained by the traced rods seeds a second round.  With ``shape="curved"`` (or
+   ``"auto"`` when the skeleton's long branches bend smoothly) filaments are traced as
+   polylines instead (:mod:`rodwarp.segment_curved`) and stages 3-5 are its own.
 3. **merge** -- collinear pieces of one rod (split by contacts, gaps or chunk borders) are
    pasted when the image shows the gap between them filled, and duplicate fits of one rod (an
    axis lying mostly within 0.75 r of another's: distinct rods keep theirs 2 r apart) become
@@ -31,11 +38,16 @@ Pipeline (:func:`segment_volume`; each stage is timed in ``SegmentResult.timings
    length the radius; each end is fitted to the intensity profile along the axis with the
    profile of a blurred capsule (or flat) end, sub-voxel.  Rounds repeat, for the rods that
    still move, until every end moves less than ``refine_tol``; pieces that converge onto one
-   rod are merged between rounds.
+   rod are merged between rounds.  With mixed radii (a broad distance-transform ridge, or a
+   spread of the rods' own radii) every rod keeps its own radius, in the output, the
+   acceptance tests and the contact gaps; the faint test compares a rod's plateau with what a
+   rod of its radius shows under the fitted blur, so thin rods are not rejected wholesale.
 5. **contacts** -- rod pairs whose surface gap ``|closest axis points| - r_i - r_j`` is below
    ``contact_tolerance`` and whose gap is filled with foreground in the image.
 
-Scoring helpers for synthetic volumes: :func:`match_rods` and :func:`score_contacts`.
+``SegmentResult.quality["flags"]`` says in words when the output should not be trusted.
+Scoring helpers for synthetic volumes: :func:`match_rods` and :func:`score_contacts` (and
+:func:`rodwarp.segment_score.match_polylines` for curved filaments).
 
 This module must not import warp.
 """
