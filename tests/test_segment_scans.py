@@ -74,11 +74,21 @@ def test_bundles_of_touching_rods_are_split():
     assert abs(np.median(res.rods.radii) - 3.0) <= 0.5  # (3.38: the partition between touching rods leaks)
 
 
+_CURVED: dict = {}
+
+
+def _curved(name):
+    """One segmentation per curved case, shared by the tests that read it."""
+    if name not in _CURVED:
+        case = make_case(name, 0)
+        _CURVED[name] = (case, segment_volume(case.volume))
+    return _CURVED[name]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["arcs", "wires"])
 def test_curved_filaments_as_polylines(name):
-    case = make_case(name, 0)
-    res = segment_volume(case.volume)
+    case, res = _curved(name)
     assert res.quality["shape"] == "curved"  # shape="auto" recognised the bends
     m, _ = _score(case, res)
     assert m.f1 >= 0.9, (name, m.f1)
@@ -105,8 +115,7 @@ def test_straight_mode_on_arcs_gives_chords_auto_gives_curves():
 def test_analyze_of_segmented_filaments_gives_the_truths_cv_e(tmp_path):
     from rodwarp.analyze import AnalyzeOptions, analyze
 
-    case = make_case("wires", 0)
-    res = segment_volume(case.volume)
+    case, res = _curved("wires")
     seg = res.rods.copy()
     seg.contacts = res.contacts
     truth = case.truth.copy()
