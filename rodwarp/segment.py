@@ -1035,9 +1035,12 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Stats, P: SegmentParams, qua
                         if kids[i_k] is not None:
                             fk = tk.fit(*kids[i_k], P.fit_iterations, sibs(i_k))
                             kids[i_k] = None if fk is None else fk[:4]
-                got = 0
+                got = covered = 0
                 for i_k in range(len(kids)):
-                    if kids[i_k] is None or _lines_cover(lines, kids[i_k][0], 0.75 * r_kid):
+                    if kids[i_k] is None:
+                        continue
+                    if _lines_cover(lines, kids[i_k][0], 0.75 * r_kid):
+                        covered += 1
                         continue
                     ch = tk.trace(*kids[i_k], max_len, sibs(i_k))
                     if ch is None or ch[3] - ch[2] < 3.0 * r_kid or _lines_cover(lines, ch[0], 0.75 * r_kid):
@@ -1049,6 +1052,8 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Stats, P: SegmentParams, qua
                 if got:
                     quality["bundles_split"] = quality.get("bundles_split", 0) + 1
                     quality["bundle_rods"] = quality.get("bundle_rods", 0) + got
+                    continue
+                if covered:  # a bundle traced before, seen again: its middle is no rod
                     continue
             mom = tr.moments(c2, u2, a, b)
             if mom is not None:
