@@ -161,21 +161,29 @@ def analyze(
 @app.command()
 @_friendly
 def phantom(
-    rods: str = typer.Argument(..., help="Rod set (npz, zarr, CSV), a simulate output directory, or 'random' "
-                                         "for a random packing in voxel units (see --n-rods)."),
+    rods: str = typer.Argument(..., help="Rod set (npz, zarr, CSV), a simulate output directory, or a scene in "
+                                         "voxel units: 'random' (straight rods, see --n-rods), 'bundles' "
+                                         "(bundles of touching parallel rods), 'arcs' (gently curved rods), "
+                                         "'wires' (a nest-like tangle of curved wires)."),
     shape: tuple[int, int, int] = typer.Option(..., help="Volume shape Z Y X (slices, rows, columns)."),
     voxel_size: float = typer.Option(1.0, help="Voxel edge length in the rods' units (1 for voxel-unit rods)."),
     out: Path = typer.Option(..., help="Output TIFF (ground truth written beside it)."),
     blur: float = typer.Option(1.0, help="Gaussian point-spread sigma (voxels)."),
     cnr: float = typer.Option(10.0, help="Contrast-to-noise ratio (foreground - background) / noise sigma."),
     ring: float = typer.Option(0.0, help="Ring artefact amplitude (fraction of the contrast)."),
-    cupping: float = typer.Option(0.0, help="Cupping: relative intensity drop at the slice edge."),
+    cupping: float = typer.Option(0.0, help="Cupping: relative intensity drop at the slice edge (negative: a "
+                                            "bright rim, as beam hardening shows)."),
     streaks: float = typer.Option(0.0, help="Metal streak amplitude (fraction of the contrast)."),
-    n_rods: int = typer.Option(100, help="'random': number of rods."),
-    radius: float = typer.Option(3.0, help="'random': rod radius (voxels)."),
+    fov: Optional[float] = typer.Option(None, help="Field of view: radius (voxels) of the reconstruction circle; "
+                                                   "0 outside it."),
+    dark: bool = typer.Option(False, help="Dark rods on a bright background (grey values swapped)."),
+    z_thickness: int = typer.Option(1, help="Slices this many times thicker than the voxels are wide "
+                                            "(anisotropic voxels; the TIFF records the spacing)."),
+    n_rods: int = typer.Option(100, help="'random', 'arcs', 'wires': number of rods; 'bundles': of bundles."),
+    radius: float = typer.Option(3.0, help="Scenes: rod radius (voxels)."),
     aspect: float = typer.Option(30.0, help="'random': aspect ratio length / diameter."),
     touching: float = typer.Option(0.5, help="'random': fraction of rods touching another."),
-    seed: int = typer.Option(0, help="Seed of the noise and of 'random'."),
+    seed: int = typer.Option(0, help="Seed of the noise and of the scenes."),
 ):
     """Synthetic 16-bit CT of a rod set: partial volume, blur, noise and artefacts, with ground truth."""
     import numpy as np
@@ -189,9 +197,23 @@ def phantom(
         raise RodwarpError(f"--voxel-size must be positive, got {voxel_size:g}")
     if not (cnr > 0):
         raise RodwarpError(f"--cnr must be positive, got {cnr:g}")
-    if rods == "random":
-        rs = ph.scene_random_packing(tuple(shape), n_rods=n_rods, radius=radius, aspect=aspect,
-                                     touching_fraction=touching, seed=seed)
+    if z_thickness < 1:
+        raise RodwarpError(f"--z-thickness must be a positive integer, got {z_thickness}")
+    # scenes are built in voxel widths along every axis; thick slices span z_thickness of them
+    full = (shape[0] * z_thickness, shape[1], shape[2])
+    scenes = {
+        "random": lambda: ph.scene_random_packing(full, n_rods=n_rods, radius=radius, aspect=aspect,
+                                                  touching_fraction=touching, seed=seed,
+                                                  fov_radius=None if fov is None else fov - 2.0),
+        "bundles": lambda: ph.scene_bundles(full, n_bundles=n_rods, radius=radius, seed=seed),
+        "arcs": lambda: ph.scene_arcs(full, n_rods=n_rods, radius=radius, seed=seed),
+        "wires": lambda: ph.scene_wire_tangle(full, n_wires=n_rods, radius=radius, seed=seed),
+    }
+    if rods in scenes:
+        rs = scenes[rods]()
+        if z_thickness > 1:  # thick slice k is centred at z = k z_thickness
+            rs.points[:, 2] -= 0.5 * (z_thickness - 1)
+            rs.contacts = ph.phantom_truth(rs)
         vox = 1.0
     else:
         p = Path(rods)
@@ -208,12 +230,15 @@ def phantom(
         from rodwarp.geometry import detect_contacts
 
         rs.contacts = detect_contacts(rs, 0.1 * float(np.mean(rs.diameters)))
+    bg, fg = (50000, 20000) if dark else (20000, 50000)
     vol = ph.render_phantom(rs, tuple(shape), blur_sigma=blur, cnr=cnr, ring=ring, cupping=cupping,
-                            streaks=streaks, seed=seed)
+                            streaks=streaks, seed=seed, fov=fov, z_thickness=z_thickness,
+                            background=bg, foreground=fg)
     params = {"shape": list(shape), "voxel_size": voxel_size, "blur_sigma": blur, "cnr": cnr, "ring": ring,
-              "cupping": cupping, "streaks": streaks, "seed": seed, "source": rods,
-              "metres_per_voxel": vox if rods != "random" else None}
-    ph.write_phantom(out, vol, rs, rs.contacts, voxel_size, params)
+              "cupping": cupping, "streaks": streaks, "fov": fov, "dark": dark, "z_thickness": z_thickness,
+              "seed": seed, "source": rods, "metres_per_voxel": vox if rods not in scenes else None}
+    ph.write_phantom(out, vol, rs, rs.contacts, voxel_size, params,
+                     z_thickness=z_thickness)
     typer.echo(f"{rs.n_rods} rods, {len(rs.contacts) if rs.contacts is not None else 0} contacts -> {out}")
 
 
@@ -221,22 +246,38 @@ def phantom(
 @_friendly
 def segment(
     stack: Path = typer.Argument(..., help="Multi-page TIFF, a folder of slice TIFFs, or a zarr array."),
-    voxel_size: float = typer.Option(..., help="Voxel edge length in --units."),
-    units: str = typer.Option("mm", help="Unit of --voxel-size, --diameter and the outputs (m, mm, um, voxel)."),
+    voxel_size: Optional[str] = typer.Option(None, help="Voxel edge in --units: one value, or three for z,y,x "
+                                                        "(e.g. 0.1,0.05,0.05). Default: the file's metadata "
+                                                        "(ImageJ/OME-TIFF, OME-Zarr)."),
+    units: Optional[str] = typer.Option(None, help="Unit of --voxel-size, --diameter and the outputs (m, mm, um, "
+                                                   "voxel); default mm, or the metadata's."),
     diameter: Optional[float] = typer.Option(None, help="Rod diameter in --units (estimated when absent)."),
     out: Optional[Path] = typer.Option(None, help="Output directory (default segment/ beside the stack)."),
+    shape: str = typer.Option("auto", help="straight (rods), curved (filaments as polylines) or auto."),
+    dark_rods: Optional[bool] = typer.Option(None, "--dark-rods/--bright-rods",
+                                             help="Rods darker / brighter than the background (default: detected)."),
+    min_fill: float = typer.Option(0.6, help="Reject rods whose axis plateau is below this share of what a rod of "
+                                             "their radius shows under the measured blur."),
     chunk: Optional[int] = typer.Option(None, help="Process in overlapping chunks of this edge (voxels), for big volumes."),
     contact_tolerance: float = typer.Option(1.0, help="Largest surface gap counted as contact (voxels)."),
     figures: bool = typer.Option(True, help="Write the QA PNGs."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ):
     """CT stack to rod centrelines and contacts (CPU)."""
+    from rodwarp.segment import SegmentParams
     from rodwarp.segment_report import run_segment
 
+    if shape not in ("straight", "curved", "auto"):
+        raise RodwarpError(f"--shape must be straight, curved or auto, got '{shape}'")
+    params = SegmentParams(shape=shape, dark=dark_rods, min_fill=min_fill)
     s = run_segment(stack, voxel_size=voxel_size, units=units, diameter=diameter, out=out, chunk=chunk,
-                    contact_tolerance=contact_tolerance, figures=figures, progress=not quiet)
-    typer.echo(f"{s['n_rods']} rods, {s['n_contacts']} contacts, diameter {s['diameter']:.4g} {units} "
-               f"({s['diameter_voxels']:.2f} voxels), {s['wall_time_s']:.1f} s -> {s['out']}")
+                    contact_tolerance=contact_tolerance, figures=figures, progress=not quiet, params=params)
+    u = s["units"]
+    typer.echo(f"{s['n_rods']} {'filaments' if s.get('shape') == 'curved' else 'rods'}, {s['n_contacts']} contacts, "
+               f"diameter {s['diameter']:.4g} {u} ({s['diameter_voxels']:.2f} voxels), {s['wall_time_s']:.1f} s "
+               f"-> {s['out']}")
+    for flag in s.get("quality", {}).get("flags", []):
+        typer.echo(f"warning: {flag}", err=True)
 
 
 def _floats(text: str, name: str) -> list[float]:
