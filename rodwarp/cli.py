@@ -151,7 +151,13 @@ def simulate(
     params._explicit = _given(ctx, "alpha", "length", "n_rods", "vertices", "box", "seed")
     params.validate()
     outdir = out or Path("runs") / default_run_name(params)
-    summary = run_protocol(params, outdir, progress=not quiet, resume=resume, overwrite=overwrite)
+    try:
+        summary = run_protocol(params, outdir, progress=not quiet, resume=resume, overwrite=overwrite)
+    except (RodwarpError, SimulationBlowUp, OSError) as e:
+        from rodwarp.rundir import mark_failed
+
+        mark_failed(outdir, e)
+        raise
     typer.echo(
         f"alpha={summary['alpha']:g} n_rods={summary['n_rods']} a/g={summary['a_over_g']:.3g} "
         f"Z={summary['contacts_per_rod']:.2f} f={summary['largest_cluster_fraction']:.3f} "
@@ -315,6 +321,7 @@ def sweep(
     entangle_duration: float = typer.Option(5.0, help="Entangling duration (s)."),
     duration: float = typer.Option(5.0, help="Stability-test duration (s)."),
     amplitude: float = typer.Option(0.001, help="Floor vibration amplitude (m)."),
+    save_every: float = typer.Option(0.1, help="Sampling interval of each point's metrics (s of simulated time)."),
     out: Path = typer.Option(..., help="Sweep directory (results.csv, points/, figures)."),
     scheduler: Optional[str] = typer.Option(None, help="Existing Dask scheduler tcp://HOST:8786 (default: a local cluster on 127.0.0.1)."),
     workers: Optional[int] = typer.Option(None, help="Local worker processes (default: the number of cores)."),
@@ -333,7 +340,9 @@ def sweep(
     spec = SweepSpec(alphas=_floats(alpha, "--alpha"), freqs=_floats(freq, "--freq"),
                      gravities=_floats(gravity, "--gravity"), static_loads=_floats(static_load, "--static-load"),
                      seeds=list(range(seeds)), entangle_duration=entangle_duration, duration=duration,
-                     amplitude=amplitude, device=device)
+                     amplitude=amplitude, device=device,
+                     # only when changed: rows of sweeps run before this option still match their points
+                     overrides={} if save_every == 0.1 else {"save_every": save_every})
     path = run_sweep(spec, out, scheduler=scheduler, workers=workers, progress=not quiet)
     import json
 

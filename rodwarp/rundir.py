@@ -58,9 +58,10 @@ def _read_manifest(path: Path):
 
 
 def _describe(m: dict) -> str:
-    state = "a finished" if m.get("complete") else "an unfinished"
+    state = "a finished" if m.get("complete") else ("a failed" if m.get("status") == "failed" else "an unfinished")
     when = f", started {m['started']}" if m.get("started") else ""
-    return f"{state} {m.get('kind', 'unknown')} run{when}"
+    err = f" ({m['error'][:80]})" if m.get("status") == "failed" and m.get("error") else ""
+    return f"{state} {m.get('kind', 'unknown')} run{when}{err}"
 
 
 def _param_diff(a: dict, b: dict) -> list[str]:
@@ -89,6 +90,29 @@ def clean_temporaries(path: Path) -> list[Path]:
                 _remove(p)
                 gone.append(p)
     return gone
+
+
+#: folders this process took (path -> run id), so that only our own run is marked failed
+_CLAIMED: dict = {}
+
+
+def mark_failed(path, error: BaseException) -> None:
+    """Record in the manifest that this process's run in ``path`` stopped with ``error``.
+
+    Does nothing when this process did not take the folder (a refused claim leaves the other
+    run's manifest alone)."""
+    path = Path(path)
+    key = str(path.resolve()) if path.exists() else None
+    m = _read_manifest(path) if key else None
+    if m is None or m.get("unreadable") or _CLAIMED.get(key) != m.get("run_id"):
+        return
+    m["status"] = "failed"
+    m["error"] = " ".join(str(error).split())[:500]
+    m["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+    try:
+        write_json(path / MANIFEST, m)
+    except OSError:
+        pass  # the error being reported matters more than its record
 
 
 class RunDir:
@@ -213,6 +237,7 @@ def claim(path, kind: str, parameters: dict, outputs, *, resume: bool = False, o
 
     manifest["rodwarp"] = __version__
     run = RunDir(path, manifest)
+    _CLAIMED[str(path.resolve())] = manifest["run_id"]
     # the folder is taken (new incomplete manifest) before the old outputs go, so a kill in
     # between leaves an incomplete run, never old outputs passing for the new run's
     run._write()

@@ -211,7 +211,7 @@ def check_points(pts: list[dict], *, local: bool) -> None:
             AnalyzeOptions(**{**p.get("_analyze", {}), "figures": False}).validate()
         except RodwarpError as e:
             bad = sum(1 for q in pts if _invalid(q))
-            raise RodwarpError(f"sweep point {p['id']} is invalid ({e}); {bad} of {len(pts)} points are, "
+            raise RodwarpError(f"sweep point {p['id']} is invalid ({e}); invalid points: {bad} of {len(pts)}; "
                                f"no point was run: fix the sweep's values") from None
     if local and pts:
         from rodwarp import _warp

@@ -66,13 +66,15 @@ def number(name: str, v, *, gt=None, ge=None, le=None, lt=None, unit: str = "", 
     if le is not None:
         rng.append(f"<= {_fmt(le)}{u}")
     want = " and ".join(rng) if rng else "finite"
+    if gt == 0 and ge is None and le is None and lt is None:
+        want = f"positive (> 0{u})"
     try:
         f = float(v)
     except (TypeError, ValueError):
         fail(f"{name} must be a number ({want}), got {v!r}")
     tail = f"; {hint}" if hint else ""
     if not math.isfinite(f):
-        fail(f"{name} must be a finite number ({want}), got {_fmt(f)}{tail}")
+        fail(f"{name} must be a finite number, {want}, got {_fmt(f)}{tail}")
     if (gt is not None and not f > gt) or (ge is not None and not f >= ge) or (lt is not None and not f < lt) \
             or (le is not None and not f <= le):
         fail(f"{name} must be {want}, got {_fmt(f)}{tail}")
@@ -151,6 +153,19 @@ def disk_fits(path: Path, need: float, what: str, fix: str) -> None:
         fail(f"{what} needs about {human_bytes(need)} on disk, {human_bytes(free)} is free at {base}; {fix}")
 
 
+def probe_write(directory: Path) -> None:
+    """Write and remove a 4 kB hidden file in ``directory`` (raises the OSError a real write gets)."""
+    import tempfile
+
+    fd, tmp = tempfile.mkstemp(prefix=".rodwarp-probe.", suffix=".tmp", dir=directory)
+    try:
+        os.write(fd, b"x" * 4096)
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+        os.unlink(tmp)
+
+
 def output_location(path, name: str = "--out", *, directory: bool = True) -> Path:
     """Check that ``path`` can be created and written, before any work.
 
@@ -165,7 +180,6 @@ def output_location(path, name: str = "--out", *, directory: bool = True) -> Pat
         ``path``.
     """
     import errno
-    import tempfile
 
     path = Path(path)
     if directory and path.exists() and not path.is_dir():
@@ -180,13 +194,7 @@ def output_location(path, name: str = "--out", *, directory: bool = True) -> Pat
             break
     probe_dir = existing_ancestor(p)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=".rodwarp-probe.", suffix=".tmp", dir=probe_dir)
-        try:
-            os.write(fd, b"x" * 4096)
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-            os.unlink(tmp)
+        probe_write(probe_dir)
     except OSError as e:
         why = {errno.EROFS: "the file system is read-only", errno.ENOSPC: "the disk is full",
                errno.EACCES: "permission denied", errno.EPERM: "permission denied",
@@ -267,8 +275,8 @@ def check_protocol(p) -> None:
              f"the verdict needs samples inside the test; lower --save-every")
     if p.dt is not None:
         for title, opt, dur in stages:
-            if stage_steps(dur, p.dt) < 1:
-                fail(f"--dt {p.dt:g} s leaves the {title} ({opt} {dur:g} s) without a single step; "
+            if p.dt > dur or stage_steps(dur, p.dt) < 1:
+                fail(f"--dt {p.dt:g} s is longer than the {title} ({opt} {dur:g} s): not a single full step fits; "
                      f"lower --dt below {dur:g} s or leave it out for the default step")
         check_step_count(p, p.dt, "--dt")
     # the step can never exceed 1/40 of a drive period (solver default): a lower bound on the work
@@ -401,7 +409,7 @@ def check_analyze(o) -> None:
     for name in ("radius", "spacing", "diameter", "length"):
         val = getattr(o, name)
         if val is not None:
-            number(f"--{name}", val, gt=0, hint="in the input's length units")
+            number(f"--{name}", val, gt=0, hint="lengths are in the input's units")
     if o.contact_tolerance is not None:
         number("--contact-tolerance", o.contact_tolerance, ge=0, hint="a surface gap in the input's units")
     if o.units is not None and o.units not in UNITS:
