@@ -140,10 +140,12 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
     opts.validate()
     t0 = time.perf_counter()
     from rodwarp import rundir
-    from rodwarp.validation import check_grid_memory
+    from rodwarp.validation import check_grid_memory, output_location
 
-    kind, obj, src = load_input(path, opts)
     out = Path(out) if out is not None else default_out(Path(path))
+    if Path(path).exists():
+        output_location(out, "--out")  # a file, read-only or full: refused before reading the input
+    kind, obj, src = load_input(path, opts)
     if kind == "rods":
         from rodwarp.fields import grid_axes, resolve_params
 
