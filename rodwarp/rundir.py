@@ -40,6 +40,8 @@ SIMULATE_OUTPUTS = ("summary.json", "metrics.csv", "metrics.png", "trajectory.za
 #: what ``rodwarp analyze`` writes in its folder
 ANALYZE_OUTPUTS = ("fields.zarr", "summary.json", "rods.npz", "histograms.png", "slices.png", "zprofiles.png",
                    "tangles.png")
+#: outputs only a simulation writes (an analysis never replaces a folder holding them)
+_SIMULATION_ONLY = ("final.npz", "trajectory.zarr", "metrics.csv", "checkpoints")
 #: subfolders whose hidden temporary files are cleaned too
 _TEMP_DIRS = ("", "vtk", "checkpoints")
 
@@ -207,6 +209,9 @@ def claim(path, kind: str, parameters: dict, outputs, *, resume: bool = False, o
             run_id = old.get("run_id")
     elif old is not None or present:
         same = old is not None and old.get("kind") == kind and not old.get("unreadable")
+        if old is None and kind == "analyze":
+            # an analysis from before manifests: its fields, and nothing of a simulation
+            same = "fields.zarr" in present and not any((path / o).exists() for o in _SIMULATION_ONLY)
         if not (overwrite or (replace_same_kind and same)):
             what = _describe(old) if old is not None else f"outputs of an earlier run ({', '.join(present[:4])})"
             hint = " --resume to continue it," if old is not None and not old.get("complete") \
