@@ -13,8 +13,8 @@ every JSON file in ``benchmarks/results``.  See ``benchmarks/README.md``.
 """
 
 BENCHMARKS = ("pile", "broadphase", "accuracy", "simulate", "fig4h", "protocol_dt", "acn", "fields", "stability",
-              "scaling", "pyelastica", "acn_peer", "segment")
+              "scaling", "pyelastica", "acn_peer", "segment", "vtk", "analyze")
 # run when no --only is given; fig4h and protocol_dt are long protocol sweeps (tens of minutes
 # on two cores) that run only when named
 DEFAULT = ("pile", "broadphase", "accuracy", "simulate", "acn", "fields", "segment", "stability", "scaling",
-           "pyelastica", "acn_peer")
+           "pyelastica", "acn_peer", "vtk", "analyze")

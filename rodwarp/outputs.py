@@ -87,6 +87,15 @@ class Trajectory:
         consolidate(self.path)
 
 
+def _quiet_vtk() -> None:
+    """VTK reports a failed write on stderr itself (many lines); rodwarp raises an OSError that
+    the CLI prints as one line instead."""
+    from vtkmodules.vtkCommonCore import vtkLogger, vtkObject
+
+    vtkObject.GlobalWarningDisplayOff()
+    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_OFF)
+
+
 def write_vtp(path, positions: np.ndarray, offsets: np.ndarray, radii: np.ndarray, t: float) -> None:
     """One frame as VTK XML PolyData, written by VTK itself, atomically.
 
@@ -108,6 +117,7 @@ def write_vtp(path, positions: np.ndarray, offsets: np.ndarray, radii: np.ndarra
     t : float
         Time of the frame (s).
     """
+    _quiet_vtk()
     from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
     from vtkmodules.vtkCommonCore import vtkDoubleArray, vtkPoints
     from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
@@ -145,7 +155,13 @@ def write_vtp(path, positions: np.ndarray, offsets: np.ndarray, radii: np.ndarra
         if w.Write() != 1:
             import errno
 
-            raise OSError(errno.EIO, "VTK could not write the frame (disk full or not writable?)", str(path))
+            from vtkmodules.vtkCommonMisc import vtkErrorCode
+
+            code = w.GetErrorCode()
+            why = vtkErrorCode.GetStringFromErrorCode(code) or "unknown error"
+            if code == vtkErrorCode.OutOfDiskSpaceError or "No space" in why:
+                raise OSError(errno.ENOSPC, "No space left on device", str(path))
+            raise OSError(errno.EIO, f"VTK could not write the frame ({why})", str(path))
 
 
 def write_pvd(path, entries) -> None:

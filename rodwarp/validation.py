@@ -325,9 +325,19 @@ def check_step_count(p, dt: float, source: str) -> None:
              f"(weeks of computing); shorten --duration/--entangle-duration or lower --alpha")
 
 
+#: bytes per vertex of the two checkpoints kept (state, warm-start impulses; the main job's
+#: are 170 B per vertex each) and of initial.npz + final.npz, rounded up
+DISK_BYTES_PER_VERTEX_FIXED = 2 * 400 + 2 * 100
+#: the three PNG figures and the small files of a run
+DISK_BYTES_FIXED = 1.0e6
+
+
 def output_bytes(p) -> float:
-    """Disk space the run's frames take (bytes): trajectory plus VTK, every --save-every."""
-    return float(getattr(p, "_frames", 0)) * float(getattr(p, "_n_vertices", 0)) * DISK_BYTES_PER_VERTEX_FRAME
+    """Disk space a run needs (bytes): its frames (trajectory plus VTK, every --save-every),
+    checkpoints, rod sets and figures."""
+    V = float(getattr(p, "_n_vertices", 0))
+    return float(getattr(p, "_frames", 0)) * V * DISK_BYTES_PER_VERTEX_FRAME + V * DISK_BYTES_PER_VERTEX_FIXED \
+        + DISK_BYTES_FIXED
 
 
 def check_input_rods(p, explicit=()):
@@ -511,6 +521,6 @@ def check_scheduler(address: str, timeout: float = 3.0) -> str:
         fail(f"--scheduler '{address}': unknown host '{host}'; check the address")
     except OSError as e:
         why = "timed out" if isinstance(e, TimeoutError) or "timed out" in str(e) else (e.strerror or str(e))
-        fail(f"--scheduler '{address}' does not answer ({why} after at most {timeout:g} s); "
+        fail(f"--scheduler '{address}' does not answer ({why.lower()}; waited at most {timeout:g} s); "
              f"start it with `dask scheduler` on that host or check the address")
     return a

@@ -109,19 +109,40 @@ def _mount_tmpfs(path, size):
         pytest.skip(f"cannot mount a tmpfs here ({r.stderr.decode().strip()[:80]})")
 
 
-def test_real_small_tmpfs_full_before_and_during_the_run(tmp_path):
+def test_real_small_tmpfs_full_before_and_during_the_run(tmp_path, monkeypatch):
     mnt = tmp_path / "small"
-    _mount_tmpfs(mnt, "200k")  # the short run writes about 450 kB
+    _mount_tmpfs(mnt, "2m")  # the short run writes about 450 kB; its estimate is 1.1 MB
     try:
-        # before: a run whose frames alone need more than the free space is refused at once
+        # before: a run whose estimate exceeds the free space is refused at once, with the path
         res = runner.invoke(app, [*SHORT, "--n-rods", "200", "--duration", "1", "--out", str(mnt / "big")])
         line = _err(res)
-        assert res.exit_code == 2 and "on disk" in line and str(mnt) in line
-        # during: the estimate fits, the figures and checkpoints do not: the message names a file
+        assert res.exit_code == 2 and "on disk" in line and "is free at" in line and str(mnt) in line
+        assert not (mnt / "big").exists()
+        # during: the estimate fits, then something else fills the disk after the third frame;
+        # the real ENOSPC is reported with the file it hit
+        import rodwarp.outputs as outputs
+
+        real, n = outputs.write_vtp, []
+
+        def fill_then_write(path, *a, **k):
+            n.append(path)
+            if len(n) == 3:
+                with open(mnt / "ballast", "wb") as fh:
+                    try:
+                        while True:
+                            fh.write(b"\0" * 65536)
+                    except OSError:
+                        pass
+            return real(path, *a, **k)
+
+        monkeypatch.setattr(outputs, "write_vtp", fill_then_write)
         res = runner.invoke(app, [*SHORT, "--out", str(mnt / "run")])
         line = _err(res)
-        assert res.exit_code == 2 and "No space left on device" in line and str(mnt / "run") in line
+        assert res.exit_code == 2 and "cannot write" in line and str(mnt / "run") in line
         assert _manifest(mnt / "run")["complete"] is False
+        import zarr
+
+        assert zarr.open_group(str(mnt / "run" / "trajectory.zarr"), mode="r").attrs["n_frames"] >= 2
     finally:
         subprocess.run(["umount", str(mnt)], capture_output=True)
 
