@@ -38,9 +38,14 @@ def _friendly(fn):
             typer.echo(f"error: no such file: {e.filename or e}", err=True)
             raise typer.Exit(2)
         except OSError as e:  # a location problem found during the work (disk full, read-only)
+            import errno
+
             where = f" {e.filename}" if e.filename else ""
-            typer.echo(f"error: cannot write{where}: {e.strerror or e}; free space or choose another --out "
-                       "(earlier results are kept)", err=True)
+            if e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO):
+                typer.echo(f"error: cannot write{where}: {e.strerror or e}; free space or choose another --out "
+                           "(earlier results are kept)", err=True)
+            else:
+                typer.echo(f"error: cannot access{where}: {e.strerror or e}", err=True)
             raise typer.Exit(2)
         except KeyboardInterrupt:
             typer.echo("interrupted; earlier results and checkpoints are kept", err=True)

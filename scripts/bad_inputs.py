@@ -81,6 +81,7 @@ def cases(d: Path) -> list[tuple[str, str]]:
          ("oversized", f"simulate --n-rods 10000000 --out {d}/o"),
          ("oversized", f"simulate --alpha 1e9 --out {d}/o"),
          ("oversized", f"phantom random --shape 2000 2000 2000 --out {d}/big.tif"),
+         ("oversized (steps)", f"simulate --alpha 1e9 --n-rods 10 --device cpu --quiet --out {d}/o9"),
          ("input on z = 0", f"simulate --initial {d}/on_floor.npz --duration 0.05 --save-every 0.01 --device cpu "
                             f"--quiet --out {d}/floor"),
          ("input overlap", f"simulate --initial {d}/overlap.npz --out {d}/o"),
