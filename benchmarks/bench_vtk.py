@@ -6,7 +6,6 @@ meshio has no polyline cell), on frames of the main job's size (540 rods x 10 ve
 
 from __future__ import annotations
 
-import os
 import shutil
 import tempfile
 import time

@@ -356,7 +356,8 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
 
     verdict = vd.judge_rows(rows, pile_ref.time, thresholds).to_dict()
     summary = {
-        "alpha": params.alpha, "diameter": params.diameter, "length": params.length, "n_rods": model.n_rods, "freq": params.freq, "amplitude": params.amplitude,
+        "alpha": params.alpha, "diameter": params.diameter, "length": params.length,  # measured for --initial
+        "n_rods": model.n_rods, "freq": params.freq, "amplitude": params.amplitude,
         "gravity": params.gravity, "a_over_g": params.a_over_g, "static_load": params.static_load,
         "contacts_per_rod": contacts_per_rod(model.n_rods, c),
         "largest_cluster_fraction": verdict["largest_cluster_fraction"],

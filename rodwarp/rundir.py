@@ -301,8 +301,13 @@ def default_run_name(params) -> str:
              "entangle_amplitude": "eamp", "static_load": "F", "n_rods": "n", "length": "l", "vertices": "v",
              "iterations": "it", "save_every": "save", "checkpoint_every": "ckpt", "young": "E", "density": "rho",
              "entangle": "entangle"}
-    extra = [f"{short.get(k, k)}{fmt(v)}" for k, v in d.items()
-             if k not in skip and v != defaults.get(k) and not (isinstance(v, tuple) and list(v) == list(defaults.get(k)))]
+    def differs(k, v):
+        dv = defaults.get(k)
+        if isinstance(v, (tuple, list)) and isinstance(dv, (tuple, list)):
+            return list(v) != list(dv)
+        return v != dv
+
+    extra = [f"{short.get(k, k)}{fmt(v)}" for k, v in d.items() if k not in skip and differs(k, v)]
     name = "_".join([head, *extra])
     if len(name) > 120:
         name = head + "_" + hashlib.sha1("_".join(extra).encode()).hexdigest()[:10]

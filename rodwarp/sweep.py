@@ -382,7 +382,7 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
     Path
         ``out/results.csv``.
     """
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import as_completed
 
     from rodwarp.validation import check_scheduler, output_location
 
