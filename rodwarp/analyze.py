@@ -49,12 +49,11 @@ class AnalyzeOptions:
     figures: bool = True
 
     def validate(self) -> None:
-        if self.outlier not in ("q3", "q1"):
-            raise RodwarpError(f"--outlier must be q3 (Q3 + 1.5 IQR, the paper's) or q1, got '{self.outlier}'")
-        if self.connectivity not in (6, 26):
-            raise RodwarpError(f"--connectivity must be 6 or 26, got {self.connectivity}")
-        if self.bins < 2:
-            raise RodwarpError(f"--bins must be at least 2, got {self.bins}")
+        """Raise :class:`RodwarpError` (one line) for any option that is not finite, out of
+        range or unknown (:func:`rodwarp.validation.check_analyze`)."""
+        from rodwarp.validation import check_analyze
+
+        check_analyze(self)
 
 
 def _is_fields_npz(path: Path) -> bool:
@@ -111,7 +110,8 @@ def default_out(path: Path) -> Path:
     return path.parent / "analysis"
 
 
-def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: bool = False) -> dict:
+def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: bool = False,
+            overwrite: bool = False) -> dict:
     """Compute (or read) the fields of an input, their statistics, and write every output.
 
     Parameters
@@ -124,6 +124,9 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
         Grid, contact, statistics and device options.
     progress : bool
         Show a progress bar over the voxel batches.
+    overwrite : bool
+        Write into ``out`` even when it holds another kind of run (whose outputs are then
+        removed). An earlier analysis in ``out`` is always replaced (:mod:`rodwarp.rundir`).
 
     Returns
     -------
@@ -136,18 +139,31 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
     opts = opts or AnalyzeOptions()
     opts.validate()
     t0 = time.perf_counter()
-    kind, obj, src = load_input(path, opts)
+    from rodwarp import rundir
+    from rodwarp.validation import check_grid_memory, output_location
+
     out = Path(out) if out is not None else default_out(Path(path))
-    out.mkdir(parents=True, exist_ok=True)
+    if Path(path).exists():
+        output_location(out, "--out")  # a file, read-only or full: refused before reading the input
+    kind, obj, src = load_input(path, opts)
+    if kind == "rods":
+        from rodwarp.fields import grid_axes, resolve_params
+
+        fp = resolve_params(obj, radius=opts.radius, spacing=opts.spacing, diameter=opts.diameter,
+                            length=opts.length, keep_outside=opts.keep_outside,
+                            contact_tolerance=opts.contact_tolerance)
+        check_grid_memory(float(np.prod([len(a) for a in grid_axes(fp)])))
+    # the folder is taken only once the input is known to be good: a bad input leaves an
+    # earlier analysis alone
+    run = rundir.claim(out, "analyze", {"input": str(Path(src).resolve()), **asdict(opts)}, rundir.ANALYZE_OUTPUTS,
+                       overwrite=overwrite, replace_same_kind=True)
     cluster = None
     if kind == "rods":
         rods: RodSet = obj
-        from rodwarp.fields import resolve_contacts, resolve_params
+        from rodwarp.fields import resolve_contacts
         from rodwarp.metrics import largest_cluster_fraction
 
-        tol = resolve_params(rods, radius=opts.radius, spacing=opts.spacing, diameter=opts.diameter,
-                             length=opts.length, keep_outside=opts.keep_outside,
-                             contact_tolerance=opts.contact_tolerance).contact_tolerance
+        tol = fp.contact_tolerance
         contacts, source = resolve_contacts(rods, tol)
         fields = _fields_with_progress(rods, contacts, opts, progress)
         fields.attrs["contact_source"] = source
@@ -158,10 +174,8 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
         fields.attrs["source"] = str(src)
         fields.save(out / "fields.zarr")
     else:
-        fields = obj
-        if fields.attrs.get("layout") == "paper-authors" or not (out / "fields.zarr").exists() \
-                or Path(src).resolve() != (out / "fields.zarr").resolve():
-            fields.save(out / "fields.zarr")
+        fields = obj  # read into memory, so writing over the input's own folder is safe
+        fields.save(out / "fields.zarr")
     if not fields.valid.any():
         raise RodwarpError("no voxel of the grid lies inside the packing (every ball is empty or leaves "
                            "the domain); lower --radius/--spacing or pass --keep-outside")
@@ -193,6 +207,7 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
         summary["figures"] = [Path(f).name for f in figs]
     summary["analysis_wall_s"] = time.perf_counter() - t0
     write_json(out / "summary.json", _finite(json.loads(json.dumps(summary, default=_jsonable))))
+    run.complete()
     return summary
 
 

@@ -53,11 +53,14 @@ def atomic_path(path: str | os.PathLike, *, directory: bool = False) -> Iterator
             with open(tmp, "rb+") as fh:
                 os.fsync(fh.fileno())
             os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         if tmp.is_dir():
             shutil.rmtree(tmp, ignore_errors=True)
         elif tmp.exists():
             tmp.unlink()
+        if isinstance(e, OSError) and not isinstance(e, FileNotFoundError):
+            # a failed write (disk full, read-only) names the file it was writing, not nothing
+            raise OSError(e.errno, e.strerror or str(e), str(path)) from e
         raise
 
 

@@ -1,7 +1,9 @@
 """The ``rodwarp`` command line (typer).
 
-Every user error is reported as one line on stderr with exit code 2; a simulation that blows
-up exits with code 3 and names the step and the likely cause. No raw tracebacks.
+Every option is checked before any work (:mod:`rodwarp.validation`). Exit codes: 0 done;
+2 bad input or an unusable output location (one line on stderr saying what is wrong and how to
+fix it); 3 a simulation blew up (the message names the step and the likely cause); 4 a sweep
+finished with failed points; 1 an internal error or an abort. No raw tracebacks.
 """
 
 from __future__ import annotations
@@ -15,7 +17,10 @@ import typer
 
 from rodwarp.errors import RodwarpError, SimulationBlowUp
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, help="Simulate and analyse packings of elastic rods (NVIDIA Warp).")
+app = typer.Typer(add_completion=False, no_args_is_help=False,
+                  help="Simulate and analyse packings of elastic rods (NVIDIA Warp).",
+                  epilog="Example: rodwarp simulate --alpha 100 --freq 10, then rodwarp analyze "
+                         "runs/alpha100_freq10_g0.5_seed0")
 
 
 def _friendly(fn):
@@ -31,6 +36,16 @@ def _friendly(fn):
             raise typer.Exit(3)
         except FileNotFoundError as e:
             typer.echo(f"error: no such file: {e.filename or e}", err=True)
+            raise typer.Exit(2)
+        except OSError as e:  # a location problem found during the work (disk full, read-only)
+            import errno
+
+            where = f" {e.filename}" if e.filename else ""
+            if e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO):
+                typer.echo(f"error: cannot write{where}: {e.strerror or e}; free space or choose another --out "
+                           "(earlier results are kept)", err=True)
+            else:
+                typer.echo(f"error: cannot access{where}: {e.strerror or e}", err=True)
             raise typer.Exit(2)
         except KeyboardInterrupt:
             typer.echo("interrupted; earlier results and checkpoints are kept", err=True)
@@ -48,25 +63,52 @@ def _friendly(fn):
     return wrapper
 
 
-@app.callback()
-def _root():
-    """Simulate and analyse packings of elastic rods (NVIDIA Warp)."""
-
-
-@app.command()
-def version():
-    """Print the versions of rodwarp, Warp and NumPy."""
+def _version_text() -> str:
     import numpy
     import warp
 
     from rodwarp import __version__
 
-    typer.echo(f"rodwarp {__version__}, warp {warp.config.version}, numpy {numpy.__version__}")
+    return f"rodwarp {__version__}, warp {warp.config.version}, numpy {numpy.__version__}"
 
 
-@app.command()
+def _print_version(value: bool):
+    if value:
+        typer.echo(_version_text())
+        raise typer.Exit(0)
+
+
+@app.callback(invoke_without_command=True)
+def _root(ctx: typer.Context,
+          version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True,
+                                       help="Print the versions of rodwarp, Warp and NumPy and exit.")):
+    """Simulate and analyse packings of elastic rods (NVIDIA Warp)."""
+    if ctx.invoked_subcommand is None:  # bare `rodwarp`: the help, and success
+        typer.echo(ctx.get_help())
+        raise typer.Exit(0)
+
+
+def _given(ctx: typer.Context, *names: str) -> set:
+    """Options of ``names`` the user typed (or set in the environment), not left at their default."""
+    out = set()
+    for n in names:
+        src = ctx.get_parameter_source(n)
+        if src is not None and getattr(src, "name", "") in ("COMMANDLINE", "ENVIRONMENT", "PROMPT"):
+            out.add(n)
+    return out
+
+
+@app.command(epilog="Example: rodwarp version")
+def version():
+    """Print the versions of rodwarp, Warp and NumPy (same as rodwarp --version)."""
+    typer.echo(_version_text())
+
+
+@app.command(epilog="Example: rodwarp simulate --alpha 100 --freq 10   (the main job, about 3 min on one core; "
+                     "writes runs/alpha100_freq10_g0.5_seed0/)")
 @_friendly
 def simulate(
+    ctx: typer.Context,
     alpha: float = typer.Option(100.0, help="Rod aspect ratio l / d (> 1)."),
     freq: float = typer.Option(10.0, help="Floor vibration frequency of the stability test (Hz)."),
     amplitude: float = typer.Option(0.001, help="Floor vibration amplitude of the stability test (m)."),
@@ -89,11 +131,14 @@ def simulate(
     rolling: bool = typer.Option(True, help="Rods spin about their axes; --no-rolling locks the spin (friction on the centreline only)."),
     save_every: float = typer.Option(0.1, help="Metrics and frame interval (s of simulated time)."),
     checkpoint_every: float = typer.Option(1.0, help="Checkpoint interval (s of simulated time)."),
-    resume: bool = typer.Option(False, help="Continue a killed run from its newest checkpoint in --out."),
+    resume: bool = typer.Option(False, help="Continue a killed run from its newest checkpoint in --out (only the "
+                                            "folder's own run, same parameters)."),
+    overwrite: bool = typer.Option(False, help="Replace the run that --out holds (its outputs are removed first)."),
     entangle: bool = typer.Option(False, help="With --initial: run the entangling stage too."),
     seed: int = typer.Option(0, help="Random seed of the packing."),
     device: str = typer.Option("auto", help="auto, cpu or cuda."),
-    out: Optional[Path] = typer.Option(None, help="Output directory (default runs/alpha{A}_freq{F})."),
+    out: Optional[Path] = typer.Option(None, help="Output directory (default runs/alpha{A}_freq{F}_g{G}_seed{S}, "
+                                                  "plus every other parameter that differs from its default)."),
     initial: Optional[Path] = typer.Option(None, help="Start from this rod set (npz, zarr or CSV) instead of a random packing."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ):
@@ -108,9 +153,18 @@ def simulate(
         checkpoint_every=checkpoint_every, seed=seed, device=device, initial=str(initial) if initial else None,
         entangle=entangle,
     )
+    from rodwarp.rundir import default_run_name
+
+    params._explicit = _given(ctx, "alpha", "length", "n_rods", "vertices", "box", "seed")
     params.validate()
-    outdir = out or Path("runs") / f"alpha{alpha:g}_freq{freq:g}"
-    summary = run_protocol(params, outdir, progress=not quiet, resume=resume)
+    outdir = out or Path("runs") / default_run_name(params)
+    try:
+        summary = run_protocol(params, outdir, progress=not quiet, resume=resume, overwrite=overwrite)
+    except (RodwarpError, SimulationBlowUp, OSError) as e:
+        from rodwarp.rundir import mark_failed
+
+        mark_failed(outdir, e)
+        raise
     typer.echo(
         f"alpha={summary['alpha']:g} n_rods={summary['n_rods']} a/g={summary['a_over_g']:.3g} "
         f"Z={summary['contacts_per_rod']:.2f} f={summary['largest_cluster_fraction']:.3f} "
@@ -118,7 +172,8 @@ def simulate(
     )
 
 
-@app.command()
+@app.command(epilog="Example: rodwarp analyze runs/alpha100_freq10_g0.5_seed0   (writes its analysis/ folder; "
+                     "an earlier analysis there is replaced)")
 @_friendly
 def analyze(
     input: Path = typer.Argument(..., help="simulate/segment output directory, rod-set file (.npz, .zarr, .csv) "
@@ -136,6 +191,7 @@ def analyze(
     bins: int = typer.Option(40, help="Histogram bins."),
     device: str = typer.Option("cpu", help="cpu, cuda or auto."),
     figures: bool = typer.Option(True, help="Write the PNG figures."),
+    overwrite: bool = typer.Option(False, help="Write into --out even when it holds another kind of run."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ):
     """Local fields (phi, S, c, e), their statistics, outliers, tangles and percolation."""
@@ -146,7 +202,7 @@ def analyze(
                           connectivity=connectivity, bins=bins, device=device, figures=figures)
     opts.validate()
     outdir = out or default_out(input)
-    s = run_analyze(input, outdir, opts, progress=not quiet)
+    s = run_analyze(input, outdir, opts, progress=not quiet, overwrite=overwrite)
 
     def f(v):
         return "n/a" if v is None else f"{v:.3g}"
@@ -160,24 +216,32 @@ def analyze(
     )
 
 
-@app.command()
+@app.command(epilog="Example: rodwarp phantom random --shape 256 256 256 --n-rods 200 --cnr 5 --out ct/stack.tif")
 @_friendly
 def phantom(
-    rods: str = typer.Argument(..., help="Rod set (npz, zarr, CSV), a simulate output directory, or 'random' "
-                                         "for a random packing in voxel units (see --n-rods)."),
+    rods: str = typer.Argument(..., help="Rod set (npz, zarr, CSV), a simulate output directory, or a scene in "
+                                         "voxel units: 'random' (straight rods, see --n-rods), 'bundles' "
+                                         "(bundles of touching parallel rods), 'arcs' (gently curved rods), "
+                                         "'wires' (a nest-like tangle of curved wires)."),
     shape: tuple[int, int, int] = typer.Option(..., help="Volume shape Z Y X (slices, rows, columns)."),
     voxel_size: float = typer.Option(1.0, help="Voxel edge length in the rods' units (1 for voxel-unit rods)."),
     out: Path = typer.Option(..., help="Output TIFF (ground truth written beside it)."),
     blur: float = typer.Option(1.0, help="Gaussian point-spread sigma (voxels)."),
     cnr: float = typer.Option(10.0, help="Contrast-to-noise ratio (foreground - background) / noise sigma."),
     ring: float = typer.Option(0.0, help="Ring artefact amplitude (fraction of the contrast)."),
-    cupping: float = typer.Option(0.0, help="Cupping: relative intensity drop at the slice edge."),
+    cupping: float = typer.Option(0.0, help="Cupping: relative intensity drop at the slice edge (negative: a "
+                                            "bright rim, as beam hardening shows)."),
     streaks: float = typer.Option(0.0, help="Metal streak amplitude (fraction of the contrast)."),
-    n_rods: int = typer.Option(100, help="'random': number of rods."),
-    radius: float = typer.Option(3.0, help="'random': rod radius (voxels)."),
+    fov: Optional[float] = typer.Option(None, help="Field of view: radius (voxels) of the reconstruction circle; "
+                                                   "0 outside it."),
+    dark: bool = typer.Option(False, help="Dark rods on a bright background (grey values swapped)."),
+    z_thickness: int = typer.Option(1, help="Slices this many times thicker than the voxels are wide "
+                                            "(anisotropic voxels; the TIFF records the spacing)."),
+    n_rods: int = typer.Option(100, help="'random', 'arcs', 'wires': number of rods; 'bundles': of bundles."),
+    radius: float = typer.Option(3.0, help="Scenes: rod radius (voxels)."),
     aspect: float = typer.Option(30.0, help="'random': aspect ratio length / diameter."),
     touching: float = typer.Option(0.5, help="'random': fraction of rods touching another."),
-    seed: int = typer.Option(0, help="Seed of the noise and of 'random'."),
+    seed: int = typer.Option(0, help="Seed of the noise and of the scenes."),
 ):
     """Synthetic 16-bit CT of a rod set: partial volume, blur, noise and artefacts, with ground truth."""
     import numpy as np
@@ -185,15 +249,26 @@ def phantom(
     from rodwarp import phantom as ph
     from rodwarp.rodset import UNITS, load
 
-    if min(shape) < 2:
-        raise RodwarpError(f"--shape must be three sizes >= 2 (Z Y X), got {shape}")
-    if not (voxel_size > 0):
-        raise RodwarpError(f"--voxel-size must be positive, got {voxel_size:g}")
-    if not (cnr > 0):
-        raise RodwarpError(f"--cnr must be positive, got {cnr:g}")
-    if rods == "random":
-        rs = ph.scene_random_packing(tuple(shape), n_rods=n_rods, radius=radius, aspect=aspect,
-                                     touching_fraction=touching, seed=seed)
+    from rodwarp import validation as v
+
+    v.check_phantom(rods=rods, shape=shape, voxel_size=voxel_size, out=out, blur=blur, cnr=cnr, ring=ring,
+                    cupping=cupping, streaks=streaks, n_rods=n_rods, radius=radius, aspect=aspect,
+                    touching=touching, seed=seed, fov=fov, z_thickness=z_thickness)
+    # scenes are built in voxel widths along every axis; thick slices span z_thickness of them
+    full = (shape[0] * z_thickness, shape[1], shape[2])
+    scenes = {
+        "random": lambda: ph.scene_random_packing(full, n_rods=n_rods, radius=radius, aspect=aspect,
+                                                  touching_fraction=touching, seed=seed,
+                                                  fov_radius=None if fov is None else fov - 2.0),
+        "bundles": lambda: ph.scene_bundles(full, n_bundles=n_rods, radius=radius, seed=seed),
+        "arcs": lambda: ph.scene_arcs(full, n_rods=n_rods, radius=radius, seed=seed),
+        "wires": lambda: ph.scene_wire_tangle(full, n_wires=n_rods, radius=radius, seed=seed),
+    }
+    if rods in scenes:
+        rs = scenes[rods]()
+        if z_thickness > 1:  # thick slice k is centred at z = k z_thickness
+            rs.points[:, 2] -= 0.5 * (z_thickness - 1)
+            rs.contacts = ph.phantom_truth(rs)
         vox = 1.0
     else:
         p = Path(rods)
@@ -210,35 +285,59 @@ def phantom(
         from rodwarp.geometry import detect_contacts
 
         rs.contacts = detect_contacts(rs, 0.1 * float(np.mean(rs.diameters)))
+    bg, fg = (50000, 20000) if dark else (20000, 50000)
     vol = ph.render_phantom(rs, tuple(shape), blur_sigma=blur, cnr=cnr, ring=ring, cupping=cupping,
-                            streaks=streaks, seed=seed)
+                            streaks=streaks, seed=seed, fov=fov, z_thickness=z_thickness,
+                            background=bg, foreground=fg)
     params = {"shape": list(shape), "voxel_size": voxel_size, "blur_sigma": blur, "cnr": cnr, "ring": ring,
-              "cupping": cupping, "streaks": streaks, "seed": seed, "source": rods,
-              "metres_per_voxel": vox if rods != "random" else None}
-    ph.write_phantom(out, vol, rs, rs.contacts, voxel_size, params)
+              "cupping": cupping, "streaks": streaks, "fov": fov, "dark": dark, "z_thickness": z_thickness,
+              "seed": seed, "source": rods, "metres_per_voxel": vox if rods not in scenes else None}
+    ph.write_phantom(out, vol, rs, rs.contacts, voxel_size, params,
+                     z_thickness=z_thickness)
     typer.echo(f"{rs.n_rods} rods, {len(rs.contacts) if rs.contacts is not None else 0} contacts -> {out}")
 
 
-@app.command()
+@app.command(epilog="Example: rodwarp segment ct/stack.tif --voxel-size 0.078 --units mm --out ct/segment")
 @_friendly
 def segment(
     stack: Path = typer.Argument(..., help="Multi-page TIFF, a folder of slice TIFFs, or a zarr array."),
-    voxel_size: float = typer.Option(..., help="Voxel edge length in --units."),
-    units: str = typer.Option("mm", help="Unit of --voxel-size, --diameter and the outputs (m, mm, um, voxel)."),
+    voxel_size: Optional[str] = typer.Option(None, help="Voxel edge in --units: one value, or three for z,y,x "
+                                                        "(e.g. 0.1,0.05,0.05). Default: the file's metadata "
+                                                        "(ImageJ/OME-TIFF, OME-Zarr)."),
+    units: Optional[str] = typer.Option(None, help="Unit of --voxel-size, --diameter and the outputs (m, mm, um, "
+                                                   "voxel); default mm, or the metadata's."),
     diameter: Optional[float] = typer.Option(None, help="Rod diameter in --units (estimated when absent)."),
     out: Optional[Path] = typer.Option(None, help="Output directory (default segment/ beside the stack)."),
+    shape: str = typer.Option("auto", help="straight (rods), curved (filaments as polylines) or auto."),
+    dark_rods: Optional[bool] = typer.Option(None, "--dark-rods/--bright-rods",
+                                             help="Rods darker / brighter than the background (default: detected)."),
+    min_fill: float = typer.Option(0.6, help="Reject rods whose axis plateau is below this share of what a rod of "
+                                             "their radius shows under the measured blur."),
     chunk: Optional[int] = typer.Option(None, help="Process in overlapping chunks of this edge (voxels), for big volumes."),
     contact_tolerance: float = typer.Option(1.0, help="Largest surface gap counted as contact (voxels)."),
     figures: bool = typer.Option(True, help="Write the QA PNGs."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ):
     """CT stack to rod centrelines and contacts (CPU)."""
+    from rodwarp import validation as v
+    from rodwarp.segment import SegmentParams
+    from rodwarp.segment_report import default_out as seg_default_out
     from rodwarp.segment_report import run_segment
 
+    if shape not in ("straight", "curved", "auto"):
+        raise RodwarpError(f"--shape must be straight, curved or auto, got '{shape}'")
+    v.check_segment(stack=stack, voxel_size=voxel_size, units=units, diameter=diameter,
+                    out=out if out is not None else seg_default_out(stack), chunk=chunk,
+                    contact_tolerance=contact_tolerance, min_fill=min_fill)
+    params = SegmentParams(shape=shape, dark=dark_rods, min_fill=min_fill)
     s = run_segment(stack, voxel_size=voxel_size, units=units, diameter=diameter, out=out, chunk=chunk,
-                    contact_tolerance=contact_tolerance, figures=figures, progress=not quiet)
-    typer.echo(f"{s['n_rods']} rods, {s['n_contacts']} contacts, diameter {s['diameter']:.4g} {units} "
-               f"({s['diameter_voxels']:.2f} voxels), {s['wall_time_s']:.1f} s -> {s['out']}")
+                    contact_tolerance=contact_tolerance, figures=figures, progress=not quiet, params=params)
+    u = s["units"]
+    typer.echo(f"{s['n_rods']} {'filaments' if s.get('shape') == 'curved' else 'rods'}, {s['n_contacts']} contacts, "
+               f"diameter {s['diameter']:.4g} {u} ({s['diameter_voxels']:.2f} voxels), {s['wall_time_s']:.1f} s "
+               f"-> {s['out']}")
+    for flag in s.get("quality", {}).get("flags", []):
+        typer.echo(f"warning: {flag}", err=True)
 
 
 def _floats(text: str, name: str) -> list[float]:
@@ -248,10 +347,16 @@ def _floats(text: str, name: str) -> list[float]:
         raise RodwarpError(f"{name} must be comma-separated numbers, e.g. 25,50,100; got '{text}'") from None
     if not vals:
         raise RodwarpError(f"{name} needs at least one value")
+    import math
+
+    bad = [v for v in vals if not math.isfinite(v)]
+    if bad:
+        raise RodwarpError(f"{name} values must be finite numbers, got {bad[0]:g} in '{text}'")
     return vals
 
 
-@app.command()
+@app.command(epilog="Example: rodwarp sweep --alpha 25,50,100 --freq 1,10 --seeds 2 --out runs/sweep   "
+                     "(exit 4 when any point failed)")
 @_friendly
 def sweep(
     alpha: str = typer.Option("25,50,100,200,300", help="Aspect ratios, comma-separated."),
@@ -262,6 +367,7 @@ def sweep(
     entangle_duration: float = typer.Option(5.0, help="Entangling duration (s)."),
     duration: float = typer.Option(5.0, help="Stability-test duration (s)."),
     amplitude: float = typer.Option(0.001, help="Floor vibration amplitude (m)."),
+    save_every: float = typer.Option(0.1, help="Sampling interval of each point's metrics (s of simulated time)."),
     out: Path = typer.Option(..., help="Sweep directory (results.csv, points/, figures)."),
     scheduler: Optional[str] = typer.Option(None, help="Existing Dask scheduler tcp://HOST:8786 (default: a local cluster on 127.0.0.1)."),
     workers: Optional[int] = typer.Option(None, help="Local worker processes (default: the number of cores)."),
@@ -272,22 +378,34 @@ def sweep(
     """Parameter sweep: simulate + analyze per point on Dask; results.csv, then the phase diagram."""
     from rodwarp.sweep import SweepSpec, phase_diagram, run_sweep
 
-    if seeds < 1:
-        raise RodwarpError(f"--seeds must be at least 1, got {seeds}")
-    if workers is not None and workers < 1:
-        raise RodwarpError(f"--workers must be at least 1, got {workers}")
+    from rodwarp import validation as v
+
+    v.integer("--seeds", seeds, ge=1, le=10_000)
+    if workers is not None:
+        v.integer("--workers", workers, ge=1, le=1024)
     spec = SweepSpec(alphas=_floats(alpha, "--alpha"), freqs=_floats(freq, "--freq"),
                      gravities=_floats(gravity, "--gravity"), static_loads=_floats(static_load, "--static-load"),
                      seeds=list(range(seeds)), entangle_duration=entangle_duration, duration=duration,
-                     amplitude=amplitude, device=device)
+                     amplitude=amplitude, device=device,
+                     # only when changed: rows of sweeps run before this option still match their points
+                     overrides={} if save_every == 0.1 else {"save_every": save_every})
     path = run_sweep(spec, out, scheduler=scheduler, workers=workers, progress=not quiet)
-    if figures:
+    import json
+
+    meta = json.loads((Path(out) / "sweep.json").read_text())
+    failed, total = int(meta.get("failed") or 0), int(meta.get("n_points") or 0)
+    if figures and failed < total:
         for f in phase_diagram(out):
             typer.echo(f"wrote {f}")
     typer.echo(f"results -> {path}")
+    if failed:
+        first = meta.get("first_failure") or ""
+        typer.echo(f"error: {failed} of {total} sweep points failed (their status is in {path}); "
+                   f"first: {first}", err=True)
+        raise typer.Exit(4)
 
 
-@app.command("phase-diagram")
+@app.command("phase-diagram", epilog="Example: rodwarp phase-diagram runs/sweep")
 @_friendly
 def phase_diagram_cmd(
     sweep_dir: Path = typer.Argument(..., help="A `rodwarp sweep` output directory (with results.csv)."),
@@ -306,7 +424,9 @@ def _parse_box(text: str):
         vals = tuple(float(v) for v in text.split(","))
     except ValueError:
         raise RodwarpError(f"--box must be three numbers 'X,Y,Z' in rod lengths, got '{text}'")
-    if len(vals) != 3 or min(vals) <= 0:
+    import math
+
+    if len(vals) != 3 or not all(math.isfinite(v) and v > 0 for v in vals):
         raise RodwarpError(f"--box must be three positive numbers 'X,Y,Z' in rod lengths, got '{text}'")
     return vals
 
@@ -328,7 +448,7 @@ def main(argv=None) -> int:
         if hasattr(mod, "Abort"):
             abort.append(mod.Abort)
     try:
-        rv = app(args=argv, standalone_mode=False)
+        rv = app(args=argv if argv is not None else sys.argv[1:], prog_name="rodwarp", standalone_mode=False)
     except tuple(usage) as e:
         cmd = e.ctx.command_path if getattr(e, "ctx", None) is not None else "rodwarp"
         msg = " ".join(e.format_message().split())

@@ -16,7 +16,7 @@ import numpy as np
 
 from rodwarp.errors import RodwarpError
 
-__all__ = ["read_volume", "open_volume_lazy", "write_tiff", "list_slices", "check_volume"]
+__all__ = ["read_volume", "open_volume_lazy", "write_tiff", "list_slices", "check_volume", "read_voxel_size"]
 
 _TIFF_SUFFIXES = (".tif", ".tiff")
 
@@ -303,7 +303,7 @@ def open_volume_lazy(path, *, key: str | None = None):
 # writing
 # ----------------------------------------------------------------------------------------------
 
-def write_tiff(path, volume, *, voxel_size: float | None = None) -> Path:
+def write_tiff(path, volume, *, voxel_size=None) -> Path:
     """Write a ``(z, y, x)`` volume as a multi-page TIFF atomically, with ImageJ metadata (axes ZYX).
 
     Parameters
@@ -313,8 +313,9 @@ def write_tiff(path, volume, *, voxel_size: float | None = None) -> Path:
     volume : array-like, 3-D
         uint8, uint16 or float32 data get ImageJ hyperstack metadata (axes ZYX); other dtypes, and
         volumes of 4 GiB or more (written as BigTIFF), get a plain ``{"axes": "ZYX"}`` description.
-    voxel_size : float, optional
-        Metres per voxel, stored as the ImageJ resolution in micrometres.
+    voxel_size : float or (dz, dy, dx), optional
+        Metres per voxel (one edge, or one per axis), stored as the ImageJ resolution (x, y)
+        and spacing (z) in micrometres.
     """
     import tifffile
 
@@ -331,9 +332,11 @@ def write_tiff(path, volume, *, voxel_size: float | None = None) -> Path:
     if imagej:
         meta = {"axes": "ZYX"}
         if voxel_size is not None:
-            um = float(voxel_size) * 1e6
-            meta.update(unit="um", spacing=um)
-            kw["resolution"] = (1.0 / um, 1.0 / um)
+            from rodwarp.segment_prep import parse_voxel_size
+
+            dz, dy, dx = (v * 1e6 for v in parse_voxel_size(voxel_size))
+            meta.update(unit="um", spacing=dz)
+            kw["resolution"] = (1.0 / dx, 1.0 / dy)
         kw.update(imagej=True, metadata=meta)
     else:
         kw["metadata"] = {"axes": "ZYX"}
@@ -342,3 +345,133 @@ def write_tiff(path, volume, *, voxel_size: float | None = None) -> Path:
             tifffile.imwrite(fh, vol, **kw)
     return path
 
+
+# ----------------------------------------------------------------------------------------------
+# voxel size from metadata
+# ----------------------------------------------------------------------------------------------
+
+#: unit names found in TIFF / OME / OME-Zarr metadata -> metres
+_UNIT_M = {"m": 1.0, "meter": 1.0, "metre": 1.0, "cm": 1e-2, "centimeter": 1e-2, "mm": 1e-3, "millimeter": 1e-3,
+           "millimetre": 1e-3, "um": 1e-6, "\u00b5m": 1e-6, "\u03bcm": 1e-6, "micron": 1e-6, "microns": 1e-6,
+           "micrometer": 1e-6, "micrometre": 1e-6, "nm": 1e-9, "nanometer": 1e-9, "nanometre": 1e-9,
+           "inch": 0.0254, "in": 0.0254}
+
+
+def _metres(unit) -> float | None:
+    if unit is None:
+        return None
+    u = str(unit).strip().lower().replace("\\u00b5", "\u00b5")
+    return _UNIT_M.get(u)
+
+
+def _tiff_voxel_size(path: Path):
+    import tifffile
+
+    with tifffile.TiffFile(path) as tf:
+        if tf.is_ome and tf.ome_metadata:
+            import xml.etree.ElementTree as ET
+
+            root = ET.fromstring(tf.ome_metadata)
+            px = next((el for el in root.iter() if el.tag.endswith("Pixels")), None)
+            if px is not None and px.get("PhysicalSizeX"):
+                out = []
+                for ax in ("Z", "Y", "X"):
+                    v = px.get(f"PhysicalSize{ax}")
+                    unit = px.get(f"PhysicalSize{ax}Unit", "\u00b5m")  # the OME default
+                    k = _metres(unit)
+                    if v is None or k is None:
+                        return None
+                    out.append(float(v) * k)
+                return tuple(out), "OME-XML PhysicalSize"
+        page = tf.pages[0]
+        tags = page.tags
+        if "XResolution" not in tags or "YResolution" not in tags:
+            return None
+        xr, yr = tags["XResolution"].value, tags["YResolution"].value
+        xres = xr[0] / xr[1] if isinstance(xr, tuple) else float(xr)
+        yres = yr[0] / yr[1] if isinstance(yr, tuple) else float(yr)
+        if not (xres > 0 and yres > 0):
+            return None
+        ij = tf.imagej_metadata or {}
+        ru = tags["ResolutionUnit"].value if "ResolutionUnit" in tags else 1
+        if ij.get("unit") is not None:
+            k = _metres(ij.get("unit"))
+            src = "ImageJ resolution/spacing"
+        elif int(ru) == 2:
+            k, src = 0.0254, "TIFF resolution (inch)"
+        elif int(ru) == 3:
+            k, src = 0.01, "TIFF resolution (cm)"
+        else:
+            return None  # resolution without a unit: pixels per nothing
+        if k is None:
+            return None
+        dx, dy = k / xres, k / yres
+        dz = float(ij["spacing"]) * k if ij.get("spacing") else dx
+        # a default resolution of 1 pixel per unit is no calibration
+        if xres == 1.0 and yres == 1.0 and not ij.get("spacing"):
+            return None
+        return (dz, dy, dx), src
+
+
+def _zarr_voxel_size(path: Path, key: str | None):
+    import zarr
+
+    try:
+        root = zarr.open(str(path), mode="r")
+    except Exception:  # noqa: BLE001 - unreadable stores are reported by the readers
+        return None
+    attrs = dict(getattr(root, "attrs", {}) or {})
+    ms = attrs.get("multiscales") or (attrs.get("ome") or {}).get("multiscales")
+    if not ms:
+        return None
+    m = ms[0]
+    ds = m.get("datasets") or []
+    d0 = next((d for d in ds if key is None or d.get("path") == key), ds[0] if ds else None)
+    if d0 is None:
+        return None
+    scale = None
+    for t in list(m.get("coordinateTransformations") or []) + list(d0.get("coordinateTransformations") or []):
+        if t.get("type") == "scale":
+            s = np.asarray(t["scale"], float)
+            scale = s if scale is None else scale * s
+    if scale is None or len(scale) < 3:
+        return None
+    axes = m.get("axes") or []
+    names = [a.get("name") if isinstance(a, dict) else str(a) for a in axes] or ["z", "y", "x"][-len(scale):]
+    units = [a.get("unit") if isinstance(a, dict) else None for a in axes] or [None] * len(scale)
+    out = []
+    for ax in ("z", "y", "x"):
+        if ax not in names:
+            return None
+        i = names.index(ax)
+        k = _metres(units[i]) if i < len(units) else None
+        if k is None:
+            return None
+        out.append(float(scale[i]) * k)
+    return tuple(out), "OME-Zarr scale"
+
+
+def read_voxel_size(path, *, key: str | None = None):
+    """Voxel size recorded in a CT stack's metadata, or None when it records none.
+
+    Reads OME-XML ``PhysicalSize{X,Y,Z}`` (OME-TIFF), the ImageJ ``spacing`` / ``unit`` and
+    the TIFF ``XResolution`` / ``YResolution`` tags (ImageJ TIFF; a plain TIFF with an inch or
+    centimetre resolution unit gives x, y and takes z = x), and the OME-Zarr ``scale``
+    transformation with its axis units.  A folder of slices is read from its first slice.
+
+    Returns
+    -------
+    ((dz, dy, dx), source) or None
+        Edge lengths in metres along (z, y, x) and the metadata they came from.
+    """
+    p = _resolve(path)
+    try:
+        if _is_zarr(p):
+            return _zarr_voxel_size(p, key)
+        if p.is_dir():
+            files = _folder_files(p)
+            got = _tiff_voxel_size(files[0])
+            return got
+        return _tiff_voxel_size(p)
+    except Exception:  # noqa: BLE001 - metadata is optional: unreadable metadata means none
+        return None

@@ -35,6 +35,11 @@ _LABELS = {
 _SHORT = {"phi": r"$\phi$", "S": r"$S$", "c": r"$c$", "e": r"$e$", "n": r"$n$"}
 
 
+#: fixed margins instead of constrained layout, which took most of each figure's time (the
+#: main job's four figures: 2.7 s, 1.5 s of it in the layout solver; benchmarks/RESULTS.md)
+_GRID = dict(left=0.08, right=0.97, bottom=0.08, top=0.92, wspace=0.25, hspace=0.32)
+
+
 def _save(fig: Figure, path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -111,8 +116,8 @@ def plot_histograms(fields, stats: dict | None, path) -> Path:
     """
     if stats is None:
         stats = field_statistics(fields)
-    fig = Figure(figsize=(9, 7), layout="constrained")
-    axs = fig.subplots(2, 2)
+    fig = Figure(figsize=(9, 7))
+    axs = fig.subplots(2, 2, gridspec_kw=_GRID)
     for ax, name in zip(axs.ravel(), STAT_FIELDS):
         h = stats.get("histograms", {}).get(name)
         if h is None:
@@ -166,8 +171,9 @@ def plot_slices(fields, path) -> Path:
     ext_xy = _extent(x, y, h)
     ext_xz = _extent(x, z, h)
     # keep panels to scale but not absurdly tall or flat
-    fig = Figure(figsize=(10, 3.0 * len(PROFILE_FIELDS)), layout="constrained")
-    axs = fig.subplots(len(PROFILE_FIELDS), 2, squeeze=False)
+    fig = Figure(figsize=(10, 3.0 * len(PROFILE_FIELDS)))
+    axs = fig.subplots(len(PROFILE_FIELDS), 2, squeeze=False,
+                       gridspec_kw=dict(left=0.08, right=0.9, bottom=0.04, top=0.95, wspace=0.3, hspace=0.45))
     for row, name in enumerate(PROFILE_FIELDS):
         a = getattr(fields, name)
         rng = _robust_range(a[fields.valid]) if np.any(fields.valid) else None
@@ -216,8 +222,9 @@ def plot_zprofiles(source, path) -> Path:
     if "z" not in prof:
         raise ValueError("plot_zprofiles needs Fields, field_statistics output or z_profiles output")
     z = np.asarray(prof["z"], dtype=float)
-    fig = Figure(figsize=(2.6 * len(PROFILE_FIELDS), 4.2), layout="constrained")
-    axs = fig.subplots(1, len(PROFILE_FIELDS), sharey=True)
+    fig = Figure(figsize=(2.6 * len(PROFILE_FIELDS), 4.2))
+    axs = fig.subplots(1, len(PROFILE_FIELDS), sharey=True,
+                       gridspec_kw=dict(left=0.07, right=0.98, bottom=0.16, top=0.88, wspace=0.12))
     for ax, name in zip(axs, PROFILE_FIELDS):
         vals = prof.get(name)
         v = None if vals is None else np.asarray([np.nan if q is None else q for q in vals], dtype=float)
@@ -292,8 +299,8 @@ def plot_tangles(fields, labels, stats: dict | None, path) -> Path:
     lcmap = _label_cmap(n_lab).with_extremes(bad=(1, 1, 1, 0))
     e_cmap = matplotlib.colormaps["Greys"].with_extremes(bad=(0.8, 0.87, 0.95))  # outside: pale blue
 
-    fig = Figure(figsize=(15, 9), layout="constrained")
-    axs = fig.subplots(2, 3)
+    fig = Figure(figsize=(15, 9))
+    axs = fig.subplots(2, 3, gridspec_kw=dict(left=0.05, right=0.97, bottom=0.07, top=0.92, wspace=0.35, hspace=0.3))
     e = fields.e
     rng = _robust_range(e[fields.valid]) if np.any(fields.valid) else None
     outlier = labels > 0

@@ -139,11 +139,20 @@ class Fields:
             raise RodwarpError(f"cannot write fields to '{path}': use a .zarr or .npz name")
         import zarr
 
+        from rodwarp.outputs import consolidate
+
+        units = {"x": self.units, "y": self.units, "z": self.units}
         with atomic_path(path, directory=True) as tmp:
             g = zarr.open_group(str(tmp), mode="w")
             for name, a in self.arrays().items():
-                g.create_array(name, data=a) if hasattr(g, "create_array") else g.array(name, a)
+                # named dimensions: xarray.open_zarr gives fields on (z, y, x) with x, y, z as
+                # index coordinates (voxel centres)
+                dims = (name,) if name in ("x", "y", "z") else ("z", "y", "x")
+                arr = g.create_array(name, data=a, dimension_names=dims)
+                if name in units:
+                    arr.attrs["units"] = units[name]
             g.attrs.update(meta)
+            consolidate(tmp)
         return path
 
     @classmethod

@@ -29,6 +29,7 @@ from rodwarp.rodset import Contacts, RodSet
 __all__ = [
     "render_phantom", "occupancy", "phantom_truth", "write_phantom",
     "scene_isolated", "scene_crossing_pair", "scene_parallel_pair", "scene_random_packing",
+    "scene_bundles", "scene_arcs", "scene_wire_tangle",
     "capsule_volume", "DEFAULT_TOLERANCE_VOXELS",
 ]
 
@@ -290,7 +291,8 @@ def _streak_slice(img: np.ndarray, rng: np.random.Generator, n_spots: int, width
 def render_phantom(rods: RodSet, shape, *, voxel_size: float | None = None, blur_sigma: float = 1.0,
                    cnr: float = 10.0, background: float = 20000, foreground: float = 50000,
                    ring: float = 0.0, cupping: float = 0.0, streaks: float = 0.0, seed: int = 0,
-                   supersample: int = 3,
+                   supersample: int = 3, fov: float | None = None, fov_value: float = 0.0,
+                   z_thickness: int = 1,
                    progress: Callable[[int, int], None] | None = None) -> np.ndarray:
     """Render a synthetic 16-bit CT volume of a rod set.
 
@@ -314,7 +316,10 @@ def render_phantom(rods: RodSet, shape, *, voxel_size: float | None = None, blur
         Ring-artefact amplitude as a fraction of the contrast (sharp concentric rings about the
         z axis through the slice centre, the same in every slice).
     cupping : float
-        Beam-hardening cupping: intensity times ``1 - cupping (rho / rho_max)^2`` in each slice.
+        Beam-hardening cupping: intensity times ``1 - cupping (rho / rho_max)^2`` in each slice
+        (``rho`` the distance from the slice centre, ``rho_max`` its largest value).  Negative
+        values (above -1) brighten the rim, as beam hardening does in a reconstruction of a
+        wide sample; positive values darken it.
     streaks : float
         Metal-streak amplitude as a fraction of the contrast (bright-dark streak pairs along
         lines through the brightest spots of each slice).
@@ -322,6 +327,17 @@ def render_phantom(rods: RodSet, shape, *, voxel_size: float | None = None, blur
         Seed of the noise and artefacts; the output is deterministic for a seed.
     supersample : int
         Sub-points per voxel edge for the partial-volume shell.
+    fov : float, optional
+        Radius (voxels) of the reconstruction's field of view about the slice centre: voxels
+        outside it are set to ``fov_value`` (cone-beam reconstructions write 0 there).
+    fov_value : float
+        Grey value outside the field of view.
+    z_thickness : int
+        Slices ``z_thickness`` times thicker than the voxels are wide (anisotropic voxels): rod
+        coordinates stay in units of the voxel width along every axis (z too), with the centre
+        of the first thick slice at z = 0; each output slice is the mean of ``z_thickness``
+        thin slices of a finer rendering (blur applied isotropically on the fine grid), so the
+        output has ``shape`` (Z, Y, X) with voxels of size (z_thickness, 1, 1).
     progress : callable(done, total), optional
         Progress callback.
 
@@ -333,11 +349,16 @@ def render_phantom(rods: RodSet, shape, *, voxel_size: float | None = None, blur
     from scipy import ndimage as ndi
 
     shape = _check_shape(shape)
-    for name, v in (("blur_sigma", blur_sigma), ("ring", ring), ("cupping", cupping), ("streaks", streaks)):
+    for name, v in (("blur_sigma", blur_sigma), ("ring", ring), ("streaks", streaks)):
         if not (isinstance(v, (int, float, np.number)) and math.isfinite(v) and v >= 0):
             raise _fail(f"{name} must be a finite number >= 0, got {v!r}")
-    if cupping >= 1:
-        raise _fail(f"cupping must be below 1 (a fraction of the intensity), got {cupping!r}")
+    if not (isinstance(cupping, (int, float, np.number)) and -1 < cupping < 1):
+        raise _fail(f"cupping must lie between -1 and 1 (a fraction of the intensity), got {cupping!r}")
+    if fov is not None and not (math.isfinite(fov) and fov > 0):
+        raise _fail(f"fov must be a positive radius in voxels, got {fov!r}")
+    zt = int(z_thickness)
+    if zt < 1 or zt != z_thickness:
+        raise _fail(f"z_thickness must be a positive integer, got {z_thickness!r}")
     if cnr is not None and not (cnr > 0):
         raise _fail(f"cnr (contrast-to-noise ratio) must be positive (or inf for no noise), got {cnr!r}")
     if not (math.isfinite(background) and math.isfinite(foreground)):
@@ -347,17 +368,25 @@ def render_phantom(rods: RodSet, shape, *, voxel_size: float | None = None, blur
     if progress is not None:
         def occ_cb(done, total):
             progress(int(80 * done / max(total, 1)), steps)
-    occ = occupancy(rods, shape, voxel_size=voxel_size, supersample=supersample, progress=occ_cb)
+    if zt > 1:
+        # fine slice j is centred at z = j - (zt - 1) / 2, so thick slice k is centred at z = k zt
+        fine = _to_voxels(rods, voxel_size).copy()
+        fine.points[:, 2] += 0.5 * (zt - 1)
+        occ = occupancy(fine, (shape[0] * zt,) + shape[1:], supersample=supersample, progress=occ_cb)
+    else:
+        occ = occupancy(rods, shape, voxel_size=voxel_size, supersample=supersample, progress=occ_cb)
     contrast = float(foreground) - float(background)
     img = occ
     img *= np.float32(contrast)
     img += np.float32(background)
     rho = None
-    if cupping > 0:
+    if cupping != 0:
         rho = _slice_radius(shape)
         img *= (1.0 - np.float32(cupping) * (rho / max(float(rho.max()), 1e-12)) ** 2)[None]
     if blur_sigma > 0:
         img = ndi.gaussian_filter(img, sigma=float(blur_sigma), mode="nearest", output=np.float32)
+    if zt > 1:
+        img = img.reshape(shape[0], zt, shape[1], shape[2]).mean(axis=1, dtype=np.float32)
     if progress is not None:
         progress(88, steps)
     if streaks > 0:  # spots are found in the blurred image (before rings and noise)
@@ -378,6 +407,8 @@ def render_phantom(rods: RodSet, shape, *, voxel_size: float | None = None, blur
         sigma = abs(contrast) / float(cnr)
         for z in range(shape[0]):  # slice by slice keeps the temporary small
             img[z] += rng.standard_normal(shape[1:], dtype=np.float32) * np.float32(sigma)
+    if fov is not None:
+        img[:, _slice_radius(shape) > float(fov)] = np.float32(fov_value)
     np.clip(img, 0, 65535, out=img)
     np.rint(img, out=img)
     out = img.astype(np.uint16)
@@ -547,8 +578,9 @@ def _seg_dist(a, b, A, B):
     return segment_distance(a[:, None], b[:, None], A[None], B[None])
 
 
-def scene_random_packing(shape, n_rods: int = 100, radius: float = 3.0, aspect: float = 30.0,
-                         touching_fraction: float = 0.5, seed: int = 0, max_attempts: int = 20000) -> RodSet:
+def scene_random_packing(shape, n_rods: int = 100, radius=3.0, aspect: float = 30.0,
+                         touching_fraction: float = 0.5, seed: int = 0, max_attempts: int = 20000,
+                         fov_radius: float | None = None) -> RodSet:
     """Random straight rods, fully inside the volume, with about ``touching_fraction`` touching.
 
     Rods have axis length ``aspect * 2 radius`` and random orientations; every rod keeps a
@@ -559,6 +591,11 @@ def scene_random_packing(shape, n_rods: int = 100, radius: float = 3.0, aspect: 
 
     Random sequential placement saturates: 200 rods of aspect 30 and radius 3 (length 180) in
     256^3 is close to the limit (about 5 s); raise ``max_attempts`` or lower the count if it fails.
+
+    ``radius`` may be a pair ``(low, high)``: each rod then draws its own radius uniformly from
+    that range (mixed radii; the length is ``aspect`` times the mean diameter for every rod).
+    ``fov_radius`` (voxels) keeps every rod inside the cylinder of that radius about the slice
+    centre (the field of view of a reconstruction, see ``render_phantom(fov=...)``).
 
     Raises
     ------
@@ -571,40 +608,55 @@ def scene_random_packing(shape, n_rods: int = 100, radius: float = 3.0, aspect: 
         raise _fail(f"n_rods must be >= 1, got {n_rods}")
     if not (0.0 <= touching_fraction <= 1.0):
         raise _fail(f"touching_fraction must be in [0, 1], got {touching_fraction!r}")
-    r = float(radius)
-    L = float(aspect) * 2.0 * r
-    if not (r > 0 and L > 0):
-        raise _fail(f"radius and aspect must be positive, got radius={radius!r}, aspect={aspect!r}")
+    if np.ndim(radius) == 0:
+        r_lo = r_hi = float(radius)
+    else:
+        r_lo, r_hi = (float(v) for v in radius)
+    if not (0 < r_lo <= r_hi):
+        raise _fail(f"radius must be positive (or a range low <= high), got {radius!r}")
+    L = float(aspect) * (r_lo + r_hi)
+    if not L > 0:
+        raise _fail(f"aspect must be positive, got aspect={aspect!r}")
     shape_xyz = np.asarray(shape[::-1], dtype=np.float64)
     rng = np.random.default_rng(seed)
     A = np.zeros((0, 3))
     B = np.zeros((0, 3))
+    RR = np.zeros(0)
     touching = np.zeros(0, dtype=bool)
-    clear = 2.0 * r + 2.0  # axis distance for "clearly apart"
     K = 64  # candidates per batch
+    r = r_hi
+    centre_xy = 0.5 * (shape_xyz[:2] - 1.0)
 
     def random_dirs(k):
         v = rng.normal(size=(k, 3))
         return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
 
+    def in_fov(a, b):
+        if fov_radius is None:
+            return np.ones(len(a), bool)
+        lim = float(fov_radius) - r - _MARGIN  # the cylinder is convex: both ends inside suffice
+        return (np.linalg.norm(a[:, :2] - centre_xy, axis=1) <= lim) & \
+            (np.linalg.norm(b[:, :2] - centre_xy, axis=1) <= lim)
+
     def inside(a, b):
         lo = np.minimum(a, b) - r - _MARGIN
         hi = np.maximum(a, b) + r + _MARGIN
-        return np.all(lo >= -0.5, axis=1) & np.all(hi <= shape_xyz - 0.5, axis=1)
+        return np.all(lo >= -0.5, axis=1) & np.all(hi <= shape_xyz - 0.5, axis=1) & in_fov(a, b)
 
-    def try_free():
+    def try_free(rn):
         d = random_dirs(K)
         lo, hi = _centre_range(d.T, L, r, shape_xyz[:, None])
         lo, hi = lo.T, hi.T
         ok = np.all(hi >= lo, axis=1)
         c = lo + rng.random((K, 3)) * (hi - lo)
         a, b = c - 0.5 * L * d, c + 0.5 * L * d
-        if len(A):
-            ok &= np.all(_seg_dist(a, b, A, B) >= clear, axis=1)
+        ok &= in_fov(a, b)
+        if len(A):  # "clearly apart": surface gaps of at least 2 voxels
+            ok &= np.all(_seg_dist(a, b, A, B) >= RR[None] + rn + 2.0, axis=1)
         k = np.flatnonzero(ok)
         return None if k.size == 0 else (a[k[0]], b[k[0]], None)
 
-    def try_touch():
+    def try_touch(rn):
         if len(A) == 0:
             return None
         j = rng.integers(len(A), size=K)
@@ -616,7 +668,7 @@ def scene_random_packing(shape, n_rods: int = 100, radius: float = 3.0, aspect: 
         sn = np.linalg.norm(nrm, axis=1)
         ok = sn >= 0.3  # nearly parallel pairs would have an ill-defined contact point
         nrm = nrm / np.maximum(sn, 1e-12)[:, None] * np.where(rng.random(K) < 0.5, -1.0, 1.0)[:, None]
-        q = p + 2.0 * r * nrm
+        q = p + (RR[j] + rn)[:, None] * nrm
         c = q + rng.uniform(-0.4 * L, 0.4 * L, size=(K, 1)) * d
         a, b = c - 0.5 * L * d, c + 0.5 * L * d
         ok &= inside(a, b)
@@ -626,21 +678,23 @@ def scene_random_packing(shape, n_rods: int = 100, radius: float = 3.0, aspect: 
         dist = _seg_dist(a[k], b[k], A, B)
         own = dist[np.arange(k.size), j[k]].copy()
         dist[np.arange(k.size), j[k]] = np.inf
-        good = np.all(dist >= clear, axis=1) & (np.abs(own - 2.0 * r) <= 1e-9)
+        good = np.all(dist >= RR[None] + rn + 2.0, axis=1) & (np.abs(own - (RR[j[k]] + rn)) <= 1e-9)
         g = np.flatnonzero(good)
         return None if g.size == 0 else (a[k[g[0]]], b[k[g[0]]], int(j[k[g[0]]]))
 
     batches = max(1, int(max_attempts) // K)
     for k in range(n_rods):
         want_touch = touching_fraction > 0 and len(A) > 0 and touching.sum() < touching_fraction * (k + 1)
+        # a single radius draws nothing, so single-radius scenes stay as they were for a seed
+        rn = r_lo if r_hi == r_lo else float(rng.uniform(r_lo, r_hi))
         placed = None
         for _ in range(batches):
-            placed = try_touch() if want_touch else try_free()
+            placed = try_touch(rn) if want_touch else try_free(rn)
             if placed is not None:
                 break
         if placed is None:  # fall back to the other kind
             for _ in range(batches):
-                placed = try_free() if want_touch else try_touch()
+                placed = try_free(rn) if want_touch else try_touch(rn)
                 if placed is not None:
                     break
         if placed is None:
@@ -649,18 +703,213 @@ def scene_random_packing(shape, n_rods: int = 100, radius: float = 3.0, aspect: 
         a, b, j = placed
         A = np.vstack([A, a])
         B = np.vstack([B, b])
+        RR = np.append(RR, rn)
         touching = np.append(touching, j is not None)
         if j is not None:
             touching[j] = True
     dirs = B - A
     centres = 0.5 * (A + B)
-    rods = RodSet.from_straight(centres, dirs, L, r, n_vertices=2, units="voxel")
+    rods = RodSet.from_straight(centres, dirs, L, RR, n_vertices=2, units="voxel")
     # from_straight renormalises; put the exact end points back so touching gaps stay exact
     rods.points[0::2] = A
     rods.points[1::2] = B
-    return _finish(rods, scene="random_packing", n_rods=n_rods, radius=r, aspect=float(aspect),
+    return _finish(rods, scene="random_packing", n_rods=n_rods,
+                   radius=r_lo if r_lo == r_hi else [r_lo, r_hi], aspect=float(aspect),
                    touching_fraction=float(touching_fraction), seed=int(seed),
                    touching_rods=int(touching.sum()))
+
+
+def _polyline_gaps(poly, radius, placed, placed_r):
+    """Smallest surface gap between a polyline (n, 3) of ``radius`` and each placed polyline."""
+    from rodwarp.geometry import segment_distance
+
+    if not placed:
+        return np.zeros(0)
+    a, b = poly[:-1], poly[1:]
+    out = np.empty(len(placed))
+    for k, (q, rq) in enumerate(zip(placed, placed_r)):
+        d = segment_distance(a[:, None], b[:, None], q[None, :-1], q[None, 1:])
+        out[k] = float(d.min()) - radius - rq
+    return out
+
+
+def _polyline_inside(poly, radius, shape_xyz, margin=_MARGIN):
+    return bool(np.all(poly - radius - margin >= -0.5) and np.all(poly + radius + margin <= shape_xyz - 0.5))
+
+
+def _random_rotation(rng: np.random.Generator) -> np.ndarray:
+    m = rng.normal(size=(3, 3))
+    Q, Rm = np.linalg.qr(m)
+    Q = Q * np.sign(np.diag(Rm))
+    if np.linalg.det(Q) < 0:
+        Q[:, 0] = -Q[:, 0]
+    return Q
+
+
+def scene_bundles(shape, n_bundles: int = 8, sizes=(3, 5), radius: float = 3.0, length: float | None = None,
+                  stagger: float = 0.1, seed: int = 0, max_attempts: int = 20000) -> RodSet:
+    """Bundles of parallel straight rods touching side by side (gap 0), bundles apart.
+
+    Each bundle holds ``k`` rods (``k`` drawn uniformly from ``sizes``, inclusive) on the
+    closest-packed (triangular) lattice of spacing ``2 radius`` in its cross-section, so
+    neighbours in a bundle touch exactly; the rods are shifted along the common axis by up to
+    ``stagger`` times the length (ends not flush, as in a real bundle).  Bundles have random
+    orientations and positions, stay 2 voxels (surface gap) from each other and inside the
+    volume (2-voxel margin).  ``length`` defaults to 0.7 of the smallest volume side.
+    ``rods.contacts`` holds the truth contacts (the touching neighbours in each bundle).
+    """
+    from rodwarp.geometry import segment_distance
+
+    shape = _check_shape(shape)
+    shape_xyz = np.asarray(shape[::-1], dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    r = float(radius)
+    L = 0.7 * min(shape) if length is None else float(length)
+    k_lo, k_hi = int(sizes[0]), int(sizes[1])
+    if not (r > 0 and L > 0 and 1 <= k_lo <= k_hi <= 12):
+        raise _fail(f"bundles need radius > 0, length > 0 and 1 <= sizes <= 12, got {radius!r}, {length!r}, {sizes!r}")
+    # closest-packed lattice points ordered outward from the centre of the first triangle
+    ij = np.array([(i, j) for i in range(-4, 5) for j in range(-4, 5)], float)
+    lat = np.stack([ij[:, 0] + 0.5 * ij[:, 1], ij[:, 1] * math.sqrt(3) / 2], 1) * 2.0 * r
+    c0 = np.array([r, r / math.sqrt(3)])
+    order = np.lexsort((lat[:, 1], lat[:, 0], np.round(np.linalg.norm(lat - c0, axis=1), 6)))
+    lat = lat[order] - c0
+    A = np.zeros((0, 3))
+    B = np.zeros((0, 3))
+    bundle_of: list[int] = []
+    for nb in range(int(n_bundles)):
+        k = int(rng.integers(k_lo, k_hi + 1))
+        placed = False
+        for _ in range(max(1, int(max_attempts) // 50)):
+            Q = _random_rotation(rng)
+            u, e1, e2 = Q[:, 0], Q[:, 1], Q[:, 2]
+            off = lat[:k, 0:1] * e1 + lat[:k, 1:2] * e2
+            shift = rng.uniform(-stagger, stagger, k)[:, None] * L * u
+            ext = np.abs(u) * 0.5 * L * (1 + 2 * stagger) + np.abs(off).max(0) + r + _MARGIN
+            lo, hi = ext - 0.5, shape_xyz - 0.5 - ext
+            if np.any(hi < lo):
+                continue
+            c = lo + rng.random(3) * (hi - lo)
+            a = c + off + shift - 0.5 * L * u
+            b = c + off + shift + 0.5 * L * u
+            if not all(_polyline_inside(np.stack([p, q]), r, shape_xyz) for p, q in zip(a, b)):
+                continue
+            if len(A) and np.any(segment_distance(a[:, None], b[:, None], A[None], B[None]) < 2 * r + 2.0):
+                continue
+            A, B = np.vstack([A, a]), np.vstack([B, b])
+            bundle_of += [nb] * k
+            placed = True
+            break
+        if not placed:
+            raise _fail(f"could only place {nb} of {n_bundles} bundles (length {L:g}, radius {r:g}) in a volume "
+                        f"of shape {shape}; use fewer bundles, shorter rods or a bigger volume")
+    rods = RodSet.from_straight(0.5 * (A + B), B - A, L, r, n_vertices=2, units="voxel")
+    rods.points[0::2] = A
+    rods.points[1::2] = B
+    return _finish(rods, scene="bundles", n_bundles=int(n_bundles), sizes=[k_lo, k_hi], radius=r, length=L,
+                   seed=int(seed), bundle=[int(b) for b in bundle_of])
+
+
+def scene_arcs(shape, n_rods: int = 20, radius: float = 3.0, length: float | None = None,
+               curvature_radius=(2.0, 5.0), seed: int = 0, max_attempts: int = 5000) -> RodSet:
+    """Gently curved rods: circular arcs of axis length ``length`` (default 0.6 of the smallest side).
+
+    Each arc's radius of curvature is drawn uniformly from ``curvature_radius`` (in units of
+    the arc length); arcs lie in random planes, every pair keeps a surface gap of at least 2
+    voxels, and every arc stays inside the volume (2-voxel margin).  Arcs are polylines with a
+    vertex every voxel or so of arc length.
+    """
+    shape = _check_shape(shape)
+    shape_xyz = np.asarray(shape[::-1], dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    r = float(radius)
+    L = 0.6 * min(shape) if length is None else float(length)
+    polys: list[np.ndarray] = []
+    for n in range(int(n_rods)):
+        ok = False
+        for _ in range(int(max_attempts)):
+            Rc = float(rng.uniform(*curvature_radius)) * L
+            phi = L / Rc
+            nv = max(8, int(math.ceil(L)) + 1)
+            th = np.linspace(-0.5 * phi, 0.5 * phi, nv)
+            loc = np.stack([Rc * np.sin(th), Rc * (1.0 - np.cos(th)), np.zeros(nv)], 1)
+            loc -= loc.mean(0)
+            Q = _random_rotation(rng)
+            pts = loc @ Q.T
+            ext = np.abs(pts).max(0) + r + _MARGIN
+            lo, hi = ext - 0.5, shape_xyz - 0.5 - ext
+            if np.any(hi < lo):
+                continue
+            pts = pts + lo + rng.random(3) * (hi - lo)
+            if polys and _polyline_gaps(pts, r, polys, [r] * len(polys)).min() < 2.0:
+                continue
+            polys.append(pts)
+            ok = True
+            break
+        if not ok:
+            raise _fail(f"could only place {n} of {n_rods} arcs (length {L:g}, radius {r:g}) in a volume of shape "
+                        f"{shape}; use fewer or shorter arcs or a bigger volume")
+    rods = RodSet.from_polylines(polys, r, units="voxel")
+    return _finish(rods, scene="arcs", n_rods=int(n_rods), radius=r, length=L,
+                   curvature_radius=[float(v) for v in curvature_radius], seed=int(seed))
+
+
+def _wander(rng, shape_xyz, start, length, persistence, reach):
+    """A smooth random curve: a persistent random walk of unit steps, steered back from the faces."""
+    n = int(math.ceil(length))
+    p = np.array(start, float)
+    d = _random_direction(rng)
+    pts = [p.copy()]
+    mid = 0.5 * (shape_xyz - 1.0)
+    half = 0.5 * (shape_xyz - 1.0) - reach
+    for _ in range(n):
+        kick = rng.normal(size=3) * math.sqrt(2.0 / persistence)
+        kick -= (kick @ d) * d
+        d = d + kick
+        # steer away from the faces: a push that grows over the last ``reach`` voxels
+        w = (p - mid) / np.maximum(half, 1.0)
+        push = np.where(np.abs(w) > 0.7, -np.sign(w) * (np.abs(w) - 0.7) * 1.5, 0.0)
+        d = d + push
+        d /= np.linalg.norm(d)
+        p = p + d
+        pts.append(p.copy())
+    return np.array(pts)
+
+
+def scene_wire_tangle(shape, n_wires: int = 20, radius: float = 2.5, length=(150.0, 250.0),
+                      persistence: float = 60.0, seed: int = 0, max_attempts: int = 400) -> RodSet:
+    """A nest-like tangle of curved wires (smooth random curves) with truth.
+
+    Each wire is a persistent random walk (persistence length ``persistence`` voxels, so a
+    typical radius of curvature of that order) of length drawn from ``length``, kept inside
+    the volume (2-voxel margin); wires never overlap (surface gap >= 0: they may touch, and
+    cross above and below each other as in a nest).  Polylines with a vertex every 2 voxels.
+    """
+    shape = _check_shape(shape)
+    shape_xyz = np.asarray(shape[::-1], dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    r = float(radius)
+    reach = r + _MARGIN + 1.0
+    polys: list[np.ndarray] = []
+    for n in range(int(n_wires)):
+        ok = False
+        for _ in range(int(max_attempts)):
+            Lw = float(rng.uniform(*length))
+            start = reach + rng.random(3) * (shape_xyz - 1.0 - 2 * reach)
+            pts = _wander(rng, shape_xyz, start, Lw, persistence, reach)[::2]
+            if not _polyline_inside(pts, r, shape_xyz):
+                continue
+            if polys and _polyline_gaps(pts, r, polys, [r] * len(polys)).min() < 0.0:
+                continue
+            polys.append(pts)
+            ok = True
+            break
+        if not ok:
+            raise _fail(f"could only place {n} of {n_wires} wires in a volume of shape {shape}; "
+                        f"use fewer or shorter wires or a bigger volume")
+    rods = RodSet.from_polylines(polys, r, units="voxel")
+    return _finish(rods, scene="wire_tangle", n_wires=int(n_wires), radius=r,
+                   length=[float(v) for v in length], persistence=float(persistence), seed=int(seed))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -679,8 +928,12 @@ def truth_paths(path_tif) -> tuple[Path, Path]:
 
 
 def write_phantom(path_tif, volume: np.ndarray, rods: RodSet, contacts: Contacts | None = None,
-                  voxel_size: float | None = None, params: dict | None = None) -> dict:
+                  voxel_size: float | None = None, params: dict | None = None, z_thickness: int = 1) -> dict:
     """Write a phantom TIFF and its ground truth beside it, each atomically.
+
+    The TIFF records its voxel size (ImageJ resolution and spacing): ``voxel_size`` metres
+    for rods in metric units, else 1 um per voxel width (so that the slice spacing of
+    ``z_thickness`` voxel widths is on record); the truth is in voxel widths along every axis.
 
     Writes ``path_tif`` (multi-page, ZYX), ``<stem>_truth.npz`` (the rods in voxel units with
     ``contacts``) and ``<stem>_truth.json`` (``params``, seed and voxel size, shape, counts).
@@ -710,11 +963,16 @@ def write_phantom(path_tif, volume: np.ndarray, rods: RodSet, contacts: Contacts
     if voxel_size is not None:
         rv.attrs["voxel_size"] = float(voxel_size)
     npz, js = truth_paths(path_tif)
-    write_tiff(path_tif, vol)
+    m = 1e-6
+    if rods.units != "voxel" and voxel_size is not None:
+        from rodwarp.rodset import UNITS
+        m = float(voxel_size) * UNITS[rods.units]
+    write_tiff(path_tif, vol, voxel_size=(int(z_thickness) * m, m, m))
     rv.save(npz)
     meta = {"shape": list(vol.shape), "dtype": str(vol.dtype),
             "voxel_size": None if voxel_size is None else float(voxel_size),
             "seed": params.get("seed"), "n_rods": rv.n_rods, "n_contacts": len(contacts),
+            "voxel_size_zyx_m": [int(z_thickness) * m, m, m],
             "truth_rods": npz.name, "coordinates": "voxel units: x = column, y = row, z = slice; "
                                                    "voxel (0,0,0) centred at the origin",
             "params": params}

@@ -65,45 +65,13 @@ class ProtocolParams:
     entangle: bool = False
 
     def validate(self) -> None:
-        """Raise :class:`RodwarpError` (one line) for any impossible parameter."""
-        def bad(msg):
-            raise RodwarpError(msg)
+        """Raise :class:`RodwarpError` (one line) for any impossible, inconsistent or oversized
+        parameter, before any work (:func:`rodwarp.validation.check_protocol`); with
+        ``initial`` the input rods are loaded and checked, and ``alpha`` and ``length`` are
+        set from them."""
+        from rodwarp.validation import check_protocol
 
-        if not (self.alpha > 1 and math.isfinite(self.alpha)):
-            bad(f"--alpha must be > 1 (rod length over diameter), got {self.alpha:g}")
-        for name in ("freq", "entangle_freq"):
-            v = getattr(self, name)
-            if not (v >= 0 and math.isfinite(v)):
-                bad(f"--{name.replace('_', '-')} must be >= 0 Hz, got {v:g}")
-        for name in ("amplitude", "entangle_amplitude", "duration", "entangle_duration", "static_load"):
-            v = getattr(self, name)
-            if not (v >= 0 and math.isfinite(v)):
-                bad(f"--{name.replace('_', '-')} must be >= 0, got {v:g}")
-        if not (self.gravity > 0):
-            bad(f"--gravity must be > 0 m/s^2, got {self.gravity:g}")
-        if self.length <= 0:
-            bad(f"--length must be > 0 m, got {self.length:g}")
-        if self.vertices < 2:
-            bad(f"--vertices must be >= 2, got {self.vertices}")
-        if self.n_rods is not None and self.n_rods < 1:
-            bad(f"--n-rods must be >= 1, got {self.n_rods}")
-        if self.mu < 0:
-            bad(f"--mu must be >= 0, got {self.mu:g}")
-        if self.rod_model not in ("auto", "rigid", "elastic"):
-            bad(f"--rod-model must be auto, rigid or elastic, got '{self.rod_model}'")
-        if self.iterations < 1:
-            bad(f"--iterations must be >= 1, got {self.iterations}")
-        if self.save_every <= 0:
-            bad(f"--save-every must be > 0 s, got {self.save_every:g}")
-        if self.checkpoint_every <= 0:
-            bad(f"--checkpoint-every must be > 0 s, got {self.checkpoint_every:g}")
-        if self.dt is not None and not self.dt > 0:
-            bad(f"--dt must be > 0 s, got {self.dt:g}")
-        height = self.box[2] * self.length
-        if 2 * self.entangle_amplitude >= 0.5 * height or 2 * self.amplitude >= 0.5 * height:
-            bad(f"vibration amplitude does not fit the box (height {height:g} m); lower --amplitude")
-        if self.initial is not None and not Path(self.initial).exists():
-            bad(f"initial rod set not found: {self.initial}")
+        check_protocol(self)
 
     @property
     def diameter(self) -> float:
@@ -180,10 +148,13 @@ def _build(params: ProtocolParams, rods, device, rod_model: str):
     g_eff = params.gravity * (1.0 + 4.0 * params.static_load / math.pi)
     model = Model(rods, Material(params.young, params.density), gravity=(0.0, 0.0, -g_eff), mu=params.mu,
                   rod_model=rod_model, rolling=params.rolling, device=device)
+    bb = rods.bounding_box()
     if rods.box is not None:
-        lo, hi = np.asarray(rods.box[0], float), np.asarray(rods.box[1], float)
+        # the input's container, widened to its rods: rods lying on (or sunk into) the box's
+        # floor get the floor under their lowest point, never a floor above it
+        lo = np.minimum(np.asarray(rods.box[0], float), bb[0])
+        hi = np.maximum(np.asarray(rods.box[1], float), bb[1])
     else:  # an input without a container: the floor under its lowest point, walls around it
-        bb = rods.bounding_box()
         lo, hi = bb[0], bb[1]
     model.add_box(lo, hi + np.array([0, 0, 0.5 * params.length]), walls=("floor", *SIDE_WALLS), moving=True)
     return model, RodSolver(model, iterations=params.iterations), (lo, hi)
@@ -225,7 +196,7 @@ def _stages(params: ProtocolParams):
 
 
 def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resume: bool = False,
-                 thresholds=None) -> dict:
+                 overwrite: bool = False, thresholds=None) -> dict:
     """Run the whole experiment and write its outputs to ``outdir``.
 
     Writes ``summary.json`` (every parameter, seed, versions, device, dt, steps, wall time and
@@ -235,6 +206,9 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     ``snapshots.png``; checkpoints every ``checkpoint_every`` s of simulated time in
     ``checkpoints/``. With ``resume`` the run continues from the newest checkpoint and ends in
     the same final state, bit for bit on the CPU, as an uninterrupted run.
+
+    The run owns ``outdir`` through ``rodwarp-run.json`` (:mod:`rodwarp.rundir`): a folder
+    holding another run is refused unless ``overwrite`` (which removes the old outputs first).
 
     ``thresholds`` (:class:`rodwarp.verdict.Thresholds`, default the measured ones) set the
     stability verdict; summary.json records them with the rule.
@@ -252,10 +226,15 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     from rodwarp.packing import orientation_statistics, random_packing
     from rodwarp.rodset import load
 
+    from rodwarp import rundir
+    from rodwarp.validation import check_step_count, output_bytes
+
     params.validate()
     thresholds = thresholds or vd.DEFAULT_THRESHOLDS
     outdir = Path(outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
+    run = rundir.claim(outdir, "simulate", asdict(params), rundir.SIMULATE_OUTPUTS, resume=resume,
+                       overwrite=overwrite, resumable=any((outdir / "checkpoints").glob("ckpt_*.npz")),
+                       need_bytes=output_bytes(params))
     device = _warp.resolve_device(params.device)
     t_wall = time.perf_counter()
     ckdir = outdir / "checkpoints"
@@ -273,7 +252,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
                                f"repeat the original command with --resume")
         rods = load(outdir / "initial.npz")
     elif params.initial:
-        rods = load(params.initial, diameter=params.diameter)
+        rods = params._input_rods  # loaded, in metres, and checked by validate()
     else:
         rods = random_packing(params.rods, params.length, params.diameter, np.asarray(params.box) * params.length,
                               n_vertices=params.vertices, seed=params.seed, device=device)
@@ -289,6 +268,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     sim_rods = model.rods  # the simulated rods (two vertices per rod for rigid rods)
     stages = _stages(params)
     protocol_dt = _default_dt(params, model, solver)
+    check_step_count(params, params.dt or protocol_dt, "--dt" if params.dt else "the default step")
     control = None
 
     state = model.state()
@@ -426,7 +406,8 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
 
     verdict = vd.judge_rows(rows, pile_ref.time, thresholds).to_dict()
     summary = {
-        "alpha": params.alpha, "n_rods": model.n_rods, "freq": params.freq, "amplitude": params.amplitude,
+        "alpha": params.alpha, "diameter": params.diameter, "length": params.length,  # measured for --initial
+        "n_rods": model.n_rods, "freq": params.freq, "amplitude": params.amplitude,
         "gravity": params.gravity, "a_over_g": params.a_over_g, "static_load": params.static_load,
         "contacts_per_rod": contacts_per_rod(model.n_rods, c),
         "largest_cluster_fraction": verdict["largest_cluster_fraction"],
@@ -443,6 +424,8 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     _write_metrics(outdir / "metrics.csv", rows)
     write_json(outdir / "summary.json", summary)
     _plot_metrics(outdir / "metrics.png", rows, summary)
+    traj.finish()
+    run.complete()
     return summary
 
 

@@ -1,10 +1,13 @@
-"""CT segmentation on the CPU: straight rod centrelines, radii and contacts from a greyscale volume.
+"""CT segmentation on the CPU: rod centrelines, radii and contacts from a greyscale volume.
 
 The volume is indexed ``(z, y, x)`` = (slice, row, column); every point this module returns is
-``(x, y, z)`` in voxel units with the centre of voxel ``(0, 0, 0)`` at the origin.  Rods are
-assumed brighter than the background (steel in X-ray CT).
+``(x, y, z)`` in (working) voxel units with the centre of voxel ``(0, 0, 0)`` at the origin.
 
 Pipeline (:func:`segment_volume`; each stage is timed in ``SegmentResult.timings``):
+
+0. **prepare** (:mod:`rodwarp.segment_prep`) -- field-of-view mask, background trend (cupping,
+   rings), dark rods (negated, so that rods are brighter than the background from here on),
+   anisotropic voxels resampled onto an isotropic grid.
 
 1. **stats** -- a smoothed, strided sample of the volume gives an Otsu split; the (up to) four
    blocks with the most foreground give the background and foreground levels (medians far
@@ -17,8 +20,12 @@ Pipeline (:func:`segment_volume`; each stage is timed in ``SegmentResult.timings
    intensity-weighted centroid/line fits inside a cylinder of one radius around the current
    axis, then *marched*: the axis is extended block by block while a small disc on the axis
    stays filled, refitting as it grows.  Two rods lying side by side (whose skeleton runs
-   between them) are recognised by an elongated cross-section and split.  Foreground left
-   unexplained by the traced rods seeds a second round.
+   between them) are recognised by an elongated cross-section and split; a bundle of three or
+   more (a cross-section much shallower than it is wide) is split by fitting k blurred discs
+   to its greyscale cross-section (:mod:`rodwarp.segment_bundles`).  Foreground left
+   unexplained by the traced rods seeds a second round.  With ``shape="curved"`` (or
+   ``"auto"`` when the skeleton's long branches bend smoothly) filaments are traced as
+   polylines instead (:mod:`rodwarp.segment_curved`) and stages 3-5 are its own.
 3. **merge** -- collinear pieces of one rod (split by contacts, gaps or chunk borders) are
    pasted when the image shows the gap between them filled, and duplicate fits of one rod (an
    axis lying mostly within 0.75 r of another's: distinct rods keep theirs 2 r apart) become
@@ -31,11 +38,16 @@ Pipeline (:func:`segment_volume`; each stage is timed in ``SegmentResult.timings
    length the radius; each end is fitted to the intensity profile along the axis with the
    profile of a blurred capsule (or flat) end, sub-voxel.  Rounds repeat, for the rods that
    still move, until every end moves less than ``refine_tol``; pieces that converge onto one
-   rod are merged between rounds.
+   rod are merged between rounds.  With mixed radii (a broad distance-transform ridge, or a
+   spread of the rods' own radii) every rod keeps its own radius, in the output, the
+   acceptance tests and the contact gaps; the faint test compares a rod's plateau with what a
+   rod of its radius shows under the fitted blur, so thin rods are not rejected wholesale.
 5. **contacts** -- rod pairs whose surface gap ``|closest axis points| - r_i - r_j`` is below
    ``contact_tolerance`` and whose gap is filled with foreground in the image.
 
-Scoring helpers for synthetic volumes: :func:`match_rods` and :func:`score_contacts`.
+``SegmentResult.quality["flags"]`` says in words when the output should not be trusted.
+Scoring helpers for synthetic volumes: :func:`match_rods` and :func:`score_contacts` (and
+:func:`rodwarp.segment_score.match_polylines` for curved filaments).
 
 This module must not import warp.
 """
@@ -137,8 +149,11 @@ class SegmentParams:
         Rods whose axis intensity plateau (normalised) is below this are rejected.
     radius_range : tuple of float
         Rods whose own greyscale radius falls outside this range (x the global r) are rejected.
-    per_rod_radius : bool
-        Report each rod's own greyscale radius (noisier) instead of the global one.
+    per_rod_radius : bool or None
+        Give each rod its own greyscale radius (sub-voxel, from the intensity mass per unit
+        length) in the output, the contact gaps and the acceptance tests, instead of the
+        global one.  ``None``: when the radii are mixed (a broad distance-transform ridge, or
+        a robust spread of the rods' own radii above ``MIXED_RADIUS_CV``).
     chunk : int or None
         Detection runs on overlapping cubes of this edge (voxels) read one at a time; ``None``
         processes the whole volume at once.  The refinement reads only the voxels around each rod.
@@ -146,6 +161,19 @@ class SegmentParams:
         Overlap added on every side of a chunk; ``None``: ``max(4 smooth_sigma + 2, 3 r + 2)``.
     stats_block : int
         Edge of the blocks used for the level and coarse-radius statistics.
+    dark : bool or None
+        Rods darker than the background (grey values are negated first); ``None`` detects it
+        from the histogram (:mod:`rodwarp.segment_prep`).
+    fov : bool or None
+        Field-of-view mask (a constant outside the reconstruction circle): ``None`` detects
+        it, ``False`` never masks.
+    background : bool or None
+        Removal of the background trend about the rotation axis (cupping, rings): ``None``
+        when it exceeds half the noise, ``True`` always, ``False`` never.
+    shape : str
+        ``"straight"`` (straight rods, two vertices each), ``"curved"`` (filaments traced as
+        polylines, :mod:`rodwarp.segment_curved`) or ``"auto"`` (curved when the skeleton's
+        branches bend, see :func:`segment_volume`).
     """
 
     diameter: float | None = None
@@ -171,10 +199,14 @@ class SegmentParams:
     min_length: float = 4.0
     min_fill: float = 0.6
     radius_range: tuple = (0.6, 1.5)
-    per_rod_radius: bool = False
+    per_rod_radius: bool | None = None
     chunk: int | None = None
     chunk_halo: int | None = None
     stats_block: int = 96
+    dark: bool | None = None
+    fov: bool | None = None
+    background: bool | None = None
+    shape: str = "auto"
 
     def validate(self) -> None:
         def pos(name, v, allow_zero=False):
@@ -214,6 +246,11 @@ class SegmentParams:
             raise _fail(f"chunk must be an integer >= 16 voxels or None, got {self.chunk!r}")
         if self.chunk_halo is not None and (not isinstance(self.chunk_halo, (int, np.integer)) or self.chunk_halo < 0):
             raise _fail(f"chunk_halo must be a non-negative integer or None, got {self.chunk_halo!r}")
+        if self.shape not in ("straight", "curved", "auto"):
+            raise _fail(f"shape must be 'straight', 'curved' or 'auto', got {self.shape!r}")
+        for name in ("dark", "fov", "background"):
+            if getattr(self, name) not in (None, True, False):
+                raise _fail(f"segment parameter {name} must be true, false or None (detect), got {getattr(self, name)!r}")
         lo, hi = self.radius_range
         if not (0 <= lo < hi):
             raise _fail(f"radius_range must be (low, high) with 0 <= low < high, got {self.radius_range!r}")
@@ -235,7 +272,11 @@ class SegmentResult:
     timings : dict
         Seconds per stage (``stats``, ``detect``, ``merge``, ``refine``, ``contacts``, ``total``).
     quality : dict
-        Fit and detection figures (see :func:`segment_volume`).
+        Fit and detection figures (see :func:`segment_volume`); ``quality["flags"]`` lists, in
+        words, what makes the output untrustworthy (empty when nothing does).
+    spacing : float
+        Edge of the working voxel in the units of the ``voxel_size`` given (1 without one):
+        physical coordinates are ``rods.points * spacing``.
     """
 
     rods: RodSet
@@ -243,6 +284,7 @@ class SegmentResult:
     diameter: float
     timings: dict = field(default_factory=dict)
     quality: dict = field(default_factory=dict)
+    spacing: float = 1.0
 
 
 # ----------------------------------------------------------------------------------------------
@@ -497,6 +539,7 @@ class _Stats:
     threshold: float    # binarisation level of the smoothed image
     r0: float
     noise: float
+    mixed: bool = False  # radii spread widely (the distance-transform ridge is broad)
 
 
 def _otsu(values: np.ndarray) -> float:
@@ -505,6 +548,9 @@ def _otsu(values: np.ndarray) -> float:
 
 
 RIDGE_BIAS = 0.55
+#: interquartile range of the distance-transform ridge, relative to its median, above which
+#: the scan holds mixed radii (one radius: 0.06-0.11 on phantoms of radius 1.5-3; radii 2-5: 0.41)
+MIXED_RIDGE_SPREAD = 0.3
 
 
 def _global_stats(reader: _Reader, P: SegmentParams) -> _Stats:
@@ -616,8 +662,16 @@ def _global_stats(reader: _Reader, P: SegmentParams) -> _Stats:
         # the half-level surface of the blurred, smoothed rod lies about sigma^2 / 2r inside
         # it (coarse: calibrated on phantoms of radius 3 to 20, blur 1, smoothing 1 and 2)
         m = float(np.median(ridge))
+        q25, q75 = (float(v) for v in np.percentile(ridge, [25, 75]))
+        # one radius: the ridge spreads by about a voxel's aliasing (< 0.15 of the median);
+        # mixed radii: the coarse radius is the lower quartile's, so the thinner rods still
+        # fill the fitting discs
+        mixed = (q75 - q25) > MIXED_RIDGE_SPREAD * m
+        if mixed:
+            m = q25
         r0 = max(0.75, m + RIDGE_BIAS - 0.7 * (1.0 + P.smooth_sigma ** 2) / max(m, 1.0))
-    return _Stats(bg=bg, fg=fg, fg_smooth=fg_s, threshold=thr, r0=r0, noise=noise)
+    return _Stats(bg=bg, fg=fg, fg_smooth=fg_s, threshold=thr, r0=r0, noise=noise,
+                  mixed=bool(P.diameter is None and mixed))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -666,7 +720,7 @@ def _dp_split(q: np.ndarray, tol: float) -> list[tuple[int, int]]:
     return out
 
 
-def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=None):
+def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=None, quality=None):
     """Straight skeleton pieces, junction neighbourhoods removed: [(centre, dir, t0, t1, n)] (block xyz).
 
     ``cut_faces``: per axis (z, y, x) a pair of flags, True where the block face is interior to
@@ -713,6 +767,7 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
     deg = np.diff(csr.indptr)
     tol = max(1.5, 0.5 * r0)
     seeds = []
+    bend_stats = [0, 0, 0]
     for k in range(ncomp):
         mem = order[bounds[k]:bounds[k + 1]]
         if len(mem) < P.min_seed_voxels:
@@ -727,6 +782,20 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
             pos = {int(v): i for i, v in enumerate(mem)}
             ordered = np.array([pos[int(v)] for v in path if int(v) in pos])
             pieces = [ordered[a:b + 1] for a, b in _dp_split(q[ordered], tol)]
+        if len(mem) >= 8.0 * r0:  # for shape="auto": how much of the skeleton bends
+            # (a tolerance of a radius, at least 2 voxels: noise and thin rods wiggle less)
+            bend_stats[0] += len(mem)
+            pc2 = _dp_split(q[ordered], max(2.0, r0)) if len(pieces) > 1 else []
+            if len(pc2) > 1:
+                # a skeleton path from one straight rod into another (a crossing, an end on a
+                # side) is two chords meeting at a sharp corner; a curve needs more chords, or
+                # turns gently between two
+                d = np.array([q[ordered[b]] - q[ordered[a]] for a, b in pc2])
+                d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+                turn = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", d[1:], d[:-1]), -1.0, 1.0)))
+                if len(pc2) >= 3 or turn.max() < 20.0:
+                    bend_stats[1] += len(mem)
+                    bend_stats[2] += 1
         for idx_p in pieces:
             if len(idx_p) < P.min_seed_voxels:
                 continue
@@ -738,6 +807,10 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
             seeds.append((c, u, float(t.min()), float(t.max()), len(idx_p)))
     # longest first; ties broken by position (deterministic)
     seeds.sort(key=lambda s: (-(s[3] - s[2]), -s[4], tuple(np.round(s[0], 6))))
+    if quality is not None:
+        quality["_branch_voxels"] = quality.get("_branch_voxels", 0) + bend_stats[0]
+        quality["_bent_voxels"] = quality.get("_bent_voxels", 0) + bend_stats[1]
+        quality["_bent_branches"] = quality.get("_bent_branches", 0) + bend_stats[2]
     return seeds, len(idx), len(junc)
 
 
@@ -751,6 +824,8 @@ class _Tracer:
         self.fit_offs = _disc_offsets(max(r0, 1.0))
         self.probe_offs = _disc_offsets(max(0.5 * r0, 0.75))
         self.mom_offs = _disc_offsets(1.6 * r0 + 1.0)
+
+    mixed = False
 
     def _slices(self, c, u, ts, offs):
         e1, e2 = _basis(u)
@@ -848,7 +923,9 @@ class _Tracer:
         if res is None:
             return None
         c, u, t0, t1, fill = res
-        if fill < 0.4:
+        # a thinner rod fills less of the fitting disc: with mixed radii accept down to a
+        # quarter (a rod of half the coarse radius)
+        if fill < (0.25 if self.mixed else 0.4):
             return None
         c, u, t0, t1 = self.march(c, u, t0, t1, max_len, avoid)
         res = self.fit(c, u, t0, t1, P.fit_iterations, avoid)
@@ -871,11 +948,12 @@ def _lines_cover(lines, pt, radius):
 
 
 def _rasterize(lines, shape_zyx, origin_zyx, radius):
-    """Boolean block mask of voxels within ``radius`` of any segment."""
+    """Boolean block mask of voxels within ``radius`` (one value, or one per segment) of any segment."""
     cov = np.zeros(shape_zyx, bool)
     o = np.asarray(origin_zyx)
-    for p0, p1 in lines:
-        zyx, _, _, _ = _window_voxels(p0[::-1] - o, p1[::-1] - o, radius, shape_zyx)
+    rad = np.broadcast_to(np.asarray(radius, float), (len(lines),))
+    for (p0, p1), R in zip(lines, rad):
+        zyx, _, _, _ = _window_voxels(p0[::-1] - o, p1[::-1] - o, float(R), shape_zyx)
         if len(zyx):
             cov[zyx[:, 0], zyx[:, 1], zyx[:, 2]] = True
     return cov
@@ -891,16 +969,42 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Stats, P: SegmentParams, qua
     mask = g > level
     r0 = st.r0
     tr = _Tracer(g, origin_zyx, r0, P)
+    tr.mixed = st.mixed
     max_len = float(np.linalg.norm(raw.shape)) + 2.0
     lines: list[tuple[np.ndarray, np.ndarray]] = []
     cut = None
     if volume_shape is not None:
         cut = [(origin_zyx[a] > 0, origin_zyx[a] + raw.shape[a] < volume_shape[a]) for a in range(3)]
-    seeds, n_sk, n_j = _skeleton_seeds(mask, r0, P, cut)
+    seeds, n_sk, n_j = _skeleton_seeds(mask, r0, P, cut, quality)
     quality["skeleton_voxels"] = quality.get("skeleton_voxels", 0) + n_sk
     quality["skeleton_junctions"] = quality.get("skeleton_junctions", 0) + n_j
     quality["seeds"] = quality.get("seeds", 0) + len(seeds)
     o_xyz = np.asarray(origin_zyx, float)[::-1]
+    raw_s = []
+    r_kid = r0
+    kid_r: dict[int, float] = {}  # lines traced as rods of a bundle: their own radius
+
+    def cover_radius():
+        # a bundle's rods cover only themselves, so that one the fit missed is seeded again
+        return np.array([kid_r.get(i, r0) + 1.5 for i in range(len(lines))])
+
+    def _bundle_offsets(c, u, t0, t1):
+        """Offsets (k >= 3, 2) of the rods of a bundle around axis c, u, or None."""
+        nonlocal r_kid
+        from rodwarp.segment_bundles import cross_section, fit_discs, looks_bundled
+
+        if not raw_s:  # the raw block, normalised, sampled only once a bundle is suspected
+            raw_s.append(_BlockSampler((raw - np.float32(st.bg)) * np.float32(1.0 / (st.fg - st.bg)), origin_zyx))
+        e1, e2 = _basis(u)
+        img, g1 = cross_section(raw_s[0], c, u, e1, e2, t0, t1, 2.5 * r0 + 2.0, h=1.0)
+        if img is None or not looks_bundled(img, 1.0):
+            return None
+        fit = fit_discs(img, g1)
+        if fit is None or len(fit[0]) < 3:
+            return None
+        # the kids' own radius (a bundle's binarised outline inflates the coarse one)
+        r_kid = min(r0, max(0.75, fit[1]))
+        return fit[0]
 
     def run(seed_list):
         for c, u, t0, t1, _ in seed_list:
@@ -912,6 +1016,45 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Stats, P: SegmentParams, qua
             c2, u2, a, b, fill = res
             if b - a < 3.0 * r0:  # a rod crossed sideways is about 2 r long
                 continue
+            kids_xy = _bundle_offsets(c2, u2, a, b)
+            if kids_xy is not None:
+                # a bundle: one child per rod, fitted alternately, each ignoring its siblings
+                e1, e2 = _basis(u2)
+                kids = [(c2 + x * e1 + y * e2, u2, a, b) for x, y in kids_xy]
+
+                def kseg(kd):
+                    return (kd[0] + kd[2] * kd[1], kd[0] + kd[3] * kd[1])
+
+                def sibs(i_k):
+                    return [kseg(kd) for j, kd in enumerate(kids) if j != i_k and kd is not None]
+
+                # the children are traced with discs of their own radius
+                tk = _Tracer(g, origin_zyx, r_kid, P)
+                for rnd in range(2):
+                    for i_k in range(len(kids)):
+                        if kids[i_k] is not None:
+                            fk = tk.fit(*kids[i_k], P.fit_iterations, sibs(i_k))
+                            kids[i_k] = None if fk is None else fk[:4]
+                got = covered = 0
+                for i_k in range(len(kids)):
+                    if kids[i_k] is None:
+                        continue
+                    if _lines_cover(lines, kids[i_k][0], 0.75 * r_kid):
+                        covered += 1
+                        continue
+                    ch = tk.trace(*kids[i_k], max_len, sibs(i_k))
+                    if ch is None or ch[3] - ch[2] < 3.0 * r_kid or _lines_cover(lines, ch[0], 0.75 * r_kid):
+                        continue
+                    kids[i_k] = ch[:4]
+                    lines.append(kseg(kids[i_k]))
+                    kid_r[len(lines) - 1] = r_kid
+                    got += 1
+                if got:
+                    quality["bundles_split"] = quality.get("bundles_split", 0) + 1
+                    quality["bundle_rods"] = quality.get("bundle_rods", 0) + got
+                    continue
+                if covered:  # a bundle traced before, seen again: its middle is no rod
+                    continue
             mom = tr.moments(c2, u2, a, b)
             if mom is not None:
                 ev, evec = np.linalg.eigh(mom[0])
@@ -953,7 +1096,7 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Stats, P: SegmentParams, qua
 
     run([(s[0] + o_xyz, s[1], s[2], s[3], s[4]) for s in seeds])
     for _ in range(P.residual_passes):
-        cov = _rasterize(lines, mask.shape, origin_zyx, r0 + 1.5)
+        cov = _rasterize(lines, mask.shape, origin_zyx, cover_radius())
         resid = mask & ~cov
         resid = ndimage.binary_erosion(resid, iterations=1)
         lab, nlab = ndimage.label(resid, structure=np.ones((3, 3, 3)))
@@ -979,7 +1122,7 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Stats, P: SegmentParams, qua
         new.sort(key=lambda s: (-(s[3] - s[2]), -s[4], tuple(np.round(s[0], 6))))
         quality["residual_seeds"] = quality.get("residual_seeds", 0) + len(new)
         run(new)
-    cov = _rasterize(lines, mask.shape, origin_zyx, r0 + 1.5)
+    cov = _rasterize(lines, mask.shape, origin_zyx, cover_radius())
     quality["_fg"] = quality.get("_fg", 0) + int(mask.sum())
     quality["_fg_explained"] = quality.get("_fg_explained", 0) + int((mask & cov).sum())
     return lines
@@ -1152,7 +1295,7 @@ def _merge_lines(lines, r, angle_deg, dist, gap, dup_radius=0.75, dup_fraction=0
 # ----------------------------------------------------------------------------------------------
 
 class _Rod:
-    __slots__ = ("p0", "p1", "r", "plateau", "resid", "mass", "mass_r", "ok", "why", "prev")
+    __slots__ = ("p0", "p1", "r", "plateau", "resid", "mass", "mass_r", "ok", "why", "prev", "own_r")
 
     def __init__(self, p0, p1, r):
         self.p0 = np.asarray(p0, float)
@@ -1164,6 +1307,7 @@ class _Rod:
         self.mass_r = np.nan    # radius from the mass: sqrt(mass / (pi C))
         self.ok = True
         self.why = ""
+        self.own_r = False
 
     @property
     def length(self):
@@ -1209,6 +1353,7 @@ class _Refiner:
         self.st = st
         self.P = P
         self.C = 1.0          # fitted contrast (plateau) relative to fg - bg
+        self.mixed = False    # per-rod radii
         self.sigma = 1.0      # fitted blur
         self.r = r_glob       # global radius
         self.delta = None     # end offset
@@ -1295,7 +1440,10 @@ class _Refiner:
         dens = np.where(n_all > 0, math.pi * R * R / np.maximum(n_all, 1), 0.0)
         m_corr = m * dens
         area0 = math.pi * r * r * self.C
-        ok = (m_corr > 0.4 * area0) & (n_all > 0.3 * math.pi * R * R)
+        # until a rod has its own radius, a thin one in a scan of mixed radii holds less mass
+        # than the global radius promises
+        f_min = 0.15 if (self.st.mixed and not getattr(rod, "own_r", False)) else 0.4
+        ok = (m_corr > f_min * area0) & (n_all > 0.3 * math.pi * R * R)
         if ok.sum() < 3:
             rod.ok, rod.why = False, "no interior"
             return
@@ -1529,12 +1677,36 @@ def _gap_filler(reader, st, r):
     return filled
 
 
-def _check_rod(rod, r_glob, C, P):
-    """Mark a rod as failed when it is too short, too faint or of the wrong thickness."""
-    lo_r, hi_r = P.radius_range
-    if rod.ok and rod.length < P.min_length * r_glob:
+_LEVELS: dict = {}
+
+
+def _axis_level(r, sigma, rho_e):
+    """Mean of a unit-contrast blurred disc profile over the end-profile disc (the plateau a
+    rod of radius r shows under blur sigma; about 1 for thick rods, well below for thin ones)."""
+    key = (round(float(r), 2), round(float(sigma), 2), round(float(rho_e), 2))
+    if key not in _LEVELS:
+        rr = (np.arange(12) + 0.5) / 12 * rho_e
+        w = rr * _end_weight(rr, rho_e)
+        _LEVELS[key] = float((_blur_model(-np.inf, rr, r, sigma, n_r=24, n_th=32) * w).sum() / w.sum())
+    return _LEVELS[key]
+
+
+def _check_rod(rod, r_glob, C, P, sigma=None, mixed=False):
+    """Mark a rod as failed when it is too short, too faint or of the wrong thickness.
+
+    The faint test compares the axis plateau with what a rod of this radius shows under the
+    fitted blur (``min_fill`` of it), so thin rods are judged by their own standard, not by
+    the plateau of thick ones.  With mixed radii the length and radius tests use the rod's
+    own radius and a wide range (0.3 to 3 times the median radius).
+    """
+    lo_r, hi_r = P.radius_range if not mixed else (min(P.radius_range[0], 0.3), max(P.radius_range[1], 3.0))
+    r_own = rod.r if mixed else r_glob
+    if rod.ok and rod.length < P.min_length * r_own:
         rod.ok, rod.why = False, "short"
-    if rod.ok and np.isfinite(rod.plateau) and rod.plateau < P.min_fill * C:
+    expect = C
+    if sigma is not None:
+        expect = C * _axis_level(r_own, sigma, min(P.end_radius, max(0.5, 0.8 * r_own)))
+    if rod.ok and np.isfinite(rod.plateau) and rod.plateau < P.min_fill * expect:
         rod.ok, rod.why = False, "faint"
     if rod.ok and np.isfinite(rod.mass) and not (lo_r * r_glob <= math.sqrt(rod.mass / (math.pi * C)) <= hi_r * r_glob):
         rod.ok, rod.why = False, "radius"
@@ -1576,8 +1748,21 @@ def _refine(reader, st, P, lines, progress, quality, reasons):
             if r_given is None and masses:
                 ref.r = math.sqrt(float(np.median(masses)) / (math.pi * ref.C))
             ref.min_len = P.min_length * ref.r
+            # mixed radii: detected from the ridge, or from the spread of the rods' own radii
+            own = np.array([math.sqrt(rod.mass / (math.pi * ref.C)) for rod in rods
+                            if rod.ok and np.isfinite(rod.mass) and rod.mass > 0])
+            cv = 1.4826 * float(np.median(np.abs(own - np.median(own)))) / float(np.median(own)) if own.size >= 3 \
+                else 0.0
+            quality["radius_cv"] = cv
+            if P.per_rod_radius is None:
+                ref.mixed = r_given is None and (st.mixed or cv > MIXED_RADIUS_CV)
+            else:
+                ref.mixed = bool(P.per_rod_radius) and r_given is None
             for rod in rods:
                 rod.r = ref.r
+                if ref.mixed and np.isfinite(rod.mass) and rod.mass > 0:
+                    rod.r = float(np.clip(math.sqrt(rod.mass / (math.pi * ref.C)), 0.5, 3.0 * ref.r))
+                    rod.own_r = True
             ref.set_end_model(ref.r, ref.sigma, cap)
         nbl = _neighbours(rods, 2.0 * P.window_margin + 1.0)
         for k in sorted(active):
@@ -1586,7 +1771,10 @@ def _refine(reader, st, P, lines, progress, quality, reasons):
         n_refined += len(active)
         if it >= fit_it:
             for k in active:
-                _check_rod(rods[k], ref.r, ref.C, P)
+                _check_rod(rods[k], ref.r, ref.C, P, ref.sigma, ref.mixed)
+                if ref.mixed and rods[k].ok and np.isfinite(rods[k].mass) and rods[k].mass > 0:
+                    rods[k].r = float(np.clip(math.sqrt(rods[k].mass / (math.pi * ref.C)), 0.5, 3.0 * ref.r))
+                    rods[k].own_r = True
         moved = {}
         for k, rod in enumerate(rods):
             if k in active:
@@ -1620,7 +1808,7 @@ def _refine(reader, st, P, lines, progress, quality, reasons):
 # stage 5: contacts
 # ----------------------------------------------------------------------------------------------
 
-def _contacts(rods_out: RodSet, reader: _Reader, st: _Stats, C: float, P: SegmentParams):
+def _contacts(rods_out: RodSet, reader: _Reader, st: _Stats, C: float, P: SegmentParams, sigma=None):
     from rodwarp.geometry import detect_contacts, segment_closest_params
 
     cand = detect_contacts(rods_out, tolerance=P.contact_tolerance)
@@ -1654,7 +1842,9 @@ def _contacts(rods_out: RodSet, reader: _Reader, st: _Stats, C: float, P: Segmen
             continue
         val = (val - st.bg) * scale
         prof = val.reshape(len(ss), len(disc)).mean(1)
-        keep[k] = bool(prof.min() >= P.contact_min_fill)
+        # thin rods are dimmer under blur, and so is the contact between two of them
+        lv = 1.0 if sigma is None else min(1.0, _axis_level(min(ri, rj), sigma, min(P.end_radius, max(0.5, 0.8 * min(ri, rj)))))
+        keep[k] = bool(prof.min() >= P.contact_min_fill * lv)
     rejected = int((~keep).sum())
     return Contacts(cand.rod_i[keep], cand.rod_j[keep], cand.point[keep], cand.gap[keep]), rejected
 
@@ -1679,7 +1869,8 @@ def _chunks(shape, chunk, halo):
 
 
 def segment_volume(volume, params: SegmentParams | None = None,
-                   progress: Callable[[str, int, int], None] | None = None) -> SegmentResult:
+                   progress: Callable[[str, int, int], None] | None = None, *,
+                   voxel_size=None) -> SegmentResult:
     """Segment straight rods and their contacts from a greyscale CT volume.
 
     Parameters
@@ -1693,6 +1884,11 @@ def segment_volume(volume, params: SegmentParams | None = None,
     progress : callable(stage, done, total), optional
         Called as stages advance (``"stats"``, ``"detect"``, ``"merge"``, ``"refine"``,
         ``"contacts"``).
+    voxel_size : float or sequence of 3 floats, optional
+        Voxel edge (one value) or edges along (z, y, x), any unit.  Anisotropic volumes are
+        resampled onto an isotropic grid of the smallest edge first
+        (:mod:`rodwarp.segment_prep`); the result's coordinates are in units of that edge
+        (``SegmentResult.spacing``), with voxel (0, 0, 0) at the origin.
 
     Returns
     -------
@@ -1721,15 +1917,27 @@ def segment_volume(volume, params: SegmentParams | None = None,
         if progress is not None:
             progress(stage, done, total)
 
-    reader = _Reader(volume)
+    from rodwarp.segment_prep import _Corrected, prepare_volume
+
+    tic = time.perf_counter()
+    _Reader(volume)  # shape and dtype checks first, with their own messages
+    prep = prepare_volume(volume, voxel_size, dark=P.dark, fov=P.fov, background=P.background, quality=quality)
+    vol = prep.volume
+    if isinstance(vol, _Corrected) and isinstance(volume, np.ndarray):
+        vol = vol[:, :, :]  # in memory anyway: gathers from an array are much faster
+    reader = _Reader(vol)
+    timings["prepare"] = time.perf_counter() - tic
     tic = time.perf_counter()
     note("stats", 0, 1)
     st = _global_stats(reader, P)
     note("stats", 1, 1)
     timings["stats"] = time.perf_counter() - tic
+    noise = prep.notes.get("noise") or st.noise
     quality.update(background=st.bg, foreground=st.fg, threshold=st.threshold,
-                   cnr=(st.fg - st.bg) / st.noise if st.noise > 0 else float("inf"),
+                   cnr=(st.fg - st.bg) / noise if noise > 0 else float("inf"),
                    coarse_radius=st.r0)
+    if P.shape == "curved":
+        return _finish_curved(reader, st, P, quality, timings, t_all, prep, progress)
 
     # detection
     tic = time.perf_counter()
@@ -1746,6 +1954,15 @@ def segment_volume(volume, params: SegmentParams | None = None,
     fg_tot = quality.pop("_fg", 0)
     quality["foreground_explained"] = quality.pop("_fg_explained", 0) / fg_tot if fg_tot else 0.0
     quality["candidates"] = len(lines)
+    bv = quality.pop("_branch_voxels", 0)
+    quality["bend_fraction"] = quality.pop("_bent_voxels", 0) / bv if bv else 0.0
+    quality["bent_branches"] = quality.pop("_bent_branches", 0)
+    # (below a contrast-to-noise of 1.5 the skeleton of the noise itself bends: stay straight)
+    if P.shape == "auto" and quality["bend_fraction"] > AUTO_BEND_FRACTION and quality["bent_branches"] >= 3 \
+            and quality["cnr"] >= 1.5:
+        quality["shape"] = "curved"
+        return _finish_curved(reader, st, P, quality, timings, t_all, prep, progress)
+    quality["shape"] = "straight"
     if not lines:
         raise _fail(f"no rods found: {quality.get('seeds', 0)} skeleton seeds gave no rod-like "
                     f"fit (coarse radius {st.r0:.2f} voxels); {_HINT}")
@@ -1765,16 +1982,19 @@ def segment_volume(volume, params: SegmentParams | None = None,
         rods, ref = _refine(reader, st, P, lines, progress, quality, reasons)
         r_glob = ref.r
         C = ref.C
+        sigma_fit, mixed = ref.sigma, ref.mixed
     else:
         rods = [_Rod(a, b, st.r0) for a, b in lines]
         r_glob, C = st.r0, 1.0
+        sigma_fit, mixed = None, False
         for rod in rods:  # coarse ends run out to the half level of a cap: pull them back
             if P.end_model == "capsule":  # (0.55 r measured on phantoms, blur 1, smoothing 1)
                 u = _unit(rod.p1 - rod.p0)
                 if rod.length > 2 * r_glob:
                     rod.p0, rod.p1 = rod.p0 + 0.55 * r_glob * u, rod.p1 - 0.55 * r_glob * u
+    quality["per_rod_radius"] = bool(mixed)
     for rod in rods:
-        _check_rod(rod, r_glob, C, P)
+        _check_rod(rod, r_glob, C, P, sigma_fit, mixed)
         if not rod.ok:
             reasons[rod.why] = reasons.get(rod.why, 0) + 1
     good = [r for r in rods if r.ok]
@@ -1794,7 +2014,7 @@ def segment_volume(volume, params: SegmentParams | None = None,
     for rod in good:
         rod.mass_r = math.sqrt(rod.mass / (math.pi * C)) if np.isfinite(rod.mass) else np.nan
         polys.append(np.stack([rod.p0, rod.p1]))
-        radii.append(rod.mass_r if (P.per_rod_radius and np.isfinite(rod.mass_r)) else r_glob)
+        radii.append(rod.mass_r if (mixed and np.isfinite(rod.mass_r)) else r_glob)
         res.append(rod.resid)
         mr.append(rod.mass_r)
     out = RodSet.from_polylines(polys, np.asarray(radii), units="voxel")
@@ -1802,7 +2022,7 @@ def segment_volume(volume, params: SegmentParams | None = None,
     quality["radius_spread"] = float(np.nanstd(mr)) if np.any(np.isfinite(mr)) else float("nan")
 
     tic = time.perf_counter()
-    contacts, rej = _contacts(out, reader, st, C, P)
+    contacts, rej = _contacts(out, reader, st, C, P, sigma_fit)
     out.contacts = contacts
     quality["contacts_rejected_by_image"] = rej
     note("contacts", 1, 1)
@@ -1810,7 +2030,79 @@ def segment_volume(volume, params: SegmentParams | None = None,
     timings["total"] = time.perf_counter() - t_all
     out.attrs = {"source": "rodwarp.segment", "diameter_voxels": 2 * r_glob,
                  "params": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(P).items()}}
-    return SegmentResult(rods=out, contacts=contacts, diameter=2.0 * r_glob, timings=timings, quality=quality)
+    _flags(quality, "straight")
+    return SegmentResult(rods=out, contacts=contacts, diameter=2.0 * r_glob, timings=timings, quality=quality,
+                         spacing=prep.spacing)
+
+
+#: ``shape="auto"`` traces filaments when more than this share of the long skeleton branches
+#: (and at least 3 of them) bends smoothly away from its chord (straight packings: below 0.1,
+#: arcs and wires: above 0.5)
+AUTO_BEND_FRACTION = 0.3
+#: robust coefficient of variation of the rods' own radii above which radii are per rod
+#: (one radius at CNR 2-5: below 0.05)
+MIXED_RADIUS_CV = 0.1
+
+
+def _finish_curved(reader, st, P, quality, timings, t_all, prep, progress):
+    """The curved-filament path of :func:`segment_volume` (polylines, per-filament radii)."""
+    from rodwarp.geometry import detect_contacts
+    from rodwarp.segment_curved import _resample, trace_filaments
+
+    quality["shape"] = "curved"
+    tic = time.perf_counter()
+    raw = reader.read((0, 0, 0), reader.shape)
+    polys, radii = trace_filaments(raw, st, P, quality, progress)
+    timings["detect"] = timings.get("detect", 0.0) + time.perf_counter() - tic
+    if not polys:
+        raise _fail(f"no filaments found: {quality.get('branches', 0)} skeleton branches gave no filament longer "
+                    f"than {P.min_length:g} radii (coarse radius {st.r0:.2f} voxels); {_HINT}")
+    tic = time.perf_counter()
+    # vertices every 2 voxels (or the radius): enough for the curvature a skeleton resolves
+    step = max(2.0, 0.75 * st.r0)
+    polys = [_resample(p, step) for p in polys]
+    key = [tuple(np.round(p.mean(0), 3)[::-1]) for p in polys]
+    order = sorted(range(len(polys)), key=lambda k: key[k])
+    polys = [polys[k] for k in order]
+    radii = np.asarray(radii)[order]
+    out = RodSet.from_polylines(polys, radii, units="voxel")
+    contacts = detect_contacts(out, tolerance=P.contact_tolerance)
+    out.contacts = contacts
+    r_glob = float(np.median(radii))
+    quality["radius_spread"] = float(np.std(radii))
+    timings["contacts"] = time.perf_counter() - tic
+    timings["total"] = time.perf_counter() - t_all
+    out.attrs = {"source": "rodwarp.segment", "shape": "curved", "diameter_voxels": 2 * r_glob,
+                 "params": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(P).items()}}
+    _flags(quality, "curved")
+    return SegmentResult(rods=out, contacts=contacts, diameter=2.0 * r_glob, timings=timings, quality=quality,
+                         spacing=prep.spacing)
+
+
+def _flags(quality: dict, shape: str) -> None:
+    """Quality flags: short sentences naming what makes the output untrustworthy (empty: none)."""
+    flags = []
+    fe = quality.get("foreground_explained")
+    if fe is not None and fe < 0.9:
+        flags.append(f"only {100 * fe:.0f}% of the foreground lies near a traced rod: rods may be missing "
+                     f"(bundles, curved filaments: try --shape curved) or the background is uneven")
+    res = quality.get("fit_residual")
+    if res is not None and np.isfinite(res) and res > 0.75:
+        flags.append(f"mean fit residual {res:.2f} voxels: axes do not follow the image (curved rods? "
+                     f"try --shape curved)")
+    rej = quality.get("rods_rejected") or {}
+    n_rej = sum(v for k, v in rej.items() if k != "duplicate")
+    cand = quality.get("candidates") or 0
+    if cand and n_rej > 0.3 * cand:
+        why = ", ".join(f"{k} {v}" for k, v in sorted(rej.items()) if k != "duplicate")
+        flags.append(f"{n_rej} of {cand} candidates rejected ({why}): check --diameter and the contrast")
+    if shape == "straight" and quality.get("bend_fraction", 0.0) > 0.15:
+        flags.append(f"{100 * quality['bend_fraction']:.0f}% of the skeleton bends: the rods may be curved "
+                     f"(--shape curved)")
+    cnr = quality.get("cnr")
+    if cnr is not None and np.isfinite(cnr) and cnr < 1.5:
+        flags.append(f"contrast-to-noise {cnr:.1f} is below 1.5: expect missed rods and false contacts")
+    quality["flags"] = flags
 
 
 # ----------------------------------------------------------------------------------------------

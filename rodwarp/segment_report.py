@@ -168,7 +168,7 @@ def _mip(volume, axis: int, block: int = 64) -> np.ndarray:
 
 
 def write_outputs(outdir, result, volume, *, voxel_size: float, units: str, summary: dict,
-                  figures: bool = True) -> dict:
+                  figures: bool = True, grid_scale=None) -> dict:
     """Write every output of ``rodwarp segment`` and return the summary written.
 
     Parameters
@@ -180,9 +180,12 @@ def write_outputs(outdir, result, volume, *, voxel_size: float, units: str, summ
     volume : array-like (z, y, x)
         The scanned volume (for the QA figures).
     voxel_size, units
-        Scale of the outputs (see :func:`to_physical`).
+        Scale of the outputs (see :func:`to_physical`): the edge of the result's (working) voxel.
     summary : dict
         Extra fields (input, parameters, timings) merged into ``summary.json``.
+    grid_scale : (sx, sy, sz), optional
+        Input voxels per working voxel along x, y, z (an anisotropic scan was resampled): the
+        QA figures draw the rods over the input's slices.
     """
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
@@ -209,9 +212,16 @@ def write_outputs(outdir, result, volume, *, voxel_size: float, units: str, summ
         "quality": result.quality,
         "files": ["rods.npz", "rods.csv", "contacts.csv", "summary.json"],
     })
+    out["shape"] = result.quality.get("shape", "straight")
     if figures:
-        plot_qa_slices(outdir / "qa_slices.png", volume, rods_vox)
-        plot_qa_projection(outdir / "qa_projection.png", volume, rods_vox)
+        qa = rods_vox
+        if grid_scale is not None and not np.allclose(grid_scale, 1.0):
+            qa = rods_vox.copy()
+            qa.points = qa.points * np.asarray(grid_scale, float)
+            if qa.contacts is not None:
+                qa.contacts.point = qa.contacts.point * np.asarray(grid_scale, float)
+        plot_qa_slices(outdir / "qa_slices.png", volume, qa)
+        plot_qa_projection(outdir / "qa_projection.png", volume, qa)
         out["files"] += ["qa_slices.png", "qa_projection.png"]
     write_json(outdir / "summary.json", out)
     return out
@@ -223,7 +233,29 @@ def default_out(stack) -> Path:
     return p.parent / "segment"
 
 
-def run_segment(stack, *, voxel_size: float, units: str = "mm", diameter: float | None = None, out=None,
+def parse_voxel_size_text(text) -> tuple[float, float, float] | None:
+    """``"0.05"`` or ``"0.1,0.05,0.05"`` (z, y, x; commas or spaces) -> (dz, dy, dx); None stays None."""
+    from rodwarp.segment_prep import parse_voxel_size
+
+    if text is None:
+        return None
+    if isinstance(text, str):
+        parts = [t for t in text.replace(",", " ").split() if t]
+        try:
+            vals = [float(t) for t in parts]
+        except ValueError:
+            raise RodwarpError(f"--voxel-size must be one number or three (z,y,x), e.g. 0.05 or 0.1,0.05,0.05; "
+                               f"got '{text}'") from None
+        if not vals:
+            raise RodwarpError("--voxel-size is empty; give one number or three (z,y,x)")
+        text = vals
+    try:
+        return parse_voxel_size(text)
+    except RodwarpError as e:
+        raise RodwarpError(f"--voxel-size: {e}") from None
+
+
+def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: float | None = None, out=None,
                 chunk: int | None = None, contact_tolerance: float = 1.0, figures: bool = True,
                 progress: bool = False, params=None) -> dict:
     """Read a CT stack, segment it and write every output (the ``rodwarp segment`` command).
@@ -232,16 +264,19 @@ def run_segment(stack, *, voxel_size: float, units: str = "mm", diameter: float 
     ----------
     stack : path-like
         Multi-page TIFF, folder of slice TIFFs, or zarr array.
-    voxel_size : float
-        Voxel edge length in ``units``.
-    units : str
-        Unit of ``voxel_size``, ``diameter`` and every output length.
+    voxel_size : float, sequence of 3 floats, str or None
+        Voxel edge in ``units`` (one value), or edges along (z, y, x); a string ``"0.05"`` or
+        ``"0.1,0.05,0.05"``.  ``None``: read from the stack's metadata (ImageJ / OME-TIFF,
+        OME-Zarr, :func:`rodwarp.ctio.read_voxel_size`).
+    units : str, optional
+        Unit of ``voxel_size``, ``diameter`` and every output length; default ``mm`` (or, with
+        the voxel size from metadata, ``mm`` for voxels of 0.1 mm and more, else ``um``).
     diameter : float, optional
         Rod diameter in ``units``; estimated from the image when absent.
     chunk : int, optional
         Edge (voxels) of the overlapping chunks for volumes larger than memory.
     contact_tolerance : float
-        Largest surface gap counted as a contact, in voxels.
+        Largest surface gap counted as a contact, in (working) voxels.
     params : SegmentParams, optional
         Every other knob of the segmenter.
     """
@@ -251,22 +286,40 @@ def run_segment(stack, *, voxel_size: float, units: str = "mm", diameter: float 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from rodwarp import __version__
-    from rodwarp.ctio import open_volume_lazy
+    from rodwarp.ctio import open_volume_lazy, read_voxel_size
     from rodwarp.segment import SegmentParams, segment_volume
 
     t0 = time.perf_counter()
-    if units not in UNITS:
+    if units is not None and units not in UNITS:
         raise RodwarpError(f"unknown units '{units}'; use one of {', '.join(UNITS)}")
-    if not (np.isfinite(voxel_size) and voxel_size > 0):
-        raise RodwarpError(f"--voxel-size must be a positive number, got {voxel_size:g}")
     if diameter is not None and not (np.isfinite(diameter) and diameter > 0):
         raise RodwarpError(f"--diameter must be a positive number, got {diameter:g}")
     if chunk is not None and chunk < 16:
         raise RodwarpError(f"--chunk must be at least 16 voxels, got {chunk}")
     stack = Path(stack)
+    if isinstance(voxel_size, (int, float)) and not (np.isfinite(voxel_size) and voxel_size > 0):
+        raise RodwarpError(f"--voxel-size must be a positive number, got {voxel_size:g}")
+    vs = parse_voxel_size_text(voxel_size)
     volume = open_volume_lazy(stack)
+    source = "--voxel-size"
+    if vs is None:
+        md = read_voxel_size(stack)
+        if md is None:
+            raise RodwarpError(f"{stack} records no voxel size (no ImageJ/OME spacing metadata); pass --voxel-size "
+                               f"(one value, or three for z,y,x) and --units")
+        sizes_m, source = md
+        if units is None:
+            units = "mm" if min(sizes_m) >= 1e-4 else "um"
+        if units == "voxel":
+            vs = tuple(v / min(sizes_m) for v in sizes_m)
+        else:
+            vs = tuple(v / UNITS[units] for v in sizes_m)
+    units = units or "mm"
+    if units == "voxel" and source == "--voxel-size" and not np.allclose(vs, 1.0):
+        raise RodwarpError("with --units voxel the voxel size is 1 by definition; drop --voxel-size or pick m, mm, um")
     p = params or SegmentParams()
-    p = replace(p, diameter=None if diameter is None else diameter / voxel_size, chunk=chunk,
+    h = min(vs)
+    p = replace(p, diameter=None if diameter is None else diameter / h, chunk=chunk,
                 contact_tolerance=contact_tolerance)
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   disable=not progress) as bar:
@@ -277,21 +330,26 @@ def run_segment(stack, *, voxel_size: float, units: str = "mm", diameter: float 
                 tasks[stage] = bar.add_task(stage, total=total)
             bar.update(tasks[stage], completed=done, total=total)
 
-        result = segment_volume(volume, p, progress=cb)
+        result = segment_volume(volume, p, progress=cb, voxel_size=vs)
     outdir = Path(out) if out is not None else default_out(stack)
     summary = {
         "input": str(stack),
         "shape_zyx": list(volume.shape),
         "dtype": str(volume.dtype),
+        "voxel_size_zyx": list(vs),
+        "voxel_size_source": source,
         "parameters": asdict(p),
         "rodwarp_version": __version__,
         "out": str(outdir),
     }
-    s = write_outputs(outdir, result, volume, voxel_size=voxel_size, units=units, summary=summary, figures=figures)
+    spacing = result.spacing if units != "voxel" else 1.0
+    grid = (h / vs[2], h / vs[1], h / vs[0])
+    s = write_outputs(outdir, result, volume, voxel_size=spacing, units=units, summary=summary, figures=figures,
+                      grid_scale=grid)
     s["wall_time_s"] = time.perf_counter() - t0
     write_json(outdir / "summary.json", s)
     return s
 
 
-__all__ = ["run_segment", "default_out", "to_physical", "write_rods_csv", "write_contacts_csv", "plot_qa_slices", "plot_qa_projection",
+__all__ = ["run_segment", "parse_voxel_size_text", "default_out", "to_physical", "write_rods_csv", "write_contacts_csv", "plot_qa_slices", "plot_qa_projection",
            "write_outputs"]

@@ -161,11 +161,13 @@ def run_point(point: dict, outdir: str) -> dict:
         resume = (out / "checkpoints").is_dir() and any((out / "checkpoints").glob("ckpt_*.npz")) \
             and (out / "initial.npz").exists()
         try:
-            summary = run_protocol(params, out, progress=False, resume=resume)
+            # the point's folder belongs to the sweep: a fresh run replaces whatever it holds
+            summary = run_protocol(params, out, progress=False, resume=resume, overwrite=not resume)
         except RodwarpError:
             if not resume:
                 raise
-            summary = run_protocol(params, out, progress=False, resume=False)  # checkpoint of other parameters
+            # a checkpoint of other parameters, or of a finished run
+            summary = run_protocol(params, out, progress=False, resume=False, overwrite=True)
         opts = AnalyzeOptions(**{**point.get("_analyze", {}), "figures": False})
         dev = summary.get("device", "cpu")
         if opts.device == "cpu" and "device" not in point.get("_analyze", {}) and str(dev).startswith("cuda"):
@@ -189,6 +191,90 @@ def run_point(point: dict, outdir: str) -> dict:
             row["status"] += " | " + traceback.format_exc().replace("\n", " ")
     row["wall_s"] = time.perf_counter() - t0
     return row
+
+
+def check_points(pts: list[dict], *, local: bool) -> None:
+    """Validate every point's simulate parameters and analyze options before any cluster
+    starts; the first invalid point is refused with its id and the reason (one line).
+
+    ``local``: the points run on this machine, so the device must exist here too.
+    """
+    from rodwarp.analyze import AnalyzeOptions
+    from rodwarp.protocol import ProtocolParams
+
+    for p in pts:
+        kw = {k: v for k, v in p.items() if k != "id" and not k.startswith("_")}
+        if "box" in kw and isinstance(kw["box"], list):
+            kw["box"] = tuple(kw["box"])
+        try:
+            ProtocolParams(**kw).validate()
+            AnalyzeOptions(**{**p.get("_analyze", {}), "figures": False}).validate()
+        except RodwarpError as e:
+            bad = sum(1 for q in pts if _invalid(q))
+            raise RodwarpError(f"sweep point {p['id']} is invalid ({e}); invalid points: {bad} of {len(pts)}; "
+                               f"no point was run: fix the sweep's values") from None
+    if local and pts:
+        from rodwarp import _warp
+
+        _warp.resolve_device(pts[0]["device"])
+
+
+def _invalid(p: dict) -> bool:
+    from rodwarp.analyze import AnalyzeOptions
+    from rodwarp.protocol import ProtocolParams
+
+    kw = {k: v for k, v in p.items() if k != "id" and not k.startswith("_")}
+    if "box" in kw and isinstance(kw["box"], list):
+        kw["box"] = tuple(kw["box"])
+    try:
+        ProtocolParams(**kw).validate()
+        AnalyzeOptions(**{**p.get("_analyze", {}), "figures": False}).validate()
+    except RodwarpError:
+        return True
+    return False
+
+
+def _stop_http(dask_worker=None, dask_scheduler=None) -> None:
+    node = dask_worker or dask_scheduler
+    server = getattr(node, "http_server", None)
+    if server is not None:
+        server.stop()
+
+
+def _connect(address: str, timeout: float = 5.0):
+    """A Client of the scheduler at ``address``, or a one-line error within ``timeout`` s.
+
+    The TCP check of :func:`rodwarp.validation.check_scheduler` comes first; this catches a
+    port that accepts connections but does not speak Dask (a proxy, another service)."""
+    from distributed import Client
+
+    try:
+        return Client(address, timeout=f"{timeout:g}s")
+    except Exception as e:  # noqa: BLE001 - distributed raises OSError, TimeoutError, even MemoryError here
+        raise RodwarpError(f"--scheduler {address}: no Dask scheduler answers there within {timeout:g} s "
+                           f"({type(e).__name__}); start one with `dask scheduler` or check the address") from None
+
+
+def _local_cluster(n_workers: int):
+    """A LocalCluster of single-threaded worker processes on 127.0.0.1 with no HTTP server.
+
+    distributed always starts an HTTP server on the scheduler (port 8787: /metrics, /health,
+    /info even without a dashboard) and on each worker; a sweep on this machine needs none,
+    so no routes are mounted and the servers are stopped once the cluster is up.
+    """
+    import dask
+    from distributed import Client, LocalCluster
+
+    with dask.config.set({"distributed.scheduler.http.routes": [], "distributed.worker.http.routes": []}):
+        # a random loopback port (not 8787, which another cluster may hold) for the server
+        # that is stopped below
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, worker_dashboard_address=None,
+                               scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"})
+    client = Client(cluster)
+    _stop_http(dask_scheduler=cluster.scheduler)
+    client.run(_stop_http)
+    return cluster, client
 
 
 # --------------------------------------------------------------------------------------- CSV
@@ -296,13 +382,19 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
     Path
         ``out/results.csv``.
     """
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import as_completed
+
+    from rodwarp.validation import check_scheduler, output_location
 
     spec.validate()
+    pts = points(spec)
+    check_points(pts, local=not scheduler)
     out = Path(out)
+    output_location(out, "--out")
+    if scheduler:
+        scheduler = check_scheduler(scheduler)
     (out / "points").mkdir(parents=True, exist_ok=True)
     csv_path = out / "results.csv"
-    pts = points(spec)
     old = {r.get("id"): r for r in read_results(csv_path)}
     done, todo = [], []
     for p in pts:
@@ -333,11 +425,9 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
     if todo:
         cluster = None
         if scheduler:
-            client = Client(scheduler)
+            client = _connect(scheduler)
         else:
-            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                                   processes=True, host="127.0.0.1", dashboard_address=None)
-            client = Client(cluster)
+            cluster, client = _local_cluster(workers or os.cpu_count() or 1)
         bar = None
         try:
             futs = {}
@@ -364,6 +454,7 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
                     row["status"] = _one_line(e)
                 if row.get("status") != "ok":
                     failed += 1
+                    meta.setdefault("first_failure", f"{p['id']}: {row.get('status')}")
                 rows[p["id"]] = row
                 flush()
                 if bar is not None:

@@ -51,7 +51,8 @@ def main(argv=None):
             return
         cmd = [sys.executable, "-m", "rodwarp.cli", "simulate", "--alpha", f"{a:g}", "--freq", "10",
                "--entangle-duration", f"{args.entangle_duration:g}", "--duration", f"{args.duration:g}",
-               "--dt", repr(base[a] / k), "--device", "cpu", "--quiet", "--out", str(d)]
+               "--dt", repr(base[a] / k), "--device", "cpu", "--quiet", "--out", str(d),
+               "--overwrite"]  # the script owns its point folders (a finished one is skipped above)
         t = time.time()
         r = subprocess.run(cmd, capture_output=True, text=True)
         print(f"alpha={a:g} dt/{k:g}: {'ok' if r.returncode == 0 else r.stderr.strip()} ({time.time() - t:.0f} s)",

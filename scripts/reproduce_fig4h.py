@@ -47,8 +47,8 @@ def main(argv=None):
         cmd = [sys.executable, "-m", "rodwarp.cli", "simulate", "--alpha", f"{a:g}", "--freq", f"{f:g}",
                "--entangle-duration", f"{args.entangle_duration:g}", "--duration", f"{args.duration:g}",
                "--seed", str(args.seed), "--device", "cpu", "--quiet", "--out", str(d)]
-        if (d / "checkpoints").exists():
-            cmd.append("--resume")
+        # the script owns its point folders: continue a killed run, else replace what is there
+        cmd.append("--resume" if any((d / "checkpoints").glob("ckpt_*.npz")) else "--overwrite")
         t = time.time()
         r = subprocess.run(cmd, capture_output=True, text=True)
         status = "ok" if r.returncode == 0 else r.stderr.strip().splitlines()[-1]

@@ -46,8 +46,23 @@ def test_kill_and_resume_is_bit_exact(tmp_path):
     n = g.attrs["n_frames"]
     assert n >= 2 and np.all(np.isfinite(g["positions"][:n]))
 
+    # the killed run owns its folder: a new run there is refused, naming --resume; resuming
+    # with other parameters is refused (--resume continues only its own run)
+    r = run(out)
+    assert r.returncode == 2 and "holds an unfinished simulate run" in r.stderr and "--resume" in r.stderr
+    r = run(out, ["--resume", "--gravity", "0.6"])
+    assert r.returncode == 2 and "continues only its own run" in r.stderr and "gravity" in r.stderr
+    # temporaries a kill leaves behind are removed by the resumed run
+    (out / ".metrics.csv.k1ll3d.tmp").write_text("torn")
+    (out / "vtk" / ".frame_00002.vtp.k1ll3d.tmp").write_text("torn")
+
     r = run(out, ["--resume"])
     assert r.returncode == 0, r.stderr
+    assert not (out / ".metrics.csv.k1ll3d.tmp").exists() and not (out / "vtk" / ".frame_00002.vtp.k1ll3d.tmp").exists()
+    import json
+
+    m = json.loads((out / "rodwarp-run.json").read_text())
+    assert m["complete"] is True and m["resumed"] == 1
     a = load(ref / "final.npz")
     b = load(out / "final.npz")
     assert np.array_equal(a.points, b.points)

@@ -82,19 +82,28 @@ def test_sweep_local_cluster_resume_and_failure(tmp_path):
     meta = json.loads((out / "sweep.json").read_text())
     assert meta["submitted"] == 0 and meta["skipped"] == 4
 
-    # a larger grid in the same directory: one new point fails (alpha 1 is invalid), the
-    # others finish; the four finished points are not redone
-    spec2 = _spec(alphas=[1, 20, 30], freqs=[1, 10])
+    # a grid with an invalid point (alpha 1) is refused before any cluster starts: nothing run
+    from rodwarp.errors import RodwarpError
+
+    with pytest.raises(RodwarpError, match=r"sweep point alpha1_freq1_g0.5_F0_seed0 is invalid .*--alpha must be > 1"):
+        run_sweep(_spec(alphas=[1, 20, 30], freqs=[1, 10]), out, workers=2, progress=False)
+    assert read_results(path) == rows
+    assert json.loads((out / "sweep.json").read_text())["skipped"] == 4
+
+    # a larger grid in the same directory: the new points fail at run time (12 rods of alpha 3
+    # do not fit the box), the others finish; the four finished points are not redone
+    spec2 = _spec(alphas=[3, 20, 30], freqs=[1, 10])
     run_sweep(spec2, out, workers=2, progress=False)
     rows2 = {r["id"]: r for r in read_results(path)}
     assert len(rows2) == 6
     for r in rows:
         assert rows2[r["id"]] == r
     bad = [r for r in rows2.values() if r["status"] != "ok"]
-    assert len(bad) == 2 and all(float(r["alpha"]) == 1 for r in bad)
-    assert all("--alpha must be > 1" in r["status"] for r in bad)
+    assert len(bad) == 2 and all(float(r["alpha"]) == 3 for r in bad)
+    assert all("placed only" in r["status"] for r in bad)
     meta = json.loads((out / "sweep.json").read_text())
     assert meta["submitted"] == 2 and meta["skipped"] == 4 and meta["failed"] == 2
+    assert meta["first_failure"].startswith("alpha3_freq")
 
 
 def _synthetic(out):
@@ -145,3 +154,51 @@ def test_alpha_star_bounds():
     t = alpha_star(rows)[0]
     assert t["alpha_star"] is None and t["bracket_hi"] == 25 and "below" in t["note"]
     assert t["alpha_star_f"] is None and t["bracket_hi_f"] == 25 and "below" in t["note_f"]
+
+
+def test_sweep_command_exits_non_zero_when_a_point_fails(tmp_path):
+    # one point, alpha 3 (16 rods that do not fit the box): fails at run time; with or without
+    # figures the command exits 4 and names the failed point
+    from typer.testing import CliRunner
+
+    from rodwarp.cli import app
+
+    out = tmp_path / "sw"
+    res = CliRunner().invoke(app, ["sweep", "--alpha", "3", "--freq", "1", "--entangle-duration", "0.02", "--duration",
+                                   "0.02", "--save-every", "0.01", "--workers", "1", "--device", "cpu", "--no-figures",
+                                   "--quiet", "--out", str(out)])
+    assert res.exit_code == 4, res.output
+    err = [ln for ln in res.output.splitlines() if ln.startswith("error:")]
+    assert len(err) == 1 and "1 of 1 sweep points failed" in err[0] and "alpha3_freq1_g0.5_F0_seed0" in err[0]
+    assert read_results(out / "results.csv")[0]["status"].startswith("error: placed only")
+
+
+def test_local_cluster_serves_no_http(tmp_path):
+    # distributed starts an HTTP server (/metrics, /health, /info) on the scheduler and on every
+    # worker even without a dashboard; the sweep's local cluster stops them, so every port the
+    # cluster's processes listen on speaks Dask's protocol only
+    import socket
+
+    import psutil
+
+    from rodwarp.sweep import _local_cluster
+
+    cluster, client = _local_cluster(1)
+    try:
+        me = psutil.Process()
+        ports = {c.laddr.port for p in [me, *me.children(recursive=True)] for c in p.net_connections(kind="tcp")
+                 if c.status == psutil.CONN_LISTEN}
+        assert ports  # the scheduler, nanny and worker comms
+        for port in ports:
+            with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
+                s.settimeout(2)
+                s.sendall(b"GET /health HTTP/1.0\r\nHost: localhost\r\n\r\n")
+                try:
+                    reply = s.recv(16)
+                except (socket.timeout, ConnectionError):
+                    reply = b""
+            assert not reply.startswith(b"HTTP/"), f"port {port} answers HTTP"
+        assert client.submit(lambda x: x + 1, 1).result() == 2  # the cluster still works
+    finally:
+        client.close()
+        cluster.close()
