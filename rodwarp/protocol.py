@@ -273,7 +273,8 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
 
     state = model.state()
     other = State(model)
-    y0 = centroid_height(model, state)
+    floor0 = model.control().floor_height(0.0)
+    y0 = centroid_height(model, state, 0.0 if floor0 is None else floor0)
     pile_ref = None  # the pile at the start of the stability test (reference of h and rods left)
     rows: list = []
     steps = 0
@@ -414,7 +415,8 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         "height_kept": verdict["height_kept"], "persistence": verdict["persistence"],
         "rods_left": verdict["rods_left"], "stable": verdict["stable"], "thresholds": verdict["thresholds"],
         "stable_rule": verdict["rule"], "test_start": pile_ref.to_dict(),
-        "centroid_height_ratio": centroid_height(model, state) / y0,
+        "centroid_height_ratio": centroid_height(model, state, 0.0 if control.floor_height(state.time) is None
+                                                 else control.floor_height(state.time)) / y0,
         "max_penetration_over_d": max(r["max_penetration_over_d"] for r in rows),
         "rod_model": rule["rod_model"], "rod_model_rule": rule,
         "seed": params.seed, "device": device, "dt": dts, "steps": steps, "wall_time_s": wall,

@@ -141,16 +141,13 @@ def test_static_twist_of_a_clamped_rod_under_an_end_torque():
     assert abs(got - exact) / exact < 0.02
 
 
-@pytest.mark.parametrize("rod_model", MODELS)
-def test_rod_tipping_about_its_end_on_a_rough_floor(rod_model):
-    """Released from rest at 60 deg with its lower end on a floor it cannot slip on (mu = 1):
-    angular acceleration 3 g cos(phi) / (2 l) about that end."""
-    phi = math.radians(60.0)
-    L = 1.0
-    bottom = np.array([0.0, 0.0, R])
+def tipping_acceleration(rod_model, r, phi_deg=60.0, L=1.0):
+    """Angular acceleration of a rod released from rest at phi with its lower end on a floor
+    with mu = 1 (it cannot slip there), from its end-to-end angle over 0.03 s."""
+    phi = math.radians(phi_deg)
+    bottom = np.array([0.0, 0.0, r])
     top = bottom + L * np.array([math.cos(phi), 0.0, math.sin(phi)])
-    pts = np.linspace(bottom, top, 10)
-    rods = RodSet.from_polylines([pts], R)
+    rods = RodSet.from_polylines([np.linspace(bottom, top, 10)], r)
     model = Model(rods, STEEL, gravity=(0, 0, -G), mu=1.0, rod_contacts=False, rod_model=rod_model)
     model.add_plane((0, 0, 1), 0.0, mu=1.0, name="floor")
     solver = RodSolver(model, iterations=40, tolerance=0)
@@ -162,10 +159,24 @@ def test_rod_tipping_about_its_end_on_a_rough_floor(rod_model):
         angles.append(math.atan2(d[2], d[0]))
         ts.append(s.time)
 
-    dt = 2e-4
-    run(solver, model.state(), 0.03, dt, callback=cb)
-    t = np.array(ts)
-    ang = np.array(angles)
-    acc = -2 * np.polyfit(t, ang - phi, 2)[0]
-    exact = 3 * G * math.cos(phi) / (2 * L)
-    assert abs(acc - exact) / exact < 0.02
+    run(solver, model.state(), 0.03, 2e-4, callback=cb)
+    return -2 * np.polyfit(np.array(ts), np.array(angles) - phi, 2)[0]
+
+
+def test_rod_tipping_about_its_end_on_a_rough_floor():
+    """3 g cos(phi) / (2 l) about the end (inertia m l^2 / 3) for a thin rod. The rigid capsule
+    turns about the bottom of its end cap, an offset of r: exactly
+    g (l/2) cos(phi) / (l^2/12 + r^2/4 + (l/2)^2 + r^2 + l r sin(phi)), 2.5% below at
+    r = l/100 and 1.3% below at r = l/200; the elastic rod turns about its end vertex."""
+    phi, L = math.radians(60.0), 1.0
+    thin = 3 * G * math.cos(phi) / (2 * L)
+
+    def capsule(r):
+        return G * 0.5 * L * math.cos(phi) / (L**2 / 12 + r**2 / 4 + 0.25 * L**2 + r**2 + L * r * math.sin(phi))
+
+    elastic = tipping_acceleration("elastic", 0.01)
+    assert abs(elastic - thin) / thin < 0.02
+    for r in (0.01, 0.005):
+        rigid = tipping_acceleration("rigid", r)
+        assert abs(rigid - capsule(r)) / capsule(r) < 0.005
+    assert abs(rigid - thin) / thin < 0.02  # r = l / 200
