@@ -127,6 +127,7 @@ def simulate(
     density: float = typer.Option(7850.0, help="Density (kg/m^3)."),
     dt: Optional[float] = typer.Option(None, help="Time step (s); default from the scene's stability bound."),
     iterations: int = typer.Option(20, help="Most Gauss-Seidel sweeps per step (20: max overlap < 0.1 d in the default run)."),
+    step_safety: float = typer.Option(0.5, help="Adaptive step: the fastest rod crosses at most this fraction of a diameter per step (ignored with --dt)."),
     rod_model: str = typer.Option("auto", help="auto (rigid when the rods' self-weight sag is below 0.01 d), rigid or elastic."),
     rolling: bool = typer.Option(True, help="Rods spin about their axes; --no-rolling locks the spin (friction on the centreline only)."),
     save_every: float = typer.Option(0.1, help="Metrics and frame interval (s of simulated time)."),
@@ -149,7 +150,7 @@ def simulate(
         alpha=alpha, freq=freq, amplitude=amplitude, gravity=gravity, duration=duration,
         entangle_duration=entangle_duration, entangle_freq=entangle_freq, entangle_amplitude=entangle_amplitude,
         static_load=static_load, n_rods=n_rods, length=length, vertices=vertices, box=_parse_box(box), mu=mu,
-        young=young, density=density, dt=dt, iterations=iterations, rod_model=rod_model, rolling=rolling, save_every=save_every,
+        young=young, density=density, dt=dt, iterations=iterations, rod_model=rod_model, step_safety=step_safety, rolling=rolling, save_every=save_every,
         checkpoint_every=checkpoint_every, seed=seed, device=device, initial=str(initial) if initial else None,
         entangle=entangle,
     )

@@ -56,6 +56,7 @@ class ProtocolParams:
     dt: float | None = None
     iterations: int = 20
     rod_model: str = "auto"
+    step_safety: float = 0.5
     rolling: bool = True
     save_every: float = 0.1
     checkpoint_every: float = 1.0
@@ -280,7 +281,11 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     steps = 0
     dts: dict = {}
     stage_t0 = {}
-    start_stage, start_k = 0, 0
+    start_stage, start_j, mid_stage = 0, 0, False
+    # the adaptive step's memory: last step and fastest vertex (checkpointed: resume is bit-exact)
+    stepper = {"dt": None, "vmax": float(np.linalg.norm(state.velocities(), axis=1).max(initial=0.0))}
+    next_ck = params.checkpoint_every
+    last_info = None
     vtk_entries: list = []
     snaps = [("start", sim_rods.points.copy())]
     if ck is not None:
@@ -290,12 +295,15 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         pile_ref = vd.PileReference.from_dict(meta["pile_ref"]) if meta.get("pile_ref") else None
         steps = meta["steps"]
         stage_t0 = {k: float(v) for k, v in meta["stage_t0"].items()}
-        start_stage, start_k = meta["stage"], meta["k"]
+        start_stage, start_j, mid_stage = meta["stage"], meta["j"], meta["mid_stage"]
+        stepper = dict(meta["stepper"])
+        dts = meta["dts"]
+        next_ck = float(meta["next_ck"])
         vtk_entries = [tuple(e) for e in meta["vtk"]]
         for name in [s[0] for s in stages[:start_stage]]:
             if name == "entangle" and "after_entangle" in arrays:
                 snaps.append(("after entangling", arrays["after_entangle"]))
-        if start_k > 0:
+        if mid_stage:
             name, dur, amp, freq = stages[start_stage]
             control = stage_control(model, name, amp, freq, stage_t0[name])
         state.load_numpy({k[6:]: v for k, v in arrays.items() if k.startswith("state_")})
@@ -330,6 +338,8 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
             "max_penetration_over_d": max(0.0, -float(c.gap.min()) if len(c) else 0.0) / model.min_diameter,
             "friction_residual": inf.contact_residual if inf else 0.0,
             "iterations": inf.iterations if inf else 0,
+            "dt": inf.dt if inf else "",
+            "steps": steps,
             "n_contact_pairs": inf.n_contacts if inf else 0,
         })
         traj.write(frame, st.time, x)
@@ -339,14 +349,15 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         write_pvd(outdir / "trajectory.pvd", vtk_entries)
         frame += 1
 
-    def checkpoint(si, k):
+    def checkpoint(si, j, mid):
         arrays = {f"state_{key}": val for key, val in state.to_numpy().items()}
         for title, x in snaps:
             if title == "after entangling":
                 arrays["after_entangle"] = x
-        meta = {"stage": si, "k": k, "steps": steps, "y0": y0, "rows": rows,
+        meta = {"stage": si, "j": j, "mid_stage": mid, "steps": steps, "y0": y0, "rows": rows,
                 "pile_ref": pile_ref.to_dict() if pile_ref is not None else None, "stage_t0": stage_t0, "frame": frame,
-                "vtk": vtk_entries, "parameters": json.loads(json.dumps(asdict(params)))}
+                "vtk": vtk_entries, "parameters": json.loads(json.dumps(asdict(params))), "stepper": stepper,
+                "dts": dts, "next_ck": next_ck}
         save_checkpoint(ckdir, steps, arrays, meta)
         _write_metrics(outdir / "metrics.csv", rows)
 
@@ -361,40 +372,64 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
             if si < start_stage:
                 t_done += dur
                 continue
-            k0 = start_k if si == start_stage else 0
-            if k0 == 0:
+            j0 = start_j if si == start_stage else 0  # samples of this stage already taken
+            if si != start_stage or not mid_stage:
                 stage_t0[name] = state.time
                 control = stage_control(model, name, amp, freq, state.time)
+                dts[name] = {"steps": 0, "min": None, "max": None, "mean": None, "sum": 0.0}
+                next_ck = state.time + params.checkpoint_every
                 if name == "stability":
                     state.wall_impulse.zero_()
                     floor = control.floor_height(state.time)
                     pile_ref = vd.pile_reference(state.time, state.positions(), model.vertex_rod_np, model.mass_np,
                                                  model.n_rods, 0.0 if floor is None else floor,
                                                  float(np.max(rods.rod_lengths())), model.min_diameter)
-            dt = params.dt or protocol_dt
-            dts[name] = dt
-            n = int(round(dur / dt))
-            every = max(1, int(round(params.save_every / dt)))
-            ck_every = max(1, int(round(params.checkpoint_every / dt)))
-            bar.update(task, description=name, completed=t_done + k0 * dt)
-            if si == 0 and k0 == 0:
+            t_s0 = stage_t0[name]
+            t_end = t_s0 + dur
+            n_samples = max(1, int(math.ceil(dur / params.save_every - 1e-9)))
+            bar.update(task, description=name, completed=t_done + (state.time - t_s0))
+            if si == 0 and j0 == 0 and not mid_stage:
                 sample(name, state, None)
             t0 = time.perf_counter()
-            for k in range(k0, n):
+            steps0 = steps
+            j = j0 + 1
+            while j <= n_samples:
+                target = t_end if j == n_samples else t_s0 + j * params.save_every
+                dt = params.dt or solver.adaptive_dt(control, stepper["vmax"], stepper["dt"],
+                                                     safety=params.step_safety)
+                left = target - state.time
+                # reach the sample time exactly, in equal steps no longer than dt
+                n_left = max(1, int(math.ceil(left / dt - 1e-6)))
+                landing = n_left == 1
+                dt = left / n_left
                 info = solver.step(state, other, control, dt)
                 state, other = other, state
+                if landing:
+                    state.time = target
                 steps += 1
-                if (k + 1) % every == 0 or k == n - 1:
+                st = dts[name]
+                st["steps"] += 1
+                st["sum"] += dt
+                st["min"] = dt if st["min"] is None else min(st["min"], dt)
+                st["max"] = dt if st["max"] is None else max(st["max"], dt)
+                stepper["vmax"] = info.max_speed
+                stepper["dt"] = dt
+                last_info = info
+                if landing:
                     sample(name, state, info)
-                    rate = (k + 1 - k0) / max(time.perf_counter() - t0, 1e-9)
-                    bar.update(task, completed=t_done + (k + 1) * dt, rate=f"{rate:.0f} steps/s")
-                if (k + 1) % ck_every == 0 and k + 1 < n:
-                    checkpoint(si, k + 1)
+                    j += 1
+                    rate = (steps - steps0) / max(time.perf_counter() - t0, 1e-9)
+                    bar.update(task, completed=t_done + (state.time - t_s0), rate=f"{rate:.0f} steps/s")
+                if state.time >= next_ck - 1e-12 and j <= n_samples:
+                    next_ck += params.checkpoint_every
+                    checkpoint(si, j - 1, True)
             t_done += dur
+            dts[name]["mean"] = dts[name]["sum"] / max(dts[name]["steps"], 1)
             if name == "entangle":
                 snaps.append(("after entangling", state.positions()))
             if si + 1 < len(stages):
-                checkpoint(si + 1, 0)
+                next_ck = state.time + params.checkpoint_every
+                checkpoint(si + 1, 0, False)
 
     wall = time.perf_counter() - t_wall
     c = rod_contacts(model, state)

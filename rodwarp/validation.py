@@ -253,6 +253,7 @@ def check_protocol(p) -> None:
     if p.dt is not None:
         number("--dt", p.dt, gt=0, unit="s", hint="leave it out for the default step")
     integer("--iterations", p.iterations, ge=1, le=100_000)
+    number("--step-safety", p.step_safety, gt=0, le=4, hint="the fraction of a diameter the fastest rod may cross per step")
     if p.rod_model not in ("auto", "rigid", "elastic"):
         fail(f"--rod-model must be auto, rigid or elastic, got '{p.rod_model}'")
     number("--save-every", p.save_every, gt=0, unit="s")

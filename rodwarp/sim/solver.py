@@ -261,34 +261,62 @@ class RodSolver:
         v0 = 0.0 if m.rods.velocities is None else float(np.linalg.norm(m.rods.velocities, axis=1).max())
         return math.sqrt(2.0 * g * height) + control.drive.peak_speed + v0 + 1e-3
 
-    def contact_dt(self, control=None) -> float:
-        """Resolution bound of the contact model (s): a rod moving at the characteristic speed
-        crosses at most one diameter per step, so speculative contacts see every approach
-        and the linearised normals stay valid; and gravity alone moves a resting vertex by at
-        most 1% of a diameter per step (g dt^2 <= 0.01 d), which keeps frictional stacks from
-        creeping at the default Gauss-Seidel effort."""
+    def contact_dt(self, control=None, speed: float | None = None) -> float:
+        """Resolution bound of the contact model (s): a rod crosses at most one diameter per
+        step relative to the walls, so speculative contacts see every approach and the
+        linearised normals stay valid; and gravity alone moves a resting vertex by at most 1%
+        of a diameter per step (g dt^2 <= 0.01 d), which keeps frictional stacks from creeping.
+
+        ``speed`` (m/s) is the fastest vertex now; without it, the worst case of the scene
+        (free fall over its height, :meth:`characteristic_speed`), which holds whatever happens.
+        """
+        control = self._control(control)
         d = self.model.min_diameter
-        b = d / self.characteristic_speed(control)
+        if speed is None:
+            v = self.characteristic_speed(control)
+        else:
+            v = float(speed) + control.drive.peak_speed + 1e-3
+        b = d / v
         g = float(np.linalg.norm(self.model.gravity))
         if g > 0:
             b = min(b, math.sqrt(0.01 * d / g))
         return b
 
-    def max_stable_dt(self, bending: str | None = None, control=None) -> float:
-        """Stability bound of this scene for the chosen bending integration (s)."""
+    def max_stable_dt(self, bending: str | None = None, control=None, speed: float | None = None) -> float:
+        """Stability bound of this scene for the chosen bending integration (s), at ``speed``
+        (m/s) when given, else for the worst case (see :meth:`contact_dt`)."""
         mode = bending or self.bending
-        b = self.contact_dt(control)
+        b = self.contact_dt(control, speed)
         if mode == "explicit":
             b = min(b, self.explicit_bending_dt())
         return b
 
-    def default_dt(self, control=None, safety: float = 0.5) -> float:
+    def default_dt(self, control=None, safety: float = 0.5, speed: float | None = None) -> float:
         """Default step: ``safety`` x the stability bound, and at least 40 steps per drive period."""
         control = self._control(control)
-        dt = safety * self.max_stable_dt(control=control)
+        dt = safety * self.max_stable_dt(control=control, speed=speed)
         f = control.drive.frequency
         if f > 0:
             dt = min(dt, 1.0 / (40.0 * f))
+        return dt
+
+    def adaptive_dt(self, control, speed: float, previous: float | None = None, safety: float = 0.5,
+                    growth: float = 1.25) -> float:
+        """A step that follows the motion (s): :meth:`default_dt` at the current fastest
+        vertex speed, growing by at most ``growth`` per step (falling at once), so a resting
+        pile takes large steps and an impact small ones. Deterministic: the same state and
+        previous step give the same step.
+
+        Parameters
+        ----------
+        speed : float
+            Fastest vertex speed at the end of the last step (m/s), ``StepInfo.max_speed``.
+        previous : float, optional
+            The last step (s).
+        """
+        dt = self.default_dt(control, safety=safety, speed=speed)
+        if previous is not None and previous > 0:
+            dt = min(dt, growth * previous)
         return dt
 
     def theta_for(self, dt: float) -> float:
@@ -298,22 +326,25 @@ class RodSolver:
             return 0.0
         return 0.0 if dt <= 0.8 * self.explicit_bending_dt() else 1.0
 
-    def check_dt(self, dt: float, control=None) -> None:
-        """Refuse (or, with ``allow_unstable``, flag) a step above the stability bound."""
+    def check_dt(self, dt: float, control=None, speed: float | None = None) -> None:
+        """Refuse (or, with ``allow_unstable``, flag) a step above the stability bound (at
+        ``speed`` when given, see :meth:`contact_dt`)."""
         if not (dt > 0 and math.isfinite(dt)):
             raise RodwarpError(f"time step must be a positive number, got {dt}")
-        bound = self.max_stable_dt(control=control)
+        bound = self.max_stable_dt(control=control, speed=speed)
         if dt > bound:
             msg = (f"time step {dt:.3g} s exceeds this scene's stability bound {bound:.3g} s "
-                   f"({self._bound_reason(control)}); use dt <= {bound:.3g} s")
+                   f"({self._bound_reason(control, speed)}); use dt <= {bound:.3g} s")
             if not self.allow_unstable:
                 raise RodwarpError(msg + " or allow_unstable=True")
             warnings.warn(msg, stacklevel=3)
 
-    def _bound_reason(self, control=None) -> str:
-        if self.bending == "explicit" and self.explicit_bending_dt() < self.contact_dt(control):
+    def _bound_reason(self, control=None, speed=None) -> str:
+        if self.bending == "explicit" and self.explicit_bending_dt() < self.contact_dt(control, speed):
             return "explicit bending, 2/omega_max"
-        return "contact resolution, d_min / characteristic speed"
+        if speed is None:
+            return "contact resolution, d_min / characteristic speed"
+        return f"contact resolution, d_min / (fastest vertex {speed:.3g} m/s + drive speed)"
 
     # ------------------------------------------------------------------ profiling
     def _launch(self, stage: str, kernel, **kw) -> None:
@@ -370,7 +401,8 @@ class RodSolver:
         dev = m.device
         control = self._control(control)
         if check:
-            self.check_dt(dt, control)
+            if not (dt > 0 and math.isfinite(dt)):
+                raise RodwarpError(f"time step must be a positive number, got {dt}")
             if self._v_elastic is None:
                 e = self.energy(state_in)
                 self._v_elastic = math.sqrt(2.0 * (e["bending"] + e["stretching"] + e["twist"]) / m.total_mass())
@@ -397,6 +429,9 @@ class RodSolver:
         if sc[1] != 0.0:
             raise self._blowup(state_in, dt, theta, "non-finite velocity after the elastic predictor", control)
         vmax = float(sc[0])
+        if check:
+            # the guard follows the motion: the bound at the speeds this step starts from
+            self.check_dt(dt, control, speed=vmax)
 
         n_contacts = self.contacts.detect(state_in, state_out, vmax, dt) if m.rod_contacts and m.n_segments > 1 else 0
         state_out.contact_count = n_contacts
