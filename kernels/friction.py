@@ -35,7 +35,7 @@ contacts run one thread per rod.
 import warp as wp
 
 from rodwarp.kernels.narrowphase import any_perpendicular
-from rodwarp.kernels.structs import RodContacts, RodModel, StepParams, WallContacts, Walls
+from rodwarp.kernels.structs import ContactFrame, ContactSide, RodContacts, RodModel, StepParams, WallContacts, Walls
 
 wp.set_module_options({"enable_backward": False})
 
@@ -89,32 +89,45 @@ def coulomb_2d(u1: wp.float64, u2: wp.float64, w11: wp.float64, w12: wp.float64,
 
 
 @wp.func
-def solve_local(u: wp.vec3d, W: wp.mat33d, n: wp.vec3d, P: wp.vec3d, target: wp.float64, mu: wp.float64):
-    """The exact impulse of one contact: u the contact velocity with the current impulse P
-    applied, W the contact's mobility; returns the new impulse."""
-    uf = u - W * P  # the velocity this contact's impulse acts on
+def local_frame(W: wp.mat33d, n: wp.vec3d, target: wp.float64):
+    """The parts of a contact's local problem fixed within a step: mobility, tangent basis,
+    the mobility's entries in it, whether normal and tangent couple, the normal target."""
+    f = ContactFrame()
+    f.W = W
     e1 = any_perpendicular(n)
     e2 = wp.cross(n, e1)
+    f.e1 = e1
     Wn = W * n
     wnn = wp.dot(n, Wn)
+    f.k = wp.vec4d(wnn, wp.dot(e1, W * e1), wp.dot(e1, W * e2), wp.dot(e2, W * e2))
+    # coupling of normal and tangential parts (zero for an elastic contact at the segments' interiors)
+    f.coupled = int(wp.abs(wp.dot(e1, Wn)) + wp.abs(wp.dot(e2, Wn)) > wp.float64(1.0e-12) * wnn)
+    f.target = target
+    return f
+
+
+@wp.func
+def solve_local(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.float64):
+    """The exact impulse of one contact: u the contact velocity with the current impulse P
+    applied, ``f`` its :func:`local_frame`; returns the new impulse."""
+    wnn = f.k[0]
     if wnn <= F0:
         return P
-    w11 = wp.dot(e1, W * e1)
-    w12 = wp.dot(e1, W * e2)
-    w22 = wp.dot(e2, W * e2)
-    # coupling of normal and tangential parts (zero for an elastic contact at the segments' interiors)
-    coupled = wp.abs(wp.dot(e1, Wn)) + wp.abs(wp.dot(e2, Wn)) > wp.float64(1.0e-12) * wnn
+    W = f.W
+    uf = u - W * P  # the velocity this contact's impulse acts on
+    e1 = f.e1
+    e2 = wp.cross(n, e1)
     pn = wp.dot(P, n)
     pt = P - n * pn
     for it in range(2):
-        pn_new = wp.max(F0, (target - wp.dot(uf + W * pt, n)) / wnn)
-        c = uf + Wn * pn_new
-        q = coulomb_2d(wp.dot(c, e1), wp.dot(c, e2), w11, w12, w22, mu * pn_new)
+        pn_new = wp.max(F0, (f.target - wp.dot(uf + W * pt, n)) / wnn)
+        c = uf + (W * n) * pn_new
+        q = coulomb_2d(wp.dot(c, e1), wp.dot(c, e2), f.k[1], f.k[2], f.k[3], mu * pn_new)
         pt_new = e1 * q[0] + e2 * q[1]
         change = wp.abs(pn_new - pn) + wp.length(pt_new - pt)
         pn = pn_new
         pt = pt_new
-        if not coupled or change <= wp.float64(1.0e-9) * (pn + wp.length(pt)):
+        if f.coupled == 0 or change <= wp.float64(1.0e-9) * (pn + wp.length(pt)):
             break
     return n * pn + pt
 
@@ -126,26 +139,6 @@ def point_weights(w0: wp.float64, w1: wp.float64, c: wp.float64, s: wp.float64):
     q0 = (F1 - s) * w0 + s * c
     q1 = (F1 - s) * c + s * w1
     return q0, q1, (F1 - s) * q0 + s * q1
-
-
-@wp.struct
-class ContactSide:
-    """One rod's side of a contact: where the impulse acts and how the rod responds."""
-
-    i: int  # first vertex of the edge
-    rigid: int
-    s: wp.float64  # parameter on the edge
-    q0: wp.float64  # elastic: velocity change of the edge's ends per unit impulse
-    q1: wp.float64
-    t: wp.vec3d  # edge tangent at the start of the step
-    g: wp.vec3d  # elastic: t x (surface offset), the spin's lever
-    lever: wp.vec3d  # rigid: from the centre of mass to the point
-    arm0: wp.vec3d  # rigid: from the centre of mass to the two vertices
-    arm1: wp.vec3d
-    iinv: wp.mat33d  # rigid: inverse inertia tensor
-    im: wp.float64  # rigid: 1 / m
-    ispin: wp.float64  # inverse axial inertia of the edge
-    W: wp.mat33d  # mobility of the point (m / (N s))
 
 
 @wp.func
@@ -241,28 +234,46 @@ def rod_contact_sides(k: int, model: RodModel, x: wp.array(dtype=wp.vec3d), cont
     return a, b
 
 
-@wp.func
-def solve_rod_contact(
-    k: int,
+@wp.kernel
+def prepare_rod_contacts(
     model: RodModel,
     x: wp.array(dtype=wp.vec3d),
     contacts: RodContacts,
     tangent: wp.array(dtype=wp.vec3d),
     params: StepParams,
+    frames: wp.array(dtype=ContactFrame),
+):
+    """Per contact, once per step: its two sides, mobility, tangent basis and normal target."""
+    k = wp.tid()
+    if k >= contacts.count:
+        return
+    a, b = rod_contact_sides(k, model, x, contacts, tangent)
+    f = local_frame(a.W + b.W, contacts.normal[k], approach_target(contacts.gap[k], params))
+    f.a = a
+    f.b = b
+    frames[k] = f
+
+
+@wp.func
+def solve_rod_contact(
+    k: int,
+    model: RodModel,
+    contacts: RodContacts,
+    frames: wp.array(dtype=ContactFrame),
+    params: StepParams,
     v: wp.array(dtype=wp.vec3d),
     spin: wp.array(dtype=wp.float64),
 ):
     """Exact local solve of rod-rod contact k; returns the velocity change it caused (m/s)."""
-    a, b = rod_contact_sides(k, model, x, contacts, tangent)
-    W = a.W + b.W
-    u = side_velocity(a, v, spin, model.rest_length[a.i]) - side_velocity(b, v, spin, model.rest_length[b.i])
+    f = frames[k]
+    u = side_velocity(f.a, v, spin, model.rest_length[f.a.i]) - side_velocity(f.b, v, spin, model.rest_length[f.b.i])
     P = contacts.impulse[k]
-    P_new = solve_local(u, W, contacts.normal[k], P, approach_target(contacts.gap[k], params), params.mu)
+    P_new = solve_local(u, f, contacts.normal[k], P, params.mu)
     dP = P_new - P
-    side_apply(a, dP, v, spin)
-    side_apply(b, -dP, v, spin)
+    side_apply(f.a, dP, v, spin)
+    side_apply(f.b, -dP, v, spin)
     contacts.impulse[k] = P_new
-    return wp.length(W * dP)
+    return wp.length(f.W * dP)
 
 
 @wp.kernel
@@ -270,9 +281,8 @@ def solve_rod_contacts(
     ids: wp.array(dtype=wp.int32),
     use_ids: int,
     model: RodModel,
-    x: wp.array(dtype=wp.vec3d),
     contacts: RodContacts,
-    tangent: wp.array(dtype=wp.vec3d),
+    frames: wp.array(dtype=ContactFrame),
     params: StepParams,
     v: wp.array(dtype=wp.vec3d),
     spin: wp.array(dtype=wp.float64),
@@ -282,15 +292,13 @@ def solve_rod_contacts(
     k = wp.tid()
     if use_ids != 0:
         k = ids[k]
-    wp.atomic_max(residual, 0, solve_rod_contact(k, model, x, contacts, tangent, params, v, spin))
+    wp.atomic_max(residual, 0, solve_rod_contact(k, model, contacts, frames, params, v, spin))
 
 
 @wp.kernel
 def apply_rod_impulses(
-    model: RodModel,
-    x: wp.array(dtype=wp.vec3d),
     contacts: RodContacts,
-    tangent: wp.array(dtype=wp.vec3d),
+    frames: wp.array(dtype=ContactFrame),
     v: wp.array(dtype=wp.vec3d),
     spin: wp.array(dtype=wp.float64),
 ):
@@ -298,10 +306,9 @@ def apply_rod_impulses(
     k = wp.tid()
     if k >= contacts.count:
         return
-    a, b = rod_contact_sides(k, model, x, contacts, tangent)
     P = contacts.impulse[k]
-    side_apply_atomic(a, P, v, spin)
-    side_apply_atomic(b, -P, v, spin)
+    side_apply_atomic(frames[k].a, P, v, spin)
+    side_apply_atomic(frames[k].b, -P, v, spin)
 
 
 # ----------------------------------------------------------------------------- walls
@@ -390,7 +397,7 @@ def solve_rod_walls(
             c = contact_side(model, x, tangent, e, se, n * (-rr))
             u = side_velocity(c, v, spin, model.rest_length[e]) - walls.vel[p]
             P = contacts.impulse[k]
-            P_new = solve_local(u, c.W, n, P, approach_target(gap, params), walls.mu[p])
+            P_new = solve_local(u, local_frame(c.W, n, approach_target(gap, params)), n, P, walls.mu[p])
             dP = P_new - P
             side_apply(c, dP, v, spin)
             contacts.impulse[k] = P_new

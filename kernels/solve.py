@@ -10,7 +10,8 @@ import warp as wp
 
 from rodwarp.kernels.elastics import project_rod
 from rodwarp.kernels.friction import solve_rod_contact, solve_rod_walls
-from rodwarp.kernels.structs import RodContacts, RodFactors, RodModel, RodState, StepParams, WallContacts, Walls
+from rodwarp.kernels.structs import (ContactFrame, RodContacts, RodFactors, RodModel, RodState, StepParams,
+                                     WallContacts, Walls)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -25,6 +26,7 @@ def gauss_seidel_sequential(
     model: RodModel,
     state: RodState,
     contacts: RodContacts,
+    frames: wp.array(dtype=ContactFrame),
     walls: Walls,
     wall_contacts: WallContacts,
     factors: RodFactors,
@@ -42,7 +44,7 @@ def gauss_seidel_sequential(
         cres = F0
         sres = F0
         for k in range(contacts.count):
-            cres = wp.max(cres, solve_rod_contact(k, model, state.x, contacts, factors.tangent, params, v, spin))
+            cres = wp.max(cres, solve_rod_contact(k, model, contacts, frames, params, v, spin))
         for q in range(na):
             cres = wp.max(cres, solve_rod_walls(wall_contacts.active[q], model, state.x, factors.tangent, walls,
                                                 params, wall_contacts, v, spin))

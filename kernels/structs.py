@@ -78,6 +78,39 @@ class RodContacts:
 
 
 @wp.struct
+class ContactSide:
+    """One rod's side of a contact: where the impulse acts and how the rod responds."""
+
+    i: int  # first vertex of the edge
+    rigid: int
+    s: wp.float64  # parameter on the edge
+    q0: wp.float64  # elastic: velocity change of the edge's ends per unit impulse
+    q1: wp.float64
+    t: wp.vec3d  # edge tangent at the start of the step
+    g: wp.vec3d  # elastic: t x (surface offset), the spin's lever
+    lever: wp.vec3d  # rigid: from the centre of mass to the point
+    arm0: wp.vec3d  # rigid: from the centre of mass to the two vertices
+    arm1: wp.vec3d
+    iinv: wp.mat33d  # rigid: inverse inertia tensor
+    im: wp.float64  # rigid: 1 / m
+    ispin: wp.float64  # inverse axial inertia of the edge
+    W: wp.mat33d  # mobility of the point (m / (N s))
+
+
+@wp.struct
+class ContactFrame:
+    """What a rod-rod contact's local problem needs that does not change within a step."""
+
+    a: ContactSide
+    b: ContactSide
+    W: wp.mat33d  # mobility of the contact (both sides)
+    e1: wp.vec3d  # tangent basis (e2 = n x e1)
+    k: wp.vec4d  # (n W n, e1 W e1, e1 W e2, e2 W e2)
+    coupled: int  # W couples the normal and tangential parts
+    target: wp.float64  # lowest normal relative velocity (m/s)
+
+
+@wp.struct
 class WallContacts:
     gap: wp.array(dtype=wp.float64)  # vertex x wall; > 1e299 when out of reach
     impulse: wp.array(dtype=wp.vec3d)  # vertex x wall (N s)

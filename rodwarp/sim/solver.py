@@ -29,7 +29,7 @@ import warp as wp
 
 from rodwarp.errors import RodwarpError, SimulationBlowUp
 from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, solve
-from rodwarp.kernels.structs import RodFactors, StepParams, WallContacts, Walls
+from rodwarp.kernels.structs import ContactFrame, RodFactors, StepParams, WallContacts, Walls
 from rodwarp.sim.contacts import ContactPipeline
 from rodwarp.sim.model import Model
 from rodwarp.sim.state import State
@@ -176,6 +176,7 @@ class RodSolver:
         self._active = wp.zeros(max(model.n_rods, 1), dtype=wp.int32, device=d)
         self._n_active = wp.zeros(1, dtype=wp.int32, device=d)
         self._solve_out = wp.zeros(3, dtype=wp.float64, device=d)
+        self._frames = wp.empty(max(16, 4 * model.n_segments), dtype=ContactFrame, device=d)
         # sequential devices run the whole solve in one launch (same order, no launch overhead)
         self.fused = (not self.coloring) and not wp.get_device(model.device).is_cuda
         self.last_info: StepInfo | None = None
@@ -331,6 +332,11 @@ class RodSolver:
         ``speed`` when given, see :meth:`contact_dt`)."""
         if not (dt > 0 and math.isfinite(dt)):
             raise RodwarpError(f"time step must be a positive number, got {dt}")
+        control = self._control(control)
+        if speed is not None and not self._can_touch(control):
+            # nothing to touch: the contact bound does not apply, only explicit bending's
+            if self.bending != "explicit" or dt <= self.explicit_bending_dt():
+                return
         bound = self.max_stable_dt(control=control, speed=speed)
         if dt > bound:
             msg = (f"time step {dt:.3g} s exceeds this scene's stability bound {bound:.3g} s "
@@ -338,6 +344,11 @@ class RodSolver:
             if not self.allow_unstable:
                 raise RodwarpError(msg + " or allow_unstable=True")
             warnings.warn(msg, stacklevel=3)
+
+    def _can_touch(self, control) -> bool:
+        """Whether any contact is possible: rod-rod contacts on, or a wall in place."""
+        m = self.model
+        return (m.rod_contacts and m.n_segments > 1) or bool(len(m.planes) and control.walls_in_place())
 
     def _bound_reason(self, control=None, speed=None) -> str:
         if self.bending == "explicit" and self.explicit_bending_dt() < self.contact_dt(control, speed):
@@ -447,9 +458,13 @@ class RodSolver:
         params.warm = wp.float64(self.warm_start)
 
         if n_contacts:
+            if self._frames.shape[0] < n_contacts:
+                self._frames = wp.empty(2 * n_contacts, dtype=ContactFrame, device=dev)
+            self._launch("friction", friction.prepare_rod_contacts, dim=n_contacts, device=dev, inputs=[
+                m.arrays, state_in.x, contacts, f.tangent, params, self._frames])
             self.contacts.warm_start(state_in, state_out, n_contacts, self.warm_start)
             self._launch("friction", friction.apply_rod_impulses, dim=n_contacts, device=dev, inputs=[
-                m.arrays, state_in.x, contacts, f.tangent, state_out.v, state_out.spin])
+                contacts, self._frames, state_out.v, state_out.spin])
             if self.coloring:
                 self.contacts.color(state_out, n_contacts)
 
@@ -478,7 +493,7 @@ class RodSolver:
         if self.fused:
             self._launch("solve", solve.gauss_seidel_sequential, dim=1, device=dev, inputs=[
                 self.iterations, wp.float64(self.tolerance), wp.float64(self.length_tolerance), m.arrays, rs_in,
-                contacts, walls, wc, f, params, state_out.v, state_out.spin, self._solve_out])
+                contacts, self._frames, walls, wc, f, params, state_out.v, state_out.spin, self._solve_out])
             res, sres, used = (float(x) for x in self._solve_out.numpy())
             used = int(used)
         else:
@@ -532,7 +547,7 @@ class RodSolver:
                 self._residual.zero_()
                 self._sresidual.zero_()
             if n_contacts:
-                args = [m.arrays, rs_in.x, contacts, f.tangent, params, state_out.v, state_out.spin, self._residual]
+                args = [m.arrays, contacts, self._frames, params, state_out.v, state_out.spin, self._residual]
                 if self.coloring:
                     for c0, c1 in self.contacts.color_ranges:
                         self._launch("friction", friction.solve_rod_contacts, dim=c1 - c0, device=dev,
