@@ -234,6 +234,20 @@ def rod_contact_sides(k: int, model: RodModel, x: wp.array(dtype=wp.vec3d), cont
     return a, b
 
 
+@wp.func
+def relaxed(P_new: wp.vec3d, P: wp.vec3d, n: wp.vec3d, mu: wp.float64, relax: wp.float64):
+    """P + relax (P_new - P), projected back onto the friction cone (relax = 1: P_new)."""
+    if relax == F1:
+        return P_new
+    R = P + (P_new - P) * relax
+    pn = wp.max(wp.dot(R, n), F0)
+    pt = R - n * wp.dot(R, n)
+    lt = wp.length(pt)
+    if lt > mu * pn and lt > F0:
+        pt = pt * (mu * pn / lt)
+    return n * pn + pt
+
+
 @wp.kernel
 def prepare_rod_contacts(
     model: RodModel,
@@ -268,7 +282,8 @@ def solve_rod_contact(
     f = frames[k]
     u = side_velocity(f.a, v, spin, model.rest_length[f.a.i]) - side_velocity(f.b, v, spin, model.rest_length[f.b.i])
     P = contacts.impulse[k]
-    P_new = solve_local(u, f, contacts.normal[k], P, params.mu)
+    n = contacts.normal[k]
+    P_new = relaxed(solve_local(u, f, n, P, params.mu), P, n, params.mu, params.relax)
     dP = P_new - P
     side_apply(f.a, dP, v, spin)
     side_apply(f.b, -dP, v, spin)
@@ -397,7 +412,8 @@ def solve_rod_walls(
             c = contact_side(model, x, tangent, e, se, n * (-rr))
             u = side_velocity(c, v, spin, model.rest_length[e]) - walls.vel[p]
             P = contacts.impulse[k]
-            P_new = solve_local(u, local_frame(c.W, n, approach_target(gap, params)), n, P, walls.mu[p])
+            P_new = relaxed(solve_local(u, local_frame(c.W, n, approach_target(gap, params)), n, P, walls.mu[p]), P, n,
+                            walls.mu[p], params.relax)
             dP = P_new - P
             side_apply(c, dP, v, spin)
             contacts.impulse[k] = P_new

@@ -165,3 +165,4 @@ class StepParams:
     max_push: wp.float64  # largest separation speed an overlap may cause (m/s)
     contact_distance: wp.float64  # base speculative margin (m)
     warm: wp.float64  # fraction of last step's impulses reused
+    relax: wp.float64  # over-relaxation of each contact's impulse update (1: plain Gauss-Seidel)

@@ -223,7 +223,7 @@ def stack_run(iterations, duration=0.12):
 def test_too_few_iterations_in_a_tall_stack_show_in_the_contact_residual():
     # 12 crossed layers of steel rods (d = 1 cm) on the floor. With one sweep per step the
     # contact solve does not converge: the stack first sinks, then springs apart (rods lifted
-    # by more than a diameter). The engine raises nothing for this (see the xfail below);
+    # by 0.3 d with over-relaxed sweeps, more than a diameter without). The engine raises nothing for this (see the xfail below);
     # what reports it is StepInfo.contact_residual, 10x the 40-iteration residual.
     d = 0.01
     _, infos1, lift1, err1 = stack_run(1)
@@ -231,7 +231,7 @@ def test_too_few_iterations_in_a_tall_stack_show_in_the_contact_residual():
     assert err40 is None and max(lift40) < 0.05 * d  # the default effort holds the stack
     res1 = max(i.contact_residual for i in infos1)
     res40 = max(i.contact_residual for i in infos40)
-    assert max(lift1) > 0.5 * d  # the failure is real
+    assert max(lift1) > 0.2 * d  # the failure is real
     assert res1 > 0.1 and res1 > 10 * res40  # and visible in the reported residual
 
 
@@ -239,7 +239,7 @@ def test_too_few_iterations_in_a_tall_stack_show_in_the_contact_residual():
                                        "(contact_residual is reported, never checked)")
 def test_unconverged_stack_that_springs_apart_raises():
     _, infos1, lift1, err1 = stack_run(1)
-    assert max(lift1) > 0.5 * 0.01
+    assert max(lift1) > 0.2 * 0.01
     assert err1 is not None
 
 

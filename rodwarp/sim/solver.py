@@ -87,6 +87,9 @@ class RodSolver:
         Overlap left alone, in units of the smallest diameter: a resting contact is not
         pushed apart, so its velocity problem repeats from step to step, warm starting holds
         and the sweep converges.
+    relax : float
+        Over-relaxation of each contact's impulse update (successive over-relaxation; 1 is
+        plain Gauss-Seidel), the relaxed impulse projected back onto the friction cone.
     penetration_limit : float
         A step whose deepest rod overlap exceeds this fraction of the smallest diameter
         raises :class:`SimulationBlowUp`.
@@ -115,6 +118,7 @@ class RodSolver:
         warm_start: float = 1.0,
         baumgarte: float = 0.5,
         slop: float = 0.01,
+        relax: float = 1.5,
         penetration_limit: float = 0.25,
         speed_limit: float | None = None,
         allow_unstable: bool = False,
@@ -139,6 +143,7 @@ class RodSolver:
         self.warm_start = float(warm_start)
         self.baumgarte = float(baumgarte)
         self.slop = float(slop)
+        self.relax = float(relax)
         self.penetration_limit = float(penetration_limit)
         self.allow_unstable = bool(allow_unstable)
         self._speed_limit = speed_limit
@@ -456,6 +461,7 @@ class RodSolver:
         params.max_push = wp.float64(max(self.characteristic_speed(control), 1e-3))
         params.contact_distance = wp.float64(m.contact_distance)
         params.warm = wp.float64(self.warm_start)
+        params.relax = wp.float64(self.relax)
 
         if n_contacts:
             if self._frames.shape[0] < n_contacts:
