@@ -100,11 +100,11 @@ def test_ladder_stands_without_creep_when_friction_suffices():
     assert ladder_min_angle(0.5, 0.5) == pytest.approx(36.87, abs=0.01)
     assert ladder_slip(60.0, 0.5, "rigid") < 1e-6
     # the elastic rod holds too once Gauss-Seidel has converged
-    assert ladder_slip(60.0, 0.5, "elastic", iterations=400) < 1e-6
+    assert ladder_slip(60.0, 0.5, "elastic", iterations=200) < 1e-6
 
 
 @pytest.mark.xfail(strict=True, reason="engine gap: at the default 40 sweeps Gauss-Seidel has not converged on the "
-                                       "elastic ladder (residual 2.4e-3 m/s) and its foot creeps about 1 mm/s")
+                                       "elastic ladder (residual 1e-3 m/s) and its foot creeps about 0.3 mm/s")
 def test_elastic_ladder_stands_at_the_default_effort():
     assert ladder_slip(60.0, 0.5, "elastic") < 1e-6
 
