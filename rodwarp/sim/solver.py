@@ -69,9 +69,9 @@ class RodSolver:
     iterations : int
         Most Gauss-Seidel sweeps per step (contacts, walls, bending, twist, stretching each).
     tolerance : float
-        Stop sweeping early once a sweep changes no contact velocity by more than this
-        (m/s) and no edge length is off by more than 1e-6 of the shortest edge; 0 always
-        runs ``iterations`` sweeps. Checked every second sweep.
+        Stop sweeping early once a sweep changes no contact velocity by more than this (m/s;
+        1e-5 m/s: 10 um of drift per second) and no edge length is off by more than 1e-6 of the
+        shortest edge; 0 always runs ``iterations`` sweeps. Checked every second sweep.
     bending : {"auto", "implicit", "explicit"}
         Bending integration. ``auto`` uses symplectic (explicit) bending when the step is
         below its stability bound, which conserves energy, and implicit Euler above it.
@@ -112,7 +112,7 @@ class RodSolver:
         model: Model,
         *,
         iterations: int = 40,
-        tolerance: float = 1e-6,
+        tolerance: float = 1e-5,
         bending: str = "auto",
         coloring: str = "auto",
         warm_start: float = 1.0,
