@@ -77,6 +77,15 @@ def find_candidate_pairs(
         rb = vertex_rod[ib]
         if rb == ra and (ib == ia + 1 or ia == ib + 1):
             continue
+        # the distance between the two infinite lines bounds the segments' from below: a cheap
+        # reject of most pairs of long (rigid) rods, which the midpoint test alone keeps
+        da = x[ia + 1] - x[ia]
+        db = x[ib + 1] - x[ib]
+        c = wp.cross(da, db)
+        cc = wp.dot(c, c)
+        if cc > wp.float64(1.0e-12) * wp.dot(da, da) * wp.dot(db, db):
+            if wp.abs(wp.dot(x[ib] - x[ia], c)) / wp.sqrt(cc) - rod_radius[ra] - rod_radius[rb] > margin:
+                continue
         # exact capsule gap at build time: only pairs that can come within reach are kept
         pair = closest_points_segments(x[ia], x[ia + 1], x[ib], x[ib + 1])
         if pair.dist - rod_radius[ra] - rod_radius[rb] > margin:

@@ -182,6 +182,7 @@ class RodSolver:
         self._n_active = wp.zeros(1, dtype=wp.int32, device=d)
         self._solve_out = wp.zeros(3, dtype=wp.float64, device=d)
         self._frames = wp.empty(max(16, 4 * model.n_segments), dtype=ContactFrame, device=d)
+        self._walls_struct = None
         # sequential devices run the whole solve in one launch (same order, no launch overhead)
         self.fused = (not self.coloring) and not wp.get_device(model.device).is_cuda
         self.last_info: StepInfo | None = None
@@ -380,14 +381,21 @@ class RodSolver:
     # ------------------------------------------------------------------ step
     def _walls(self, control, t: float, dt: float) -> Walls:
         normals, offsets, vel, mus, on = control.wall_kinematics(t, dt)
-        dev = self.model.device
-        w = Walls()
+        w = self._walls_struct
+        if w is None or w.normal.shape[0] != normals.shape[0]:
+            dev = self.model.device
+            w = self._walls_struct = Walls()
+            w.normal = wp.empty(normals.shape[0], dtype=wp.vec3d, device=dev)
+            w.offset = wp.empty(normals.shape[0], dtype=wp.float64, device=dev)
+            w.vel = wp.empty(normals.shape[0], dtype=wp.vec3d, device=dev)
+            w.mu = wp.empty(normals.shape[0], dtype=wp.float64, device=dev)
+            w.on = wp.empty(normals.shape[0], dtype=wp.int32, device=dev)
         w.n = len(self.model.planes)
-        w.normal = wp.array(normals, dtype=wp.vec3d, device=dev)
-        w.offset = wp.array(offsets, dtype=wp.float64, device=dev)
-        w.vel = wp.array(vel, dtype=wp.vec3d, device=dev)
-        w.mu = wp.array(mus, dtype=wp.float64, device=dev)
-        w.on = wp.array(on, dtype=wp.int32, device=dev)
+        w.normal.assign(normals)
+        w.offset.assign(offsets)
+        w.vel.assign(vel)
+        w.mu.assign(mus)
+        w.on.assign(on)
         return w
 
     def step(self, state_in: State, state_out: State, control=None, dt: float | None = None, *,
