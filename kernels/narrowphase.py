@@ -245,6 +245,14 @@ def narrowphase_pairs(
     ra = rod_radius[vertex_rod[ia]]
     rb = rod_radius[vertex_rod[ib]]
     reach = base_margin + segment_reach(v, ia, dt) + segment_reach(v, ib, dt)
+    # the infinite lines' distance bounds the segments' from below: most candidates stop here
+    da = x[ia + 1] - x[ia]
+    db = x[ib + 1] - x[ib]
+    cr = wp.cross(da, db)
+    cc = wp.dot(cr, cr)
+    if cc > wp.float64(1.0e-12) * wp.dot(da, da) * wp.dot(db, db):
+        if wp.abs(wp.dot(x[ib] - x[ia], cr)) / wp.sqrt(cc) - ra - rb >= reach:
+            return
     pair = closest_points_segments(x[ia], x[ia + 1], x[ib], x[ib + 1])
     gap = pair.dist - ra - rb
     if gap >= reach:

@@ -103,7 +103,7 @@ class RodSolver:
         Steps between energy-jump checks (0 disables them).
     skin : float, optional
         Extra reach of the broadphase pair list (m); the list is rebuilt when a vertex has
-        moved by half of it. Default d_min + min(h_max, 10 d_min) / 5 (measured knees,
+        moved by half of it. Default d_min + min(h_max, 20 d_min) / 5 (measured knees,
         benchmarks).
     """
 
@@ -172,10 +172,10 @@ class RodSolver:
         self._residual = wp.zeros(1, dtype=wp.float64, device=d)
         self._sresidual = wp.zeros(1, dtype=wp.float64, device=d)
         if skin is None:
-            # measured knees: d + h/5 for ten-vertex rods; capped at 10 d for long (rigid) segments,
+            # measured knees: d + h/5 for ten-vertex rods; capped at 20 d for long (rigid) segments,
             # whose candidate list would otherwise hold every rod within a fifth of a length
             dmin = model.min_diameter
-            skin = dmin + 0.2 * min(float(model.rest_length_np.max()), 10.0 * dmin)
+            skin = dmin + 0.2 * min(float(model.rest_length_np.max()), 40.0 * dmin)
         self.contacts = ContactPipeline(model, skin, self._launch, lambda: self.timings)
         self._wall_gap = wp.zeros(V * max(len(model.planes), 1), dtype=wp.float64, device=d)
         self._active = wp.zeros(max(model.n_rods, 1), dtype=wp.int32, device=d)
