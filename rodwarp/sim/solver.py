@@ -175,7 +175,7 @@ class RodSolver:
             # measured knees: d + h/5 for ten-vertex rods; capped at 20 d for long (rigid) segments,
             # whose candidate list would otherwise hold every rod within a fifth of a length
             dmin = model.min_diameter
-            skin = dmin + 0.2 * min(float(model.rest_length_np.max()), 40.0 * dmin)
+            skin = dmin + 0.2 * min(float(model.rest_length_np.max()), 20.0 * dmin)
         self.contacts = ContactPipeline(model, skin, self._launch, lambda: self.timings)
         self._wall_gap = wp.zeros(V * max(len(model.planes), 1), dtype=wp.float64, device=d)
         self._active = wp.zeros(max(model.n_rods, 1), dtype=wp.int32, device=d)
