@@ -269,7 +269,7 @@ class RodSolver:
         v0 = 0.0 if m.rods.velocities is None else float(np.linalg.norm(m.rods.velocities, axis=1).max())
         return math.sqrt(2.0 * g * height) + control.drive.peak_speed + v0 + 1e-3
 
-    def contact_dt(self, control=None, speed: float | None = None) -> float:
+    def contact_dt(self, control=None, speed: float | None = None, reach: float = 1.0) -> float:
         """Resolution bound of the contact model (s): a rod crosses at most one diameter per
         step relative to the walls, so speculative contacts see every approach and the
         linearised normals stay valid; and gravity alone moves a resting vertex by at most 1%
@@ -284,17 +284,19 @@ class RodSolver:
             v = self.characteristic_speed(control)
         else:
             v = float(speed) + control.drive.peak_speed + 1e-3
-        b = d / v
+        b = reach * d / v
         g = float(np.linalg.norm(self.model.gravity))
         if g > 0:
             b = min(b, math.sqrt(0.01 * d / g))
         return b
 
-    def max_stable_dt(self, bending: str | None = None, control=None, speed: float | None = None) -> float:
+    def max_stable_dt(self, bending: str | None = None, control=None, speed: float | None = None,
+                      reach: float = 1.0) -> float:
         """Stability bound of this scene for the chosen bending integration (s), at ``speed``
-        (m/s) when given, else for the worst case (see :meth:`contact_dt`)."""
+        (m/s) when given, else for the worst case (see :meth:`contact_dt`; ``reach``: diameters
+        a rod may cross per step)."""
         mode = bending or self.bending
-        b = self.contact_dt(control, speed)
+        b = self.contact_dt(control, speed, reach)
         if mode == "explicit":
             b = min(b, self.explicit_bending_dt())
         return b
@@ -344,11 +346,10 @@ class RodSolver:
             # nothing to touch: the contact bound does not apply, only explicit bending's
             if self.bending != "explicit" or dt <= self.explicit_bending_dt():
                 return
-        bound = self.max_stable_dt(control=control, speed=speed)
-        if speed is not None:
-            # at the actual speeds, speculative contacts resolve approaches of up to two
-            # diameters per step (the narrowphase's reach covers twice the travel)
-            bound *= self.guard_factor
+        # at the actual speeds, speculative contacts resolve approaches of up to two diameters
+        # per step (the narrowphase's reach covers twice the travel)
+        bound = self.max_stable_dt(control=control, speed=speed,
+                                   reach=self.guard_factor if speed is not None else 1.0)
         if dt > bound * (1.0 + 1e-9):
             msg = (f"time step {dt:.3g} s exceeds this scene's stability bound {bound:.3g} s "
                    f"({self._bound_reason(control, speed)}); use dt <= {bound:.3g} s")
