@@ -339,6 +339,20 @@ def vertex_edge(model: RodModel, i: int):
     return i, F0
 
 
+@wp.func
+def wall_offset(walls: Walls, p: int):
+    """n . x of wall p at the start of the step (m)."""
+    return walls.offset[p] + walls.shift[p] * walls.drive_disp
+
+
+@wp.func
+def wall_velocity(walls: Walls, p: int):
+    """Mean velocity of wall p over the step (m/s)."""
+    if walls.moving[p] != 0:
+        return walls.drive_dir * walls.drive_vel
+    return wp.vec3d(F0, F0, F0)
+
+
 @wp.kernel
 def prepare_wall_contacts(
     model: RodModel,
@@ -366,8 +380,8 @@ def prepare_wall_contacts(
         for p in range(walls.n):
             k = i * walls.n + p
             n = walls.normal[p]
-            g = wp.dot(n, x[i]) - walls.offset[p] - rr
-            closing = wp.max(-wp.dot(v[i] - walls.vel[p], n), F0)
+            g = wp.dot(n, x[i]) - wall_offset(walls, p) - rr
+            closing = wp.max(-wp.dot(v[i] - wall_velocity(walls, p), n), F0)
             if walls.on[p] != 0 and g < params.contact_distance + closing * params.dt * wp.float64(2.0):
                 contacts.gap[k] = g
                 P = contacts.impulse[k] * params.warm
@@ -410,7 +424,7 @@ def solve_rod_walls(
                 continue
             n = walls.normal[p]
             c = contact_side(model, x, tangent, e, se, n * (-rr))
-            u = side_velocity(c, v, spin, model.rest_length[e]) - walls.vel[p]
+            u = side_velocity(c, v, spin, model.rest_length[e]) - wall_velocity(walls, p)
             P = contacts.impulse[k]
             P_new = relaxed(solve_local(u, local_frame(c.W, n, approach_target(gap, params)), n, P, walls.mu[p]), P, n,
                             walls.mu[p], params.relax)

@@ -59,12 +59,18 @@ class RodState:
 
 @wp.struct
 class Walls:
+    """The walls of a step: static arrays per wall, the drive as scalars (no per-step copies)."""
+
     n: int
     normal: wp.array(dtype=wp.vec3d)  # unit, into the allowed half-space
-    offset: wp.array(dtype=wp.float64)  # n . x >= offset at the start of the step (m)
-    vel: wp.array(dtype=wp.vec3d)  # mean velocity over the step (m/s)
+    offset: wp.array(dtype=wp.float64)  # n . x >= offset at rest (m)
+    moving: wp.array(dtype=wp.int32)  # 1: the wall follows the drive
+    shift: wp.array(dtype=wp.float64)  # n . drive direction of a moving wall (its offset's change per metre)
     mu: wp.array(dtype=wp.float64)
-    on: wp.array(dtype=wp.int32)  # 0: removed for this step (no contact)
+    on: wp.array(dtype=wp.int32)  # 0: removed (no contact)
+    drive_dir: wp.vec3d  # unit direction of the drive
+    drive_disp: wp.float64  # drive displacement at the start of the step (m)
+    drive_vel: wp.float64  # mean drive speed over the step along drive_dir (m/s)
 
 
 @wp.struct

@@ -54,9 +54,9 @@ class ProtocolParams:
     young: float = 200e9
     density: float = 7850.0
     dt: float | None = None
-    iterations: int = 20
+    iterations: int = 10
     rod_model: str = "auto"
-    step_safety: float = 0.5
+    step_safety: float = 1.0
     rolling: bool = True
     save_every: float = 0.1
     checkpoint_every: float = 1.0

@@ -184,6 +184,7 @@ class RodSolver:
         self._solve_out = wp.zeros(3, dtype=wp.float64, device=d)
         self._frames = wp.empty(max(16, 4 * model.n_segments), dtype=ContactFrame, device=d)
         self._walls_struct = None
+        self._walls_key = None
         # sequential devices run the whole solve in one launch (same order, no launch overhead)
         self.fused = (not self.coloring) and not wp.get_device(model.device).is_cuda
         self.last_info: StepInfo | None = None
@@ -386,22 +387,39 @@ class RodSolver:
 
     # ------------------------------------------------------------------ step
     def _walls(self, control, t: float, dt: float) -> Walls:
-        normals, offsets, vel, mus, on = control.wall_kinematics(t, dt)
+        """The Walls bundle of this step: per-wall arrays copied only when the control's walls
+        change; the drive enters as three scalars."""
+        m = self.model
+        P = len(m.planes)
+        key = (id(control), P, tuple(control.on.tolist()), tuple(control.drive.direction.tolist()))
         w = self._walls_struct
-        if w is None or w.normal.shape[0] != normals.shape[0]:
-            dev = self.model.device
+        if w is None or self._walls_key != key:
+            dev = m.device
+            rows = max(P, 1)
+            normal = np.zeros((rows, 3))
+            offset = np.zeros(rows)
+            moving = np.zeros(rows, dtype=np.int32)
+            shift = np.zeros(rows)
+            mu = np.zeros(rows)
+            on = np.zeros(rows, dtype=np.int32)
+            for k, p in enumerate(m.planes):
+                normal[k], offset[k], mu[k], on[k] = p.normal, p.offset, p.mu, int(control.on[k])
+                moving[k] = int(p.moving)
+                shift[k] = float(p.normal @ control.drive.direction) if p.moving else 0.0
             w = self._walls_struct = Walls()
-            w.normal = wp.empty(normals.shape[0], dtype=wp.vec3d, device=dev)
-            w.offset = wp.empty(normals.shape[0], dtype=wp.float64, device=dev)
-            w.vel = wp.empty(normals.shape[0], dtype=wp.vec3d, device=dev)
-            w.mu = wp.empty(normals.shape[0], dtype=wp.float64, device=dev)
-            w.on = wp.empty(normals.shape[0], dtype=wp.int32, device=dev)
-        w.n = len(self.model.planes)
-        w.normal.assign(normals)
-        w.offset.assign(offsets)
-        w.vel.assign(vel)
-        w.mu.assign(mus)
-        w.on.assign(on)
+            w.n = P
+            w.normal = wp.array(normal, dtype=wp.vec3d, device=dev)
+            w.offset = wp.array(offset, dtype=wp.float64, device=dev)
+            w.moving = wp.array(moving, dtype=wp.int32, device=dev)
+            w.shift = wp.array(shift, dtype=wp.float64, device=dev)
+            w.mu = wp.array(mu, dtype=wp.float64, device=dev)
+            w.on = wp.array(on, dtype=wp.int32, device=dev)
+            w.drive_dir = wp.vec3d(*control.drive.direction)
+            self._walls_key = key
+        d0 = control.drive.displacement(t)
+        d1 = control.drive.displacement(t + dt)
+        w.drive_disp = wp.float64(d0)
+        w.drive_vel = wp.float64((d1 - d0) / dt)
         return w
 
     def step(self, state_in: State, state_out: State, control=None, dt: float | None = None, *,
