@@ -64,9 +64,9 @@ def _once(cmd, env, outdir) -> float:
 
 _WARM = """
 import importlib.util, json, sys, time
-from rodwarp.fieldset import Fields
-from rodwarp import fieldplots as new
-from rodwarp.stats import field_statistics, find_tangles
+from rodwarp.analysis import Fields
+from rodwarp.analysis import _figures as new
+from rodwarp.analysis import field_statistics, find_tangles
 spec = importlib.util.spec_from_file_location("oldfp", sys.argv[2])
 old = importlib.util.module_from_spec(spec); spec.loader.exec_module(old)
 f = Fields.load(sys.argv[1])

@@ -9,7 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from rodwarp.cli import app
-from rodwarp.fieldset import Fields
+from rodwarp.analysis import Fields
 from rodwarp.packing import random_packing
 from rodwarp.rodset import load as load_rods
 

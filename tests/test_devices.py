@@ -9,7 +9,7 @@ import pytest
 
 from rodwarp.sim import STEEL, Model, State
 from rodwarp.packing import random_packing
-from rodwarp.scenes import TEST_DENSITY, TEST_YOUNG, cantilever
+from rodwarp.testing.scenes import TEST_DENSITY, TEST_YOUNG, cantilever
 from rodwarp.sim.model import Material
 from rodwarp.sim.solver import RodSolver, run
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from rodwarp.errors import RodwarpError
-from rodwarp.geometry import segment_distance
+from rodwarp.rodset import segment_distance
 from rodwarp.packing import orientation_statistics, random_packing
 
 

@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 from rodwarp.rodset import RodSet
-from rodwarp.scenes import log_cabin, straight_rod
+from rodwarp.testing.scenes import log_cabin, straight_rod
 from rodwarp.sim import STEEL, Model, RodSolver, State
 
 G = 9.81

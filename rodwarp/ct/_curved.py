@@ -1,6 +1,6 @@
 """Curved filaments (wires, fibres, arcs) traced as polylines from a greyscale CT volume.
 
-Used by :func:`rodwarp.segment.segment_volume` with ``shape="curved"`` (or ``"auto"`` when
+Used by :func:`rodwarp.ct.segment_volume` with ``shape="curved"`` (or ``"auto"`` when
 the skeleton's branches bend).  Inputs are the prepared volume and the global levels of the
 straight-rod pipeline; coordinates are ``(x, y, z)`` in working voxels.
 
@@ -35,7 +35,6 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from rodwarp.rodset import RodSet
 
 __all__ = ["trace_filaments", "bend_fraction"]
 
@@ -352,9 +351,9 @@ def trace_filaments(raw: np.ndarray, st, P, quality: dict, progress=None):
     ----------
     raw : ndarray (z, y, x) float32
         The prepared volume.
-    st : rodwarp.segment._Stats
+    st : rodwarp.ct._levels._Stats
         Background and foreground levels, threshold, coarse radius ``r0`` (voxels).
-    P : rodwarp.segment.SegmentParams
+    P : rodwarp.ct.SegmentParams
         Knobs (``smooth_sigma``, ``junction_radius``, ``min_length``, ``window_margin``).
     quality : dict
         Updated with ``branches``, ``joins``, ``filaments``, ``bend_fraction``.
@@ -364,7 +363,7 @@ def trace_filaments(raw: np.ndarray, st, P, quality: dict, progress=None):
     (list of (m, 3) arrays, radii (n,))
         Centrelines (x, y, z) in voxels, vertices about one voxel apart, and radii (voxels).
     """
-    from rodwarp.segment import _BlockSampler
+    from rodwarp.ct._voxels import _BlockSampler
 
     g = ndimage.gaussian_filter(raw, P.smooth_sigma) if P.smooth_sigma > 0 else raw
     scale = 1.0 / (st.fg_smooth - st.bg)

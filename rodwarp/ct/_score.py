@@ -1,22 +1,228 @@
-"""Scoring segmented filaments (polylines) against a ground truth.
+"""Scoring a segmentation against a ground truth (a phantom's): rods, filaments, contacts.
 
-:func:`match_polylines` pairs found and true filaments one-to-one as curves: a found filament
-matches a true one when it lies along it (mean distance) *and* covers most of it, so a wire
-found as many short pieces scores as missed, and one piece running along two wires scores as
-one match at most.  Straight rods are scored with :func:`rodwarp.segment.match_rods`.
+* :func:`match_rods` pairs found and true straight rods one-to-one (Hungarian assignment on
+  the mean centreline distance, within a distance and an angle);
+* :func:`match_polylines` pairs found and true curved filaments one-to-one as curves: a found
+  filament matches a true one when it lies along it (mean distance) *and* covers most of it,
+  so a wire found as many short pieces scores as missed, and one piece running along two
+  wires scores as one match at most;
+* :func:`score_contacts` scores the found contacts of the packing through a rod matching,
+  leaving out the true gaps no scan can resolve.
 
 This module does not import warp.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from rodwarp.rodset import RodSet
+from rodwarp.ct._voxels import _point_segment_distance
+from rodwarp.rodset import Contacts, RodSet, detect_contacts
 
-__all__ = ["PolylineMatch", "match_polylines", "resample_polyline"]
+__all__ = ["RodMatch", "match_rods", "ContactScore", "score_contacts", "PolylineMatch", "match_polylines",
+           "resample_polyline"]
+
+
+def _scores(matched: int, n_found: int, n_true: int) -> tuple[float, float, float]:
+    """Precision, recall and F1 of ``matched`` one-to-one matches."""
+    prec = matched / n_found if n_found else 0.0
+    rec = matched / n_true if n_true else 0.0
+    return prec, rec, (2 * prec * rec / (prec + rec) if prec + rec > 0 else 0.0)
+
+
+@dataclass
+class _Matching:
+    """A one-to-one matching of found to true rods or filaments, and its detection scores.
+
+    Attributes
+    ----------
+    pairs : (M, 2) int
+        ``(found index, true index)`` of every match.
+    n_found, n_true : int
+        Sizes of the two sets.
+    precision, recall, f1 : float
+        Detection scores.
+    """
+
+    pairs: np.ndarray
+    n_found: int
+    n_true: int
+    precision: float
+    recall: float
+    f1: float
+
+    def mapping(self) -> dict[int, int]:
+        """found index -> true index."""
+        return {int(a): int(b) for a, b in self.pairs}
+
+
+@dataclass
+class RodMatch(_Matching):
+    """One-to-one matching of found rods to true rods (see :func:`match_rods`).
+
+    Attributes (beyond :class:`_Matching`'s)
+    ----------------------------------------
+    mean_distance : (M,) float
+        Mean distance of the found centreline to the true axis, per match (voxels or the sets'
+        unit).
+    angle_deg : (M,) float
+        Angle between the found and true axes, per match.
+    endpoint_error : (M,) float
+        Larger of the two endpoint distances (ends paired to minimise it), per match.
+    """
+
+    mean_distance: np.ndarray = None
+    angle_deg: np.ndarray = None
+    endpoint_error: np.ndarray = None
+
+
+def _ends(rods: RodSet):
+    o = rods.offsets
+    return rods.points[o[:-1]], rods.points[o[1:] - 1]
+
+
+def _polyline_samples(poly, s):
+    """Points at arc-length fractions s (in [0, 1]) along a polyline."""
+    seg = np.linalg.norm(np.diff(poly, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    if cum[-1] <= 0:
+        return np.repeat(poly[:1], len(s), axis=0)
+    q = np.interp(s * cum[-1], cum, np.arange(len(poly), dtype=np.float64))
+    k = np.minimum(q.astype(int), len(poly) - 2)
+    f = (q - k)[:, None]
+    return poly[k] * (1 - f) + poly[k + 1] * f
+
+
+def _dist_to_polyline(pts, poly):
+    """Distance from points (n,3) to a polyline (m,3)."""
+    best = np.full(len(pts), np.inf)
+    for a, b in zip(poly[:-1], poly[1:]):
+        np.minimum(best, _point_segment_distance(pts, a, b), out=best)
+    return best
+
+
+def match_rods(found: RodSet, truth: RodSet, max_mean_distance: float = 2.0,
+               max_angle_deg: float = 5.0, n_samples: int = 21) -> RodMatch:
+    """Match found rods to true rods one-to-one.
+
+    A found rod may match a true rod when the mean distance of ``n_samples`` points spread
+    evenly along the found centreline to the true centreline (polyline) is at most
+    ``max_mean_distance`` and the angle between their end-to-end axes is at most
+    ``max_angle_deg``.  Among admissible pairs the assignment (Hungarian algorithm) minimises
+    the total of the symmetric mean distance (found-to-true and true-to-found averaged), so a
+    whole rod is preferred to a fragment of it.  ``mean_distance`` reports found-to-true.
+    Both sets must be in the same units.
+    """
+    from scipy.optimize import linear_sum_assignment
+    from scipy.spatial import cKDTree
+
+    nf, nt = found.n_rods, truth.n_rods
+    fa, fb = _ends(found)
+    ta, tb = _ends(truth)
+    fu = fb - fa
+    tu = tb - ta
+    fL = np.linalg.norm(fu, axis=1)
+    tL = np.linalg.norm(tu, axis=1)
+    fmid, tmid = 0.5 * (fa + fb), 0.5 * (ta + tb)
+    s = np.linspace(0.0, 1.0, n_samples)
+    cost = np.full((nf, nt), np.inf)
+    both = np.full((nf, nt), np.inf)
+    ang = np.full((nf, nt), np.inf)
+    tpts = [_polyline_samples(truth.rod(j), s) for j in range(nt)]
+    tree = cKDTree(tmid)
+    reach = 0.5 * (fL.max() + tL.max()) + max_mean_distance + 1e-9 if nf and nt else 0.0
+    for i in range(nf):
+        poly_f = found.rod(i)
+        pts = _polyline_samples(poly_f, s)
+        for j in sorted(tree.query_ball_point(fmid[i], reach)):
+            c = abs(fu[i] @ tu[j]) / max(fL[i] * tL[j], 1e-300)
+            a = math.degrees(math.acos(min(1.0, c)))
+            if a > max_angle_deg:
+                continue
+            d = float(_dist_to_polyline(pts, truth.rod(j)).mean())
+            if d <= max_mean_distance:
+                cost[i, j] = d
+                ang[i, j] = a
+                # the assignment also weighs how much of the true rod is covered, so that a
+                # whole rod beats a short fragment of it
+                both[i, j] = 0.5 * (d + float(_dist_to_polyline(tpts[j], poly_f).mean()))
+    big = 1e9
+    cm = np.where(np.isfinite(both), both, big)
+    if nf and nt:
+        ri, ci = linear_sum_assignment(cm)
+        ok = np.isfinite(cost[ri, ci])
+        ri, ci = ri[ok], ci[ok]
+    else:
+        ri = ci = np.zeros(0, int)
+    pairs = np.stack([ri, ci], 1).astype(np.int64) if len(ri) else np.zeros((0, 2), np.int64)
+    e1 = np.maximum(np.linalg.norm(fa[ri] - ta[ci], axis=1), np.linalg.norm(fb[ri] - tb[ci], axis=1))
+    e2 = np.maximum(np.linalg.norm(fa[ri] - tb[ci], axis=1), np.linalg.norm(fb[ri] - ta[ci], axis=1))
+    prec, rec, f1 = _scores(len(pairs), nf, nt)
+    return RodMatch(pairs=pairs, mean_distance=cost[ri, ci], angle_deg=ang[ri, ci],
+                    endpoint_error=np.minimum(e1, e2), n_found=nf, n_true=nt,
+                    precision=prec, recall=rec, f1=f1)
+
+
+@dataclass
+class ContactScore:
+    """Contact detection scores (see :func:`score_contacts`)."""
+
+    tp: int
+    fp: int
+    fn: int
+    ignored: int
+    precision: float
+    recall: float
+    f1: float
+
+
+def score_contacts(found_contacts: Contacts, truth: RodSet, match: RodMatch,
+                   truth_contacts: Contacts | None = None, touch_tol: float = 1e-3,
+                   ambiguous: tuple = (0.0, 1.0)) -> ContactScore:
+    """Score found contacts against the true contacts through a rod matching.
+
+    True contacts are the true rod pairs with surface gap <= ``touch_tol`` (from
+    ``truth_contacts``, else ``truth.contacts``, else computed from the true geometry).  Pairs
+    whose true gap lies in the open interval ``ambiguous`` (default (0, 1) voxel: unresolvable)
+    are scored apart: a found contact there is neither a hit nor a false alarm.  A found contact
+    on a rod that matched no true rod is a false positive; a true contact on an unmatched true
+    rod is a miss.
+    """
+    tc = truth_contacts if truth_contacts is not None else truth.contacts
+    geo = detect_contacts(truth, tolerance=max(ambiguous[1], touch_tol) + 1e-9)
+    if tc is None:
+        tc = geo
+    true_pairs = {(int(a), int(b)) for a, b, g in zip(tc.rod_i, tc.rod_j, tc.gap) if g <= touch_tol}
+    amb = {(int(a), int(b)) for a, b, g in zip(geo.rod_i, geo.rod_j, geo.gap)
+           if ambiguous[0] < g < ambiguous[1] and g > touch_tol}
+    amb -= true_pairs
+    mp = match.mapping()
+    tp = fp = ign = 0
+    hit = set()
+    for a, b in zip(found_contacts.rod_i, found_contacts.rod_j):
+        a, b = int(a), int(b)
+        if a not in mp or b not in mp:
+            fp += 1
+            continue
+        p = (min(mp[a], mp[b]), max(mp[a], mp[b]))
+        if p in true_pairs:
+            if p not in hit:
+                tp += 1
+                hit.add(p)
+        elif p in amb:
+            ign += 1
+        else:
+            fp += 1
+    fn = len(true_pairs) - len(hit)
+    prec = tp / (tp + fp) if tp + fp else (1.0 if not true_pairs else 0.0)
+    rec = tp / (tp + fn) if tp + fn else 1.0
+    f1 = 2 * prec * rec / (prec + rec) if prec + rec > 0 else 0.0
+    return ContactScore(tp=tp, fp=fp, fn=fn, ignored=ign, precision=prec, recall=rec, f1=f1)
+
+
 
 
 def resample_polyline(poly: np.ndarray, step: float) -> np.ndarray:
@@ -30,33 +236,19 @@ def resample_polyline(poly: np.ndarray, step: float) -> np.ndarray:
 
 
 @dataclass
-class PolylineMatch:
+class PolylineMatch(_Matching):
     """One-to-one matching of found filaments to true filaments (see :func:`match_polylines`).
 
-    Attributes
-    ----------
-    pairs : (M, 2) int
-        ``(found index, true index)`` of every match.
+    Attributes (beyond :class:`_Matching`'s)
+    ----------------------------------------
     mean_distance : (M,) float
         Mean distance from the found centreline to the true one (the sets' unit).
     coverage : (M,) float
         Fraction of the true centreline within ``cover_distance`` of the found one.
-    precision, recall, f1 : float
-        Filament detection scores.
     """
 
-    pairs: np.ndarray
-    mean_distance: np.ndarray
-    coverage: np.ndarray
-    n_found: int
-    n_true: int
-    precision: float
-    recall: float
-    f1: float
-
-    def mapping(self) -> dict[int, int]:
-        """found index -> true index."""
-        return {int(a): int(b) for a, b in self.pairs}
+    mean_distance: np.ndarray = None
+    coverage: np.ndarray = None
 
 
 def match_polylines(found: RodSet, truth: RodSet, max_mean_distance: float = 2.0, min_coverage: float = 0.8,
@@ -113,8 +305,6 @@ def match_polylines(found: RodSet, truth: RodSet, max_mean_distance: float = 2.0
         ri = ci = np.zeros(0, int)
     pairs = np.stack([ri, ci], 1).astype(np.int64) if len(ri) else np.zeros((0, 2), np.int64)
     m = len(pairs)
-    prec = m / nf if nf else 0.0
-    rec = m / nt if nt else 0.0
-    f1 = 2 * prec * rec / (prec + rec) if prec + rec > 0 else 0.0
+    prec, rec, f1 = _scores(m, nf, nt)
     return PolylineMatch(pairs=pairs, mean_distance=dist[ri, ci], coverage=cov[ri, ci], n_found=nf, n_true=nt,
                          precision=prec, recall=rec, f1=f1)

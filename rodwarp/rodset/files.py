@@ -1,6 +1,8 @@
-"""Atomic file writes: write to a temporary sibling, then rename over the target.
+"""Crash-safe file writes: write to a temporary sibling, then rename over the target.
 
-A crash at any moment leaves either the old file or the new one, never a torn file.
+A crash at any moment leaves either the old file or the new one, never a torn file.  Every
+output of rodwarp goes through :func:`atomic_path` (or the helpers built on it: JSON, text,
+PNG figures); :func:`consolidate_zarr` finishes a zarr group for ``xarray.open_zarr``.
 """
 
 from __future__ import annotations
@@ -12,6 +14,10 @@ import shutil
 import tempfile
 from pathlib import Path
 from typing import Any, Iterator
+
+from rodwarp._util import json_safe
+
+__all__ = ["atomic_path", "write_json", "write_text", "save_figure", "consolidate_zarr"]
 
 
 @contextlib.contextmanager
@@ -64,10 +70,23 @@ def atomic_path(path: str | os.PathLike, *, directory: bool = False) -> Iterator
         raise
 
 
-def write_json(path: str | os.PathLike, data: Any) -> None:
-    """Write ``data`` as indented JSON atomically."""
+def write_json(path: str | os.PathLike, data: Any, *, finite: bool = False) -> None:
+    """Write ``data`` as indented JSON atomically.
+
+    Parameters
+    ----------
+    path : path-like
+        Destination.
+    data : any
+        Nested dicts and lists of numbers, strings, NumPy values and paths
+        (:func:`rodwarp._util.json_safe`; an object of another kind raises TypeError).
+    finite : bool
+        Write NaN and infinities as null (strict JSON), as summaries do; by default they are
+        written as ``NaN``, which Python's json module reads back.
+    """
+    text = json.dumps(json_safe(data, finite=finite, strict=True), indent=2, sort_keys=False)
     with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(data, indent=2, sort_keys=False, default=_json_default) + "\n")
+        tmp.write_text(text + "\n")
 
 
 def write_text(path: str | os.PathLike, text: str) -> None:
@@ -76,13 +95,34 @@ def write_text(path: str | os.PathLike, text: str) -> None:
         tmp.write_text(text)
 
 
-def _json_default(obj: Any) -> Any:
-    import numpy as np
+def save_figure(fig, path: str | os.PathLike, dpi: int = 110) -> Path:
+    """Render a matplotlib figure to PNG atomically and return the path.
 
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"cannot serialise {type(obj).__name__} to JSON")
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        Drawn on its own canvas (no pyplot state is touched, so an interactive session's
+        backend is left alone).
+    path : path-like
+        PNG to write; its folder is created.
+    dpi : int
+        Resolution (dots per inch).
+    """
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        # the temporary name has no .png suffix, so the format must be explicit
+        fig.savefig(tmp, format="png", dpi=dpi)
+    return path
+
+
+def consolidate_zarr(path: str | os.PathLike) -> None:
+    """Write zarr's consolidated metadata of the group at ``path``, so ``xarray.open_zarr``
+    reads every array's metadata in one go (and does not warn that it had to look for it)."""
+    import warnings
+
+    import zarr
+
+    with warnings.catch_warnings():
+        # zarr 3 notes that consolidated metadata is not in the v3 spec yet; xarray reads it
+        warnings.simplefilter("ignore")
+        zarr.consolidate_metadata(str(path))
