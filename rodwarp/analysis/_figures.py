@@ -66,6 +66,14 @@ def _mid_indices(fields) -> tuple[int, int, int]:
     return tuple(mids)
 
 
+def _mid_planes(fields):
+    """Indices of the mid xy plane (kz) and mid xz plane (jy), the length unit, and the imshow
+    extents of the two planes."""
+    kz, jy, _ = _mid_indices(fields)
+    h = float(fields.spacing)
+    return kz, jy, _units(fields), _extent(fields.x, fields.y, h), _extent(fields.x, fields.z, h)
+
+
 def _robust_range(a: np.ndarray) -> tuple[float, float] | None:
     """0.5 / 99.5 percentiles of the finite values: a long tail (e) should not wash out the map."""
     v = a[np.isfinite(a)]
@@ -158,12 +166,8 @@ def plot_slices(fields, path) -> Path:
     "Mid" is the middle of the valid voxels' bounding box. Each row shares one colour scale and
     colourbar (0.5-99.5 percentiles of the whole field); NaN (outside the domain) is light grey.
     """
-    kz, jy, _ = _mid_indices(fields)
-    u = _units(fields)
-    h = float(fields.spacing)
-    x, y, z = fields.x, fields.y, fields.z
-    ext_xy = _extent(x, y, h)
-    ext_xz = _extent(x, z, h)
+    kz, jy, u, ext_xy, ext_xz = _mid_planes(fields)
+    y, z = fields.y, fields.z
     # keep panels to scale but not absurdly tall or flat
     names = [f.name for f in fields_with("slices")]
     fig = Figure(figsize=(10, 3.0 * len(names)))
@@ -189,7 +193,7 @@ def plot_slices(fields, path) -> Path:
         # both planes share the row's scale, so one colourbar per row says it all
         fig.colorbar(im, ax=axs[row, :], shrink=0.85, extend="both", label=_symbol(name))
     fig.suptitle(f"mid-plane slices (grid {fields.shape[2]} x {fields.shape[1]} x {fields.shape[0]}, "
-                 f"R = {fields.radius:.4g} {u}, spacing {h:.4g} {u})")
+                 f"R = {fields.radius:.4g} {u}, spacing {float(fields.spacing):.4g} {u})")
     return save_figure(fig, path)
 
 
@@ -287,12 +291,8 @@ def plot_tangles(fields, labels, stats: dict | None, path) -> Path:
     labels = np.asarray(labels)
     if labels.shape != fields.shape:
         raise ValueError(f"labels have shape {labels.shape}, the fields {fields.shape}")
-    kz, jy, _ = _mid_indices(fields)
-    u = _units(fields)
-    h = float(fields.spacing)
-    x, y, z = fields.x, fields.y, fields.z
-    ext_xy = _extent(x, y, h)
-    ext_xz = _extent(x, z, h)
+    kz, jy, u, ext_xy, ext_xz = _mid_planes(fields)
+    y, z = fields.y, fields.z
     n_lab = int(labels.max()) if labels.size else 0
     lcmap = _label_cmap(n_lab).with_extremes(bad=(1, 1, 1, 0))
     e_cmap = matplotlib.colormaps["Greys"].with_extremes(bad=(0.8, 0.87, 0.95))  # outside: pale blue

@@ -118,6 +118,19 @@ def _box_signed_distance(a, b, r, lo, hi):
     return dx
 
 
+def _near_capsules(A, B, R, boxes, progress, done: int, total: int):
+    """Each capsule piece i whose box reaches the volume: (i, slices of the box (zyx), its lower
+    corner (xyz), the signed distance to the capsule in it); progress every 256 pieces."""
+    n = len(boxes)
+    for i, bx in enumerate(boxes):
+        if bx is not None:
+            lo, hi = bx
+            sl = (slice(lo[2], hi[2] + 1), slice(lo[1], hi[1] + 1), slice(lo[0], hi[0] + 1))
+            yield i, sl, lo, _box_signed_distance(A[i], B[i], R[i], lo, hi)
+        if progress is not None and (i % 256 == 0 or i == n - 1):
+            progress(done + i + 1, total)
+
+
 def occupancy(rods: RodSet, shape, *, voxel_size: float | None = None, supersample: int = 3,
               progress: Callable[[int, int], None] | None = None) -> np.ndarray:
     """Fraction of each voxel inside the union of the rods' capsules, float32 ``(z, y, x)``.
@@ -152,15 +165,8 @@ def occupancy(rods: RodSet, shape, *, voxel_size: float | None = None, supersamp
     # pass 1: signed distance (min over capsules of distance - r), only near the rods
     far = np.float32(_HALF_DIAG + 1.0)
     D = np.full(shape, far, dtype=np.float32)
-    for i in range(n):
-        bx = boxes[i]
-        if bx is not None:
-            lo, hi = bx
-            sl = (slice(lo[2], hi[2] + 1), slice(lo[1], hi[1] + 1), slice(lo[0], hi[0] + 1))
-            sd = _box_signed_distance(A[i], B[i], R[i], lo, hi)
-            np.minimum(D[sl], sd, out=D[sl])
-        if progress is not None and (i % 256 == 0 or i == n - 1):
-            progress(i + 1, total)
+    for i, sl, lo, sd in _near_capsules(A, B, R, boxes, progress, 0, total):
+        np.minimum(D[sl], sd, out=D[sl])
 
     occ = (D < -_HALF_DIAG).astype(np.float32)
     shell = np.abs(D) <= _HALF_DIAG
@@ -178,29 +184,22 @@ def occupancy(rods: RodSet, shape, *, voxel_size: float | None = None, supersamp
     strides = np.array([1, shape[2], shape[1] * shape[2]], dtype=np.int64)  # x, y, z
 
     # pass 2: supersample the shell voxels each capsule piece can reach
-    for i in range(n):
-        bx = boxes[i]
-        if bx is not None:
-            lo, hi = bx
-            sl = (slice(lo[2], hi[2] + 1), slice(lo[1], hi[1] + 1), slice(lo[0], hi[0] + 1))
-            sd = _box_signed_distance(A[i], B[i], R[i], lo, hi)
-            sel = shell[sl] & (sd <= _HALF_DIAG)
-            kz, ky, kx = np.nonzero(sel)
-            if kz.size:
-                vox = np.stack([kx + lo[0], ky + lo[1], kz + lo[2]], axis=1)  # (M, 3) xyz
-                flat = vox @ strides
-                idx = np.searchsorted(shell_flat, flat)
-                a = A[i].astype(np.float32)
-                u = (B[i] - A[i]).astype(np.float32)
-                uu = float(u @ u)
-                w = (vox.astype(np.float32) - a)[:, None, :] + sub[None, :, :]  # (M, s^3, 3)
-                if uu > 0:
-                    t = np.clip((w @ u) / np.float32(uu), 0.0, 1.0)
-                    w -= t[..., None] * u
-                inside = np.einsum("mkj,mkj->mk", w, w) <= np.float32(R[i]) ** 2
-                bits[idx] |= inside
-        if progress is not None and (i % 256 == 0 or i == n - 1):
-            progress(n + i + 1, total)
+    for i, sl, lo, sd in _near_capsules(A, B, R, boxes, progress, n, total):
+        sel = shell[sl] & (sd <= _HALF_DIAG)
+        kz, ky, kx = np.nonzero(sel)
+        if kz.size:
+            vox = np.stack([kx + lo[0], ky + lo[1], kz + lo[2]], axis=1)  # (M, 3) xyz
+            flat = vox @ strides
+            idx = np.searchsorted(shell_flat, flat)
+            a = A[i].astype(np.float32)
+            u = (B[i] - A[i]).astype(np.float32)
+            uu = float(u @ u)
+            w = (vox.astype(np.float32) - a)[:, None, :] + sub[None, :, :]  # (M, s^3, 3)
+            if uu > 0:
+                t = np.clip((w @ u) / np.float32(uu), 0.0, 1.0)
+                w -= t[..., None] * u
+            inside = np.einsum("mkj,mkj->mk", w, w) <= np.float32(R[i]) ** 2
+            bits[idx] |= inside
     occ.ravel()[shell_flat] = bits.mean(axis=1, dtype=np.float32)
     return occ
 

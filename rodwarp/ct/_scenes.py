@@ -310,6 +310,29 @@ def _polyline_gaps(poly, radius, placed, placed_r):
     return out
 
 
+def _place_polylines(n: int, candidate, radius: float, min_gap: float, max_attempts: int, failure) -> list:
+    """Random sequential addition of ``n`` polylines of one radius (voxels).
+
+    ``candidate()`` proposes a polyline, or None when its draw does not fit the volume; it is
+    kept when its surface stays at least ``min_gap`` voxels from every polyline kept before.
+    ``failure(k)`` is the message when a polyline finds no place in ``max_attempts`` draws
+    after ``k`` were placed.
+    """
+    polys: list[np.ndarray] = []
+    for k in range(n):
+        for _ in range(max_attempts):
+            pts = candidate()
+            if pts is None:
+                continue
+            if polys and _polyline_gaps(pts, radius, polys, [radius] * len(polys)).min() < min_gap:
+                continue
+            polys.append(pts)
+            break
+        else:
+            raise _fail(failure(k))
+    return polys
+
+
 def _polyline_inside(poly, radius, shape_xyz, margin=_MARGIN):
     return bool(np.all(poly - radius - margin >= -0.5) and np.all(poly + radius + margin <= shape_xyz - 0.5))
 
@@ -399,31 +422,25 @@ def scene_arcs(shape, n_rods: int = 20, radius: float = 3.0, length: float | Non
     rng = np.random.default_rng(seed)
     r = float(radius)
     L = 0.6 * min(shape) if length is None else float(length)
-    polys: list[np.ndarray] = []
-    for n in range(int(n_rods)):
-        ok = False
-        for _ in range(int(max_attempts)):
-            Rc = float(rng.uniform(*curvature_radius)) * L
-            phi = L / Rc
-            nv = max(8, int(math.ceil(L)) + 1)
-            th = np.linspace(-0.5 * phi, 0.5 * phi, nv)
-            loc = np.stack([Rc * np.sin(th), Rc * (1.0 - np.cos(th)), np.zeros(nv)], 1)
-            loc -= loc.mean(0)
-            Q = _random_rotation(rng)
-            pts = loc @ Q.T
-            ext = np.abs(pts).max(0) + r + _MARGIN
-            lo, hi = ext - 0.5, shape_xyz - 0.5 - ext
-            if np.any(hi < lo):
-                continue
-            pts = pts + lo + rng.random(3) * (hi - lo)
-            if polys and _polyline_gaps(pts, r, polys, [r] * len(polys)).min() < 2.0:
-                continue
-            polys.append(pts)
-            ok = True
-            break
-        if not ok:
-            raise _fail(f"could only place {n} of {n_rods} arcs (length {L:g}, radius {r:g}) in a volume of shape "
-                        f"{shape}; use fewer or shorter arcs or a bigger volume")
+
+    def arc():
+        Rc = float(rng.uniform(*curvature_radius)) * L
+        phi = L / Rc
+        nv = max(8, int(math.ceil(L)) + 1)
+        th = np.linspace(-0.5 * phi, 0.5 * phi, nv)
+        loc = np.stack([Rc * np.sin(th), Rc * (1.0 - np.cos(th)), np.zeros(nv)], 1)
+        loc -= loc.mean(0)
+        Q = _random_rotation(rng)
+        pts = loc @ Q.T
+        ext = np.abs(pts).max(0) + r + _MARGIN
+        lo, hi = ext - 0.5, shape_xyz - 0.5 - ext
+        if np.any(hi < lo):
+            return None
+        return pts + lo + rng.random(3) * (hi - lo)
+
+    polys = _place_polylines(int(n_rods), arc, r, 2.0, int(max_attempts),
+                             lambda k: f"could only place {k} of {n_rods} arcs (length {L:g}, radius {r:g}) in a "
+                                       f"volume of shape {shape}; use fewer or shorter arcs or a bigger volume")
     rods = RodSet.from_polylines(polys, r, units="voxel")
     return _finish(rods, scene="arcs", n_rods=int(n_rods), radius=r, length=L,
                    curvature_radius=[float(v) for v in curvature_radius], seed=int(seed))
@@ -465,23 +482,16 @@ def scene_wire_tangle(shape, n_wires: int = 20, radius: float = 2.5, length=(150
     rng = np.random.default_rng(seed)
     r = float(radius)
     reach = r + _MARGIN + 1.0
-    polys: list[np.ndarray] = []
-    for n in range(int(n_wires)):
-        ok = False
-        for _ in range(int(max_attempts)):
-            Lw = float(rng.uniform(*length))
-            start = reach + rng.random(3) * (shape_xyz - 1.0 - 2 * reach)
-            pts = _wander(rng, shape_xyz, start, Lw, persistence, reach)[::2]
-            if not _polyline_inside(pts, r, shape_xyz):
-                continue
-            if polys and _polyline_gaps(pts, r, polys, [r] * len(polys)).min() < 0.0:
-                continue
-            polys.append(pts)
-            ok = True
-            break
-        if not ok:
-            raise _fail(f"could only place {n} of {n_wires} wires in a volume of shape {shape}; "
-                        f"use fewer or shorter wires or a bigger volume")
+    def wire():
+        Lw = float(rng.uniform(*length))
+        start = reach + rng.random(3) * (shape_xyz - 1.0 - 2 * reach)
+        pts = _wander(rng, shape_xyz, start, Lw, persistence, reach)[::2]
+        return pts if _polyline_inside(pts, r, shape_xyz) else None
+
+    # wires may touch (gap 0) but not overlap
+    polys = _place_polylines(int(n_wires), wire, r, 0.0, int(max_attempts),
+                             lambda k: f"could only place {k} of {n_wires} wires in a volume of shape {shape}; "
+                                       f"use fewer or shorter wires or a bigger volume")
     rods = RodSet.from_polylines(polys, r, units="voxel")
     return _finish(rods, scene="wire_tangle", n_wires=int(n_wires), radius=r,
                    length=[float(v) for v in length], persistence=float(persistence), seed=int(seed))

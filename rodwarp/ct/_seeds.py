@@ -42,6 +42,57 @@ def _dp_split(q: np.ndarray, tol: float) -> list[tuple[int, int]]:
     return out
 
 
+def _skeleton(mask: np.ndarray, r0: float, junction_radius: float):
+    """The 3-D skeleton of ``mask`` with its junctions cut out.
+
+    Returns
+    -------
+    idx : (m, 3) int
+        Skeleton voxels (z, y, x).
+    junc : (j, 3) int
+        Junctions: skeleton voxels with 3 or more skeleton neighbours (where rods touch or cross).
+    keep : (m,) bool
+        Skeleton voxels farther than ``junction_radius * r0 + 1`` from every junction, so that
+        the branches of touching rods come apart.
+    """
+    from scipy.spatial import cKDTree
+    from skimage.morphology import skeletonize
+
+    idx = np.argwhere(skeletonize(mask))
+    if len(idx) == 0:
+        return idx, idx, np.zeros(0, bool)
+    nb = cKDTree(idx).query_ball_point(idx, 1.75, return_length=True) - 1
+    junc = idx[nb >= 3]
+    keep = np.ones(len(idx), bool)
+    if len(junc):
+        d, _ = cKDTree(junc).query(idx, distance_upper_bound=junction_radius * r0 + 1.0 + 1e-6)
+        keep = ~np.isfinite(d)
+    return idx, junc, keep
+
+
+def _components(pts: np.ndarray):
+    """Connected pieces of a set of voxels (26-neighbours: centres within 1.75 voxels).
+
+    Returns
+    -------
+    (pairs, graph, n_components, labels, order, bounds)
+        ``pairs`` (p, 2) neighbouring voxel indices, ``graph`` their sparse adjacency (COO);
+        component k holds the voxels ``order[bounds[k]:bounds[k + 1]]``.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(pts).query_pairs(1.75, output_type="ndarray")
+    n = len(pts)
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)) if len(pairs) else \
+        coo_matrix((n, n))
+    ncomp, lab = connected_components(g, directed=False)
+    order = np.argsort(lab, kind="stable")
+    bounds = np.searchsorted(lab[order], np.arange(ncomp + 1))
+    return pairs, g, ncomp, lab, order, bounds
+
+
 def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=None, quality=None):
     """Straight skeleton pieces, junction neighbourhoods removed: [(centre, dir, t0, t1, n)] (block xyz).
 
@@ -49,23 +100,11 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
     the volume (a chunk border): the skeleton bends along such faces, so voxels near them are
     dropped (the neighbouring chunk sees those parts of the rods).
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import breadth_first_order, connected_components
-    from scipy.spatial import cKDTree
-    from skimage.morphology import skeletonize
+    from scipy.sparse.csgraph import breadth_first_order
 
-    sk = skeletonize(mask)
-    idx = np.argwhere(sk)
+    idx, junc, keep = _skeleton(mask, r0, P.junction_radius)
     if len(idx) == 0:
         return [], 0, 0
-    tree = cKDTree(idx)
-    nb = tree.query_ball_point(idx, 1.75, return_length=True) - 1
-    junc = idx[nb >= 3]
-    keep = np.ones(len(idx), bool)
-    if len(junc):
-        jt = cKDTree(junc)
-        d, _ = jt.query(idx, distance_upper_bound=P.junction_radius * r0 + 1.0 + 1e-6)
-        keep = ~np.isfinite(d)
     if cut_faces is not None:
         m = r0 + 1.0
         for ax in range(3):
@@ -77,13 +116,7 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
     pts = idx[keep]
     if len(pts) == 0:
         return [], len(idx), len(junc)
-    pairs = cKDTree(pts).query_pairs(1.75, output_type="ndarray")
-    n = len(pts)
-    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)) if len(pairs) else \
-        coo_matrix((n, n))
-    ncomp, lab = connected_components(g, directed=False)
-    order = np.argsort(lab, kind="stable")
-    bounds = np.searchsorted(lab[order], np.arange(ncomp + 1))
+    pairs, g, ncomp, lab, order, bounds = _components(pts)
     csr = g.tocsr()
     csr = csr + csr.T
     deg = np.diff(csr.indptr)

@@ -20,7 +20,8 @@ import numpy as np
 from rodwarp._util import json_safe
 from rodwarp._util import one_line_error as _fail
 from rodwarp.errors import RodwarpError
-from rodwarp.rodset._rodset import FORMAT_NAME, FORMAT_VERSION, SUPPORTED_SUFFIXES, Contacts, RodSet, _check_units
+from rodwarp.rodset._rodset import FORMAT_NAME, FORMAT_VERSION, SUPPORTED_SUFFIXES, Contacts, RodSet
+from rodwarp.rodset._units import _check_units, _positive
 from rodwarp.rodset.files import atomic_path
 
 __all__ = ["save", "save_csv", "load"]
@@ -153,16 +154,6 @@ def load(path: str | os.PathLike, *, radius: float | None = None, diameter: floa
         except RodwarpError as e:
             raise _fail(f"{path}: {e}") from None
     return rods
-
-
-def _positive(v, name: str) -> float:
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise _fail(f"{name} must be a positive number, got {v!r}") from None
-    if not (math.isfinite(f) and f > 0):
-        raise _fail(f"{name} must be a positive number, got {v!r}")
-    return f
 
 
 def _parse_meta(meta, path: Path) -> dict:

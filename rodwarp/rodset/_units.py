@@ -16,6 +16,17 @@ UNITS: dict[str, float | None] = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "voxel": Non
 _EXPONENT = {"m": 0, "mm": -3, "um": -6}
 
 
+def _positive(v, name: str, what: str = "a positive number") -> float:
+    """``v`` as a finite float > 0, else a one-line error naming ``name``."""
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        raise _fail(f"{name} must be {what}, got {v!r}") from None
+    if not (math.isfinite(f) and f > 0):
+        raise _fail(f"{name} must be {what}, got {v!r}")
+    return f
+
+
 def _check_units(units) -> str:
     if not isinstance(units, str) or units not in UNITS:
         raise _fail(f"unknown units {units!r}; use one of {', '.join(repr(u) for u in UNITS)}")
@@ -33,12 +44,7 @@ def _unit_scale(src: str, dst: str, voxel_size: float | None) -> tuple[float, bo
     if voxel_size is not None:
         if "voxel" not in (src, dst) or src == dst:
             raise _fail(f"voxel_size only applies to conversions to or from 'voxel' (got {src!r} -> {dst!r})")
-        try:
-            voxel_size = float(voxel_size)
-        except (TypeError, ValueError):
-            raise _fail(f"voxel_size must be a positive number in metres, got {voxel_size!r}") from None
-        if not (math.isfinite(voxel_size) and voxel_size > 0):
-            raise _fail(f"voxel_size must be a positive number in metres, got {voxel_size!r}")
+        voxel_size = _positive(voxel_size, "voxel_size", "a positive number in metres")
     if src == dst:
         return 1.0, False
     if "voxel" in (src, dst):
