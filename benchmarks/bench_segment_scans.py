@@ -38,7 +38,7 @@ BLURS = [0.5, 1.0, 1.5, 2.0, 2.5]
 _BASELINE_SCRIPT = r"""
 import json, sys, time
 import numpy as np
-from rodwarp.ct import segment_volume
+from rodwarp.segment import segment_volume  # the baseline tree's layout (before issue 16)
 from rodwarp.errors import RodwarpError
 vol = np.load(sys.argv[1])
 t = time.perf_counter()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rodwarp.ct._levels import _Stats
+from rodwarp.ct._levels import _Levels
 from rodwarp.ct._params import SegmentParams
 from rodwarp.ct._profile import _axis_level
 from rodwarp.ct._reader import _Reader
@@ -17,7 +17,7 @@ from rodwarp.ct._voxels import _basis, _disc_offsets
 from rodwarp.rodset import Contacts, RodSet, detect_contacts, segment_closest_params
 
 
-def confirm_contacts(rods_out: RodSet, reader: _Reader, st: _Stats, C: float, P: SegmentParams,
+def confirm_contacts(rods_out: RodSet, reader: _Reader, st: _Levels, C: float, P: SegmentParams,
                      sigma=None) -> tuple[Contacts, int]:
     """The contacts of the segmented packing: contact candidates the image confirms.
 
@@ -27,7 +27,7 @@ def confirm_contacts(rods_out: RodSet, reader: _Reader, st: _Stats, C: float, P:
         The segmented rods (voxel units).
     reader : _Reader
         The prepared volume.
-    st : _Stats
+    st : _Levels
         Background and foreground levels.
     C : float
         Fitted contrast of the rods (plateau over fg - bg).

@@ -335,7 +335,7 @@ def trace_filaments(raw: np.ndarray, st, P, quality: dict, progress=None):
     ----------
     raw : ndarray (z, y, x) float32
         The prepared volume.
-    st : rodwarp.ct._levels._Stats
+    st : rodwarp.ct._levels._Levels
         Background and foreground levels, threshold, coarse radius ``r0`` (voxels).
     P : rodwarp.ct.SegmentParams
         Knobs (``smooth_sigma``, ``junction_radius``, ``min_length``, ``window_margin``).

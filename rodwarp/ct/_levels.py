@@ -22,13 +22,15 @@ from rodwarp.ct._reader import _Reader
 
 
 @dataclass
-class _Stats:
+class _Levels:
+    """What stage 1 measured: grey levels (raw intensity units) and a coarse radius (voxels)."""
+
     bg: float           # background level (raw)
     fg: float           # rod plateau (raw)
     fg_smooth: float    # rod plateau in the smoothed image (detection)
     threshold: float    # binarisation level of the smoothed image
-    r0: float
-    noise: float
+    r0: float           # coarse rod radius (voxels)
+    noise: float        # robust sigma of the background (raw)
     mixed: bool = False  # radii spread widely (the distance-transform ridge is broad)
 
 
@@ -50,7 +52,9 @@ MIXED_RIDGE_SPREAD = 0.3
 MIXED_RADIUS_CV = 0.1
 
 
-def _global_stats(reader: _Reader, P: SegmentParams) -> _Stats:
+def _measure_levels(reader: _Reader, P: SegmentParams) -> _Levels:
+    """Background and rod levels, the binarisation threshold and a coarse radius of a volume
+    (the module docstring says how); raises a one-line error when no rods stand out."""
     shape = reader.shape
     n = float(np.prod(shape))
     step = max(1, int(math.ceil((n / 2.0e6) ** (1.0 / 3.0))))
@@ -167,5 +171,5 @@ def _global_stats(reader: _Reader, P: SegmentParams) -> _Stats:
         if mixed:
             m = q25
         r0 = max(0.75, m + RIDGE_BIAS - 0.7 * (1.0 + P.smooth_sigma ** 2) / max(m, 1.0))
-    return _Stats(bg=bg, fg=fg, fg_smooth=fg_s, threshold=thr, r0=r0, noise=noise,
+    return _Levels(bg=bg, fg=fg, fg_smooth=fg_s, threshold=thr, r0=r0, noise=noise,
                   mixed=bool(P.diameter is None and mixed))

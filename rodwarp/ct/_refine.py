@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from rodwarp.ct._levels import MIXED_RADIUS_CV, _Stats
+from rodwarp.ct._levels import MIXED_RADIUS_CV, _Levels
 from rodwarp.ct._params import SegmentParams
 from rodwarp.ct._pasting import _gap_filler, _merge_lines
 from rodwarp.ct._profile import _axis_level, _blur_model, _end_weight, _fit_radial_profile
@@ -77,7 +77,7 @@ def _neighbours(rods, reach):
 
 
 class _Refiner:
-    def __init__(self, reader: _Reader, st: _Stats, P: SegmentParams, r_glob: float):
+    def __init__(self, reader: _Reader, st: _Levels, P: SegmentParams, r_glob: float):
         self.reader = reader
         self.st = st
         self.P = P

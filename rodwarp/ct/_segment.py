@@ -39,7 +39,7 @@ import numpy as np
 
 from rodwarp._util import one_line_error as _fail
 from rodwarp.ct._contacts import confirm_contacts
-from rodwarp.ct._levels import _global_stats
+from rodwarp.ct._levels import _measure_levels
 from rodwarp.ct._params import _HINT, SegmentParams, SegmentResult
 from rodwarp.ct._pasting import _gap_filler, _merge_lines
 from rodwarp.ct._reader import _Reader
@@ -127,7 +127,7 @@ def segment_volume(volume, params: SegmentParams | None = None,
     timings["prepare"] = time.perf_counter() - tic
     tic = time.perf_counter()
     note("stats", 0, 1)
-    st = _global_stats(reader, P)
+    st = _measure_levels(reader, P)
     note("stats", 1, 1)
     timings["stats"] = time.perf_counter() - tic
     noise = prep.notes.get("noise") or st.noise

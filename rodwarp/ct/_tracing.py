@@ -15,7 +15,7 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from rodwarp.ct._levels import _Stats
+from rodwarp.ct._levels import _Levels
 from rodwarp.ct._params import SegmentParams
 from rodwarp.ct._seeds import _skeleton_seeds
 from rodwarp.ct._voxels import _BlockSampler, _basis, _canonical, _disc_offsets, _point_segment_distance, _unit, _window_voxels
@@ -166,7 +166,7 @@ def _rasterize(lines, shape_zyx, origin_zyx, radius):
     return cov
 
 
-def _detect_block(raw: np.ndarray, origin_zyx, st: _Stats, P: SegmentParams, quality: dict,
+def _detect_block(raw: np.ndarray, origin_zyx, st: _Levels, P: SegmentParams, quality: dict,
                   volume_shape=None):
     """Trace rods in one block; returns a list of (p0, p1) in global xyz."""
     g = ndimage.gaussian_filter(raw, P.smooth_sigma) if P.smooth_sigma > 0 else raw
