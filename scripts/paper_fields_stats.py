@@ -51,8 +51,7 @@ def _sha256(path: Path) -> str:
 
 
 def analyse(path: Path, alpha: int, epsilon: float) -> tuple[dict, object, dict]:
-    from rodwarp.analysis import Fields
-    from rodwarp.analysis import field_statistics
+    from rodwarp.analysis import Fields, field_statistics
 
     f = Fields.load(path)
     s = field_statistics(f, method="q3", connectivity=26)
@@ -256,9 +255,9 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="folder for the results")
     args = ap.parse_args(argv)
 
-    from rodwarp.rodset.files import write_json, write_text
-    from rodwarp.errors import RodwarpError
     from rodwarp.analysis import plot_tangles
+    from rodwarp.errors import RodwarpError
+    from rodwarp.rodset.files import write_json, write_text
 
     files = []
     for p in sorted(args.data.glob("*.npz")):

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from rodwarp.errors import RodwarpError, SimulationBlowUp
-from rodwarp.sim.model import STEEL, Material, Model  # noqa: F401
 from rodwarp.rodset import RodSet
-from rodwarp.testing.scenes import log_cabin, straight_rod, straightened, tilted_gravity
+from rodwarp.sim.model import STEEL, Material, Model  # noqa: F401
 from rodwarp.sim.solver import RodSolver, run
+from rodwarp.testing.scenes import log_cabin, straight_rod, straightened, tilted_gravity
 
 G = 9.81
 

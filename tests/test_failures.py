@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 from rodwarp.errors import RodwarpError, SimulationBlowUp
-from rodwarp.sim.model import STEEL, Model
 from rodwarp.rodset import RodSet
-from rodwarp.testing.scenes import log_cabin, straight_rod, straightened
+from rodwarp.sim.model import STEEL, Model
 from rodwarp.sim.solver import RodSolver, run
+from rodwarp.testing.scenes import log_cabin, straight_rod, straightened
 
 G = 9.81
 

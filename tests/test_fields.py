@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from rodwarp.analysis import _fields as F
-from rodwarp.errors import RodwarpError
 from rodwarp.analysis import compute_fields
+from rodwarp.errors import RodwarpError
 from rodwarp.rodset import Contacts, RodSet
 
 LONG = 50.0

@@ -11,8 +11,7 @@ import tifffile
 
 from rodwarp import ct
 from rodwarp.errors import RodwarpError
-from rodwarp.rodset import segment_distance
-from rodwarp.rodset import RodSet
+from rodwarp.rodset import RodSet, segment_distance
 
 SHAPE = (64, 64, 64)
 

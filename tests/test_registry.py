@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from rodwarp.analysis import _figures, _registry
-from rodwarp.analysis import FieldSpec, Fields, analyze, compute_fields, field_spec
+from rodwarp.analysis import Fields, FieldSpec, _figures, _registry, analyze, compute_fields, field_spec
 from rodwarp.packing import random_packing
 
 runner = CliRunner()

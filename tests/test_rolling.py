@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from rodwarp.rodset import RodSet
-from rodwarp.testing.scenes import straight_rod, tilted_gravity
 from rodwarp.sim import STEEL, Model, RodSolver, run
+from rodwarp.testing.scenes import straight_rod, tilted_gravity
 
 G = 9.81
 R = 0.01

@@ -4,9 +4,8 @@ import numpy as np
 import pytest
 
 from rodwarp import ct
-from rodwarp.analysis import compute_fields
+from rodwarp.analysis import compute_fields, field_statistics
 from rodwarp.ct import segment_volume
-from rodwarp.analysis import field_statistics
 
 
 @pytest.mark.slow

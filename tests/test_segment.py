@@ -8,10 +8,9 @@ import numpy as np
 import pytest
 
 from rodwarp import ct
+from rodwarp.ct import SegmentParams, SegmentResult, match_rods, score_contacts, segment_volume
 from rodwarp.errors import RodwarpError
 from rodwarp.rodset import Contacts, RodSet
-from rodwarp.ct import (SegmentParams, SegmentResult, match_rods, score_contacts,
-                             segment_volume)
 
 
 def _angle_deg(u, v):

@@ -12,9 +12,8 @@ import warnings
 import numpy as np
 import pytest
 
+from rodwarp.analysis import Fields, field_statistics, find_tangles, histogram, outlier_bound, z_profiles
 from rodwarp.errors import RodwarpError
-from rodwarp.analysis import Fields
-from rodwarp.analysis import field_statistics, find_tangles, histogram, outlier_bound, z_profiles
 
 PAPER_CASE = [1, 2, 3, 4, 5, 6, 7, 8, 12, 20]
 
