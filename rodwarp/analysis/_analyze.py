@@ -70,7 +70,21 @@ def _is_zarr_with(path: Path, key: str) -> bool:
 
 
 def load_input(path, opts: AnalyzeOptions) -> tuple[str, RodSet | Fields, Path]:
-    """Classify and read ``path``: returns ("rods", RodSet, file) or ("fields", Fields, file)."""
+    """Classify and read an input of :func:`analyze`.
+
+    Parameters
+    ----------
+    path : path-like
+        A simulate or segment output folder, a rod-set file (npz, zarr, CSV) or precomputed
+        fields (``fields.zarr``, an npz holding ``e`` and ``n``).
+    opts : AnalyzeOptions
+        ``diameter`` and ``units`` for a CSV; ``units`` converts npz/zarr rod sets.
+
+    Returns
+    -------
+    (kind, object, file)
+        ``("rods", RodSet, file)`` or ``("fields", Fields, file)``; ``file`` is what was read.
+    """
     path = Path(path)
     if not path.exists():
         raise RodwarpError(f"input '{path}' does not exist; pass a simulate/segment output directory, "
@@ -104,7 +118,17 @@ def _load_rods(path: Path, opts: AnalyzeOptions) -> RodSet:
 
 
 def default_out(path: Path) -> Path:
-    """``analysis/`` beside the input (inside it when the input is a directory of results)."""
+    """Default output folder of :func:`analyze`: ``analysis/`` beside the input.
+
+    Parameters
+    ----------
+    path : path-like
+        The input; a directory of results (not a ``.zarr``) gets ``analysis/`` inside it.
+
+    Returns
+    -------
+    pathlib.Path
+    """
     path = Path(path)
     if path.is_dir() and path.suffix != ".zarr":
         return path / "analysis"

@@ -102,7 +102,18 @@ def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float 
 
 
 def grid_axes(p: FieldParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Voxel-centre coordinates (x, y, z), centred in the domain at the given spacing."""
+    """Voxel-centre coordinates along x, y and z, centred in the domain at the given spacing.
+
+    Parameters
+    ----------
+    p : FieldParams
+        From :func:`resolve_params` (domain and spacing in the rods' units).
+
+    Returns
+    -------
+    (x, y, z) : tuple of ndarray
+        Coordinates in the rods' units; the grid has ``len(z), len(y), len(x)`` voxels.
+    """
     out = []
     for k in range(3):
         lo, hi = p.domain[0, k], p.domain[1, k]
@@ -113,7 +124,19 @@ def grid_axes(p: FieldParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def inside_mask(p: FieldParams, x, y, z) -> np.ndarray:
-    """(nz, ny, nx) voxels whose ball lies inside the domain (to 1e-9 R)."""
+    """Voxels whose ball lies inside the domain (to 1e-9 R).
+
+    Parameters
+    ----------
+    p : FieldParams
+        Ball radius and domain.
+    x, y, z : ndarray
+        Voxel-centre coordinates (:func:`grid_axes`).
+
+    Returns
+    -------
+    ndarray of bool, shape (nz, ny, nx)
+    """
     eps = 1e-9 * p.radius
     ok = [(c - p.radius >= p.domain[0, k] - eps) & (c + p.radius <= p.domain[1, k] + eps)
           for k, c in enumerate((x, y, z))]

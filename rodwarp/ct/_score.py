@@ -114,7 +114,22 @@ def match_rods(found: RodSet, truth: RodSet, max_mean_distance: float = 2.0,
     ``max_angle_deg``.  Among admissible pairs the assignment (Hungarian algorithm) minimises
     the total of the symmetric mean distance (found-to-true and true-to-found averaged), so a
     whole rod is preferred to a fragment of it.  ``mean_distance`` reports found-to-true.
-    Both sets must be in the same units.
+
+    Parameters
+    ----------
+    found, truth : RodSet
+        Segmented and true rods, in the same units (voxels for phantoms).
+    max_mean_distance : float
+        Largest admissible mean centreline distance, in those units.
+    max_angle_deg : float
+        Largest admissible angle between the axes (degrees).
+    n_samples : int
+        Points along each found centreline.
+
+    Returns
+    -------
+    RodMatch
+        The pairs, their distances, angles and endpoint errors, precision, recall and F1.
     """
     from scipy.optimize import linear_sum_assignment
     from scipy.spatial import cKDTree
@@ -190,6 +205,26 @@ def score_contacts(found_contacts: Contacts, truth: RodSet, match: RodMatch,
     are scored apart: a found contact there is neither a hit nor a false alarm.  A found contact
     on a rod that matched no true rod is a false positive; a true contact on an unmatched true
     rod is a miss.
+
+    Parameters
+    ----------
+    found_contacts : Contacts
+        The contacts of the segmented packing (rod ids of the found set).
+    truth : RodSet
+        The true rods (same units as the gaps below).
+    match : RodMatch
+        Found-to-true rod matching (:func:`match_rods` or :func:`match_polylines`).
+    truth_contacts : Contacts, optional
+        True contacts; default ``truth.contacts``, else computed from the true geometry.
+    touch_tol : float
+        Largest true surface gap (units) that is a contact.
+    ambiguous : (float, float)
+        Open interval of true gaps (units) scored apart.
+
+    Returns
+    -------
+    ContactScore
+        True and false positives, misses, ignored, precision, recall and F1.
     """
     tc = truth_contacts if truth_contacts is not None else truth.contacts
     geo = detect_contacts(truth, tolerance=max(ambiguous[1], touch_tol) + 1e-9)
@@ -261,7 +296,25 @@ def match_polylines(found: RodSet, truth: RodSet, max_mean_distance: float = 2.0
     radius plus one, at least ``max_mean_distance``) of the other: a fragment does not match,
     and neither does a piece that strays onto another filament for much of its length.  Among
     admissible pairs the assignment (Hungarian algorithm) minimises the total symmetric mean
-    distance.  Both sets must be in the same units.
+    distance.
+
+    Parameters
+    ----------
+    found, truth : RodSet
+        Segmented and true filaments (polylines), in the same units (voxels for phantoms).
+    max_mean_distance : float
+        Largest admissible mean centreline distance, in those units.
+    min_coverage : float
+        Share of both centrelines that must lie within ``cover_distance`` of the other.
+    cover_distance : float, optional
+        Distance (units) within which a centreline point counts as covered.
+    step : float
+        Spacing (units) of the points sampled along the centrelines.
+
+    Returns
+    -------
+    PolylineMatch
+        The pairs, their mean distances and coverages, precision, recall and F1.
     """
     from scipy.optimize import linear_sum_assignment
     from scipy.spatial import cKDTree

@@ -25,6 +25,16 @@ def segment_closest_params(p0, p1, q0, q1):
     """Closest-point parameters (s, t) in [0, 1] of segments p0-p1 and q0-q1 (broadcasting).
 
     Parallel pairs take the middle of their overlap, as the Warp narrowphase does.
+
+    Parameters
+    ----------
+    p0, p1, q0, q1 : array_like, shape (..., 3)
+        Segment ends, any length unit; leading axes broadcast.
+
+    Returns
+    -------
+    s, t : ndarray, shape (...)
+        The closest points are ``p0 + s (p1 - p0)`` and ``q0 + t (q1 - q0)``.
     """
     p0, p1, q0, q1 = (np.asarray(a, dtype=np.float64) for a in (p0, p1, q0, q1))
     d1 = p1 - p0
@@ -53,7 +63,18 @@ def segment_closest_params(p0, p1, q0, q1):
 
 
 def segment_distance(p0, p1, q0, q1):
-    """Distance between segments p0-p1 and q0-q1 (broadcasting over leading axes)."""
+    """Distance between segments p0-p1 and q0-q1 (broadcasting over leading axes).
+
+    Parameters
+    ----------
+    p0, p1, q0, q1 : array_like, shape (..., 3)
+        Segment ends, any length unit.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        Centreline distance, in the unit of the ends (subtract the radii for a surface gap).
+    """
     s, t = segment_closest_params(p0, p1, q0, q1)
     p0, p1, q0, q1 = (np.asarray(a, dtype=np.float64) for a in (p0, p1, q0, q1))
     pa = p0 + s[..., None] * (p1 - p0)
