@@ -1,6 +1,6 @@
 """Accuracy against cost: vertices per rod, time step, Gauss-Seidel iterations.
 
-a. Vertices per rod: the clamped cantilever of ``rodwarp.scenes.cantilever(n_edges)`` with the
+a. Vertices per rod: the clamped cantilever of ``rodwarp.testing.scenes.cantilever(n_edges)`` with the
    test material (E = 1e9 Pa, rho = 1000 kg/m^3, r = 0.01 m, L = 1 m), as in
    ``tests/test_mechanics.py``: tip sag after settling (dt 1e-3 s, 1.5 s, damping 40 1/s,
    4 iterations) against q L^4 / (8 E I), and the first bending frequency (no gravity, small
@@ -43,7 +43,7 @@ TITLE = "Accuracy against cost: vertices per rod, time step, Gauss-Seidel iterat
 
 def _test_material():
     from rodwarp.sim.model import Material
-    from rodwarp.scenes import TEST_DENSITY, TEST_YOUNG
+    from rodwarp.testing.scenes import TEST_DENSITY, TEST_YOUNG
 
     return Material(young=TEST_YOUNG, density=TEST_DENSITY)
 
@@ -92,7 +92,7 @@ def _cantilever_model(n_edges: int, *, gravity, damping: float, tip_velocity: fl
                       device: str = "cpu"):
     from rodwarp.sim.model import Model
     from rodwarp.rodset import RodSet
-    from rodwarp.scenes import TEST_RADIUS, cantilever
+    from rodwarp.testing.scenes import TEST_RADIUS, cantilever
 
     rods, pinned = cantilever(n_edges)
     pts = rods.points
@@ -175,7 +175,7 @@ def _frequency(n_edges: int, dt: float, bending: str, device: str):
 
 def _vertices(quick: bool, device: str) -> dict:
     from rodwarp.sim.solver import RodSolver
-    from rodwarp.scenes import cantilever_frequency, cantilever_sag
+    from rodwarp.testing.scenes import cantilever_frequency, cantilever_sag
 
     edges = [2, 4, 9, 16, 32] if quick else [2, 3, 4, 6, 9, 12, 16, 24, 32]
     batch = 1000
@@ -232,7 +232,7 @@ def _vertices(quick: bool, device: str) -> dict:
 def _free_rod_model(device: str):
     from rodwarp.sim.model import Model
     from rodwarp.rodset import RodSet
-    from rodwarp.scenes import TEST_RADIUS
+    from rodwarp.testing.scenes import TEST_RADIUS
 
     n = 10
     s = np.linspace(0, 1, n)
@@ -295,7 +295,7 @@ def _free_rod(quick: bool, device: str) -> dict:
 
 
 def _cantilever_dt(quick: bool, device: str) -> dict:
-    from rodwarp.scenes import cantilever_frequency, cantilever_sag
+    from rodwarp.testing.scenes import cantilever_frequency, cantilever_sag
 
     dts = [2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2] if quick else [1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2]
     repeats = common.n_repeats(quick)
@@ -402,7 +402,7 @@ def _cabin(quick: bool, device: str) -> dict:
     """The elastic ladder of ``tests/test_contact.py`` (mu 0.5 at 60 deg, it must stand): slip
     of its ends after 1 s against the sweep cap. (The log cabin used here before rolling rods
     no longer stands: round logs on a tilt roll apart, with or without friction.)"""
-    from rodwarp.scenes import leaning_rod
+    from rodwarp.testing.scenes import leaning_rod
     from rodwarp.sim import STEEL, Model, RodSolver, run
 
     its = [10, 20, 40, 80, 160, 320, 640]

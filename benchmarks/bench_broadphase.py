@@ -17,7 +17,7 @@ Methods, all on the same positions:
   Rodwarp's contacts are the step's contacts with gap < contact distance.
 * **cKDTree**: ``scipy.spatial.cKDTree`` on segment midpoints, ``query_pairs`` with rodwarp's
   own query radius (h_max + 2 r_max + margin + skin), then exact gaps with
-  ``rodwarp.geometry.segment_distance`` on the candidates; also with the smallest radius
+  ``rodwarp.rodset.segment_distance`` on the candidates; also with the smallest radius
   that still finds every contact (h_max + 2 r_max + contact distance), "cKDTree (tight)".
 * **all pairs**: exact gaps of every segment pair in NumPy (``segment_distance``, vectorised
   in chunks); skipped where its predicted time exceeds the limit (recorded as skipped).
@@ -60,7 +60,7 @@ def _exclude(model, i, j):
 
 
 def _gaps(model, x, i, j, chunk: int = 1 << 18):
-    from rodwarp.geometry import segment_distance
+    from rodwarp.rodset import segment_distance
 
     sv = model.seg_vertex_np
     r = model.radius_np[model.vertex_rod_np[sv]]
@@ -92,7 +92,7 @@ def ckdtree_contacts(model, x, radius: float):
 
 def all_pairs_contacts(model, x, chunk: int = 1 << 18):
     """Exact gap of every segment pair (upper triangle), in row blocks; returns (pairs, gaps)."""
-    from rodwarp.geometry import segment_distance
+    from rodwarp.rodset import segment_distance
 
     sv = model.seg_vertex_np
     S = len(sv)
@@ -124,7 +124,7 @@ def all_pairs_contacts(model, x, chunk: int = 1 << 18):
 
 def _calibrate_all_pairs(model, x) -> float:
     """Pairs per second of the all-pairs kernel (a small block, best of 3)."""
-    from rodwarp.geometry import segment_distance
+    from rodwarp.rodset import segment_distance
 
     sv = model.seg_vertex_np
     n = min(len(sv), 400)

@@ -40,7 +40,7 @@ def legacy_write_vtp(path, positions, offsets, radii, t):
  </PolyData>
 </VTKFile>
 """
-    from rodwarp.atomic import write_text
+    from rodwarp.rodset.files import write_text
 
     write_text(path, text)
 
@@ -63,7 +63,7 @@ def _frames(seed=0):
 
 
 def run(quick: bool, device: str) -> dict:
-    from rodwarp.outputs import write_vtp
+    from rodwarp.rodset.trajectory import write_vtp
 
     rods, frames = _frames()
     writers = [("ascii (before issue 15)", legacy_write_vtp, "vtp", "hand-written"),

@@ -304,7 +304,7 @@ def pyplot():
 
 def save_figure(fig, path: Path) -> str:
     """Save a figure as PNG atomically; returns the file name."""
-    from rodwarp.atomic import atomic_path
+    from rodwarp.rodset.files import atomic_path
 
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")

@@ -9,13 +9,23 @@ finished with failed points; 1 an internal error or an abort. No raw tracebacks.
 from __future__ import annotations
 
 import functools
+import inspect
 import sys
 from pathlib import Path
 from typing import Optional
 
 import typer
 
+from rodwarp._util import version_line
+from rodwarp.analysis import AnalyzeOptions, fields_help
+from rodwarp.ct import SegmentParams, make_phantom
 from rodwarp.errors import RodwarpError, SimulationBlowUp
+
+# option defaults come from where they are defined (the options' dataclasses, the phantom
+# builder's signature), so each is stated once
+_A = AnalyzeOptions()
+_S = SegmentParams()
+_PH = {k: p.default for k, p in inspect.signature(make_phantom).parameters.items()}
 
 app = typer.Typer(add_completion=False, no_args_is_help=False,
                   help="Simulate and analyse packings of elastic rods (NVIDIA Warp).",
@@ -63,18 +73,9 @@ def _friendly(fn):
     return wrapper
 
 
-def _version_text() -> str:
-    import numpy
-    import warp
-
-    from rodwarp import __version__
-
-    return f"rodwarp {__version__}, warp {warp.config.version}, numpy {numpy.__version__}"
-
-
 def _print_version(value: bool):
     if value:
-        typer.echo(_version_text())
+        typer.echo(version_line())
         raise typer.Exit(0)
 
 
@@ -101,7 +102,7 @@ def _given(ctx: typer.Context, *names: str) -> set:
 @app.command(epilog="Example: rodwarp version")
 def version():
     """Print the versions of rodwarp, Warp and NumPy (same as rodwarp --version)."""
-    typer.echo(_version_text())
+    typer.echo(version_line())
 
 
 @app.command(epilog="Example: rodwarp simulate --alpha 100 --freq 10   (the main job, about 3 min on one core; "
@@ -174,7 +175,10 @@ def simulate(
 
 
 @app.command(epilog="Example: rodwarp analyze runs/alpha100_freq10_g0.5_seed0   (writes its analysis/ folder; "
-                     "an earlier analysis there is replaced)")
+                     "an earlier analysis there is replaced)",
+             help="Local fields, their statistics, outliers, tangles and percolation.\n\n"
+                  f"Fields (one array each in fields.zarr; means in summary.json; panels in the figures): "
+                  f"{fields_help()}.")
 @_friendly
 def analyze(
     input: Path = typer.Argument(..., help="simulate/segment output directory, rod-set file (.npz, .zarr, .csv) "
@@ -185,18 +189,18 @@ def analyze(
     diameter: Optional[float] = typer.Option(None, help="Rod diameter d for the default R (required for a CSV without radius)."),
     length: Optional[float] = typer.Option(None, help="Rod length l for the default R (default the mean rod length)."),
     units: Optional[str] = typer.Option(None, help="Length unit of a CSV (m, mm, um, voxel); converts npz/zarr rod sets."),
-    keep_outside: bool = typer.Option(False, help="Keep voxels whose ball leaves the domain (masked as NaN by default)."),
+    keep_outside: bool = typer.Option(_A.keep_outside, help="Keep voxels whose ball leaves the domain (masked as NaN by default)."),
     contact_tolerance: Optional[float] = typer.Option(None, help="Surface gap counted as contact when contacts are detected (default d / 10)."),
-    outlier: str = typer.Option("q3", help="Outlier bound: q3 = Q3 + 1.5 IQR (the paper's) or q1 = Q1 + 1.5 IQR."),
-    connectivity: int = typer.Option(26, help="Tangle connectivity: 26 (default) or 6."),
-    bins: int = typer.Option(40, help="Histogram bins."),
-    device: str = typer.Option("cpu", help="cpu, cuda or auto."),
-    figures: bool = typer.Option(True, help="Write the PNG figures."),
+    outlier: str = typer.Option(_A.outlier, help="Outlier bound: q3 = Q3 + 1.5 IQR (the paper's) or q1 = Q1 + 1.5 IQR."),
+    connectivity: int = typer.Option(_A.connectivity, help="Tangle connectivity: 26 (default) or 6."),
+    bins: int = typer.Option(_A.bins, help="Histogram bins."),
+    device: str = typer.Option(_A.device, help="cpu, cuda or auto."),
+    figures: bool = typer.Option(_A.figures, help="Write the PNG figures."),
     overwrite: bool = typer.Option(False, help="Write into --out even when it holds another kind of run."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ):
-    """Local fields (phi, S, c, e), their statistics, outliers, tangles and percolation."""
-    from rodwarp.analyze import AnalyzeOptions, analyze as run_analyze, default_out
+    from rodwarp.analysis import analyze as run_analyze
+    from rodwarp.analysis import default_out
 
     opts = AnalyzeOptions(radius=radius, spacing=spacing, diameter=diameter, length=length, units=units,
                           keep_outside=keep_outside, contact_tolerance=contact_tolerance, outlier=outlier,
@@ -225,76 +229,35 @@ def phantom(
                                          "(bundles of touching parallel rods), 'arcs' (gently curved rods), "
                                          "'wires' (a nest-like tangle of curved wires)."),
     shape: tuple[int, int, int] = typer.Option(..., help="Volume shape Z Y X (slices, rows, columns)."),
-    voxel_size: float = typer.Option(1.0, help="Voxel edge length in the rods' units (1 for voxel-unit rods)."),
+    voxel_size: float = typer.Option(_PH["voxel_size"],
+                                     help="Voxel edge length in the rods' units (1 for voxel-unit rods)."),
     out: Path = typer.Option(..., help="Output TIFF (ground truth written beside it)."),
-    blur: float = typer.Option(1.0, help="Gaussian point-spread sigma (voxels)."),
-    cnr: float = typer.Option(10.0, help="Contrast-to-noise ratio (foreground - background) / noise sigma."),
-    ring: float = typer.Option(0.0, help="Ring artefact amplitude (fraction of the contrast)."),
-    cupping: float = typer.Option(0.0, help="Cupping: relative intensity drop at the slice edge (negative: a "
-                                            "bright rim, as beam hardening shows)."),
-    streaks: float = typer.Option(0.0, help="Metal streak amplitude (fraction of the contrast)."),
-    fov: Optional[float] = typer.Option(None, help="Field of view: radius (voxels) of the reconstruction circle; "
-                                                   "0 outside it."),
-    dark: bool = typer.Option(False, help="Dark rods on a bright background (grey values swapped)."),
-    z_thickness: int = typer.Option(1, help="Slices this many times thicker than the voxels are wide "
-                                            "(anisotropic voxels; the TIFF records the spacing)."),
-    n_rods: int = typer.Option(100, help="'random', 'arcs', 'wires': number of rods; 'bundles': of bundles."),
-    radius: float = typer.Option(3.0, help="Scenes: rod radius (voxels)."),
-    aspect: float = typer.Option(30.0, help="'random': aspect ratio length / diameter."),
-    touching: float = typer.Option(0.5, help="'random': fraction of rods touching another."),
-    seed: int = typer.Option(0, help="Seed of the noise and of the scenes."),
+    blur: float = typer.Option(_PH["blur"], help="Gaussian point-spread sigma (voxels)."),
+    cnr: float = typer.Option(_PH["cnr"], help="Contrast-to-noise ratio (foreground - background) / noise sigma."),
+    ring: float = typer.Option(_PH["ring"], help="Ring artefact amplitude (fraction of the contrast)."),
+    cupping: float = typer.Option(_PH["cupping"], help="Cupping: relative intensity drop at the slice edge "
+                                                       "(negative: a bright rim, as beam hardening shows)."),
+    streaks: float = typer.Option(_PH["streaks"], help="Metal streak amplitude (fraction of the contrast)."),
+    fov: Optional[float] = typer.Option(_PH["fov"], help="Field of view: radius (voxels) of the reconstruction "
+                                                         "circle; 0 outside it."),
+    dark: bool = typer.Option(_PH["dark"], help="Dark rods on a bright background (grey values swapped)."),
+    z_thickness: int = typer.Option(_PH["z_thickness"], help="Slices this many times thicker than the voxels are "
+                                                             "wide (anisotropic voxels; the TIFF records the spacing)."),
+    n_rods: int = typer.Option(_PH["n_rods"], help="'random', 'arcs', 'wires': number of rods; 'bundles': of bundles."),
+    radius: float = typer.Option(_PH["radius"], help="Scenes: rod radius (voxels)."),
+    aspect: float = typer.Option(_PH["aspect"], help="'random': aspect ratio length / diameter."),
+    touching: float = typer.Option(_PH["touching"], help="'random': fraction of rods touching another."),
+    seed: int = typer.Option(_PH["seed"], help="Seed of the noise and of the scenes."),
 ):
     """Synthetic 16-bit CT of a rod set: partial volume, blur, noise and artefacts, with ground truth."""
-    import numpy as np
-
-    from rodwarp import phantom as ph
-    from rodwarp.rodset import UNITS, load
-
     from rodwarp import validation as v
 
     v.check_phantom(rods=rods, shape=shape, voxel_size=voxel_size, out=out, blur=blur, cnr=cnr, ring=ring,
                     cupping=cupping, streaks=streaks, n_rods=n_rods, radius=radius, aspect=aspect,
                     touching=touching, seed=seed, fov=fov, z_thickness=z_thickness)
-    # scenes are built in voxel widths along every axis; thick slices span z_thickness of them
-    full = (shape[0] * z_thickness, shape[1], shape[2])
-    scenes = {
-        "random": lambda: ph.scene_random_packing(full, n_rods=n_rods, radius=radius, aspect=aspect,
-                                                  touching_fraction=touching, seed=seed,
-                                                  fov_radius=None if fov is None else fov - 2.0),
-        "bundles": lambda: ph.scene_bundles(full, n_bundles=n_rods, radius=radius, seed=seed),
-        "arcs": lambda: ph.scene_arcs(full, n_rods=n_rods, radius=radius, seed=seed),
-        "wires": lambda: ph.scene_wire_tangle(full, n_wires=n_rods, radius=radius, seed=seed),
-    }
-    if rods in scenes:
-        rs = scenes[rods]()
-        if z_thickness > 1:  # thick slice k is centred at z = k z_thickness
-            rs.points[:, 2] -= 0.5 * (z_thickness - 1)
-            rs.contacts = ph.phantom_truth(rs)
-        vox = 1.0
-    else:
-        p = Path(rods)
-        if p.is_dir() and (p / "final.npz").exists():
-            p = p / "final.npz"
-        rs = load(p)
-        if rs.units == "voxel":
-            if voxel_size != 1.0:
-                raise RodwarpError("the rods are in voxel units: drop --voxel-size (it is 1)")
-            vox = 1.0
-        else:
-            vox = voxel_size * UNITS[rs.units]  # metres per voxel
-            rs = rs.to_units("voxel", voxel_size=vox)
-        from rodwarp.geometry import detect_contacts
-
-        rs.contacts = detect_contacts(rs, 0.1 * float(np.mean(rs.diameters)))
-    bg, fg = (50000, 20000) if dark else (20000, 50000)
-    vol = ph.render_phantom(rs, tuple(shape), blur_sigma=blur, cnr=cnr, ring=ring, cupping=cupping,
-                            streaks=streaks, seed=seed, fov=fov, z_thickness=z_thickness,
-                            background=bg, foreground=fg)
-    params = {"shape": list(shape), "voxel_size": voxel_size, "blur_sigma": blur, "cnr": cnr, "ring": ring,
-              "cupping": cupping, "streaks": streaks, "fov": fov, "dark": dark, "z_thickness": z_thickness,
-              "seed": seed, "source": rods, "metres_per_voxel": vox if rods not in scenes else None}
-    ph.write_phantom(out, vol, rs, rs.contacts, voxel_size, params,
-                     z_thickness=z_thickness)
+    rs = make_phantom(rods, shape, out, voxel_size=voxel_size, blur=blur, cnr=cnr, ring=ring, cupping=cupping,
+                      streaks=streaks, fov=fov, dark=dark, z_thickness=z_thickness, n_rods=n_rods, radius=radius,
+                      aspect=aspect, touching=touching, seed=seed)
     typer.echo(f"{rs.n_rods} rods, {len(rs.contacts) if rs.contacts is not None else 0} contacts -> {out}")
 
 
@@ -309,21 +272,20 @@ def segment(
                                                    "voxel); default mm, or the metadata's."),
     diameter: Optional[float] = typer.Option(None, help="Rod diameter in --units (estimated when absent)."),
     out: Optional[Path] = typer.Option(None, help="Output directory (default segment/ beside the stack)."),
-    shape: str = typer.Option("auto", help="straight (rods), curved (filaments as polylines) or auto."),
+    shape: str = typer.Option(_S.shape, help="straight (rods), curved (filaments as polylines) or auto."),
     dark_rods: Optional[bool] = typer.Option(None, "--dark-rods/--bright-rods",
                                              help="Rods darker / brighter than the background (default: detected)."),
-    min_fill: float = typer.Option(0.6, help="Reject rods whose axis plateau is below this share of what a rod of "
+    min_fill: float = typer.Option(_S.min_fill, help="Reject rods whose axis plateau is below this share of what a rod of "
                                              "their radius shows under the measured blur."),
     chunk: Optional[int] = typer.Option(None, help="Process in overlapping chunks of this edge (voxels), for big volumes."),
-    contact_tolerance: float = typer.Option(1.0, help="Largest surface gap counted as contact (voxels)."),
+    contact_tolerance: float = typer.Option(_S.contact_tolerance, help="Largest surface gap counted as contact (voxels)."),
     figures: bool = typer.Option(True, help="Write the QA PNGs."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ):
     """CT stack to rod centrelines and contacts (CPU)."""
     from rodwarp import validation as v
-    from rodwarp.segment import SegmentParams
-    from rodwarp.segment_report import default_out as seg_default_out
-    from rodwarp.segment_report import run_segment
+    from rodwarp.ct import default_out as seg_default_out
+    from rodwarp.ct import run_segment
 
     if shape not in ("straight", "curved", "auto"):
         raise RodwarpError(f"--shape must be straight, curved or auto, got '{shape}'")

@@ -146,7 +146,7 @@ def _min_gap_to_placed(grid, pa, pb, ca, cb, segs_per_rod, reach, diameter, dev)
 
 
 def _clear_of(c, d, centers, dirs, length, min_dist):
-    from rodwarp.geometry import segment_distance
+    from rodwarp.rodset import segment_distance
 
     p0 = c - 0.5 * length * d
     p1 = c + 0.5 * length * d

@@ -1,6 +1,6 @@
 """The paper's numerical experiment: random packing, entangling, vibration stability test.
 
-Stages (seed paper, "Numerical simulations of rod packings"; REFERENCE.md section 1):
+Stages (seed paper, "Numerical simulations of rod packings"; docs/protocol.md):
 
 1. random packing of N = round(5.4 alpha) straight steel rods in a 1 x 1 x 2.5 l box;
 2. entangling: the closed container vibrated vertically (10 Hz, 0.05 m) for 5 s;
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rodwarp.atomic import atomic_path, write_json
+from rodwarp.rodset.files import atomic_path, write_json
 from rodwarp.errors import RodwarpError
 
 #: contacts per rod of the paper's packings, N = round(5.4 alpha) (seed paper, "Materials and Methods")
@@ -223,7 +223,8 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     from rodwarp import verdict as vd
     from rodwarp.metrics import centroid_height, contacts_per_rod, largest_cluster, rod_contacts
     from rodwarp.sim.state import State
-    from rodwarp.outputs import Trajectory, latest_checkpoint, plot_snapshots, save_checkpoint, write_pvd, write_vtp
+    from rodwarp.rodset.trajectory import (Trajectory, latest_checkpoint, plot_snapshots, save_checkpoint, write_pvd,
+                                           write_vtp)
     from rodwarp.packing import orientation_statistics, random_packing
     from rodwarp.rodset import load
 

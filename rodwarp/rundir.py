@@ -27,7 +27,7 @@ import time
 import uuid
 from pathlib import Path
 
-from rodwarp.atomic import write_json
+from rodwarp.rodset.files import write_json
 from rodwarp.errors import RodwarpError
 from rodwarp.validation import disk_fits, output_location
 

@@ -29,7 +29,7 @@ import traceback
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
-from rodwarp.atomic import write_json, write_text
+from rodwarp.rodset.files import write_json, write_text
 from rodwarp.errors import RodwarpError
 
 #: parameters that define a point (besides the ProtocolParams overrides)
@@ -66,7 +66,7 @@ class SweepSpec:
     device: str = "auto"
 
     def validate(self) -> None:
-        from rodwarp.analyze import AnalyzeOptions
+        from rodwarp.analysis import AnalyzeOptions
         from rodwarp.protocol import ProtocolParams
 
         for name in ("alphas", "freqs", "gravities", "static_loads", "seeds"):
@@ -149,7 +149,7 @@ def run_point(point: dict, outdir: str) -> dict:
     row["worker"] = _worker_name()
     row["F_tilde"] = point.get("static_load")
     try:
-        from rodwarp.analyze import AnalyzeOptions, analyze
+        from rodwarp.analysis import AnalyzeOptions, analyze
         from rodwarp.protocol import ProtocolParams, run_protocol
 
         kw = {k: v for k, v in point.items() if k not in ("id",) and not k.startswith("_")}
@@ -199,7 +199,7 @@ def check_points(pts: list[dict], *, local: bool) -> None:
 
     ``local``: the points run on this machine, so the device must exist here too.
     """
-    from rodwarp.analyze import AnalyzeOptions
+    from rodwarp.analysis import AnalyzeOptions
     from rodwarp.protocol import ProtocolParams
 
     for p in pts:
@@ -220,7 +220,7 @@ def check_points(pts: list[dict], *, local: bool) -> None:
 
 
 def _invalid(p: dict) -> bool:
-    from rodwarp.analyze import AnalyzeOptions
+    from rodwarp.analysis import AnalyzeOptions
     from rodwarp.protocol import ProtocolParams
 
     kw = {k: v for k, v in p.items() if k != "id" and not k.startswith("_")}

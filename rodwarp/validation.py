@@ -358,7 +358,7 @@ def check_input_rods(p, explicit=()):
     """
     import numpy as np
 
-    from rodwarp.geometry import detect_contacts
+    from rodwarp.rodset import detect_contacts
     from rodwarp.rodset import UNITS, load
 
     path = Path(p.initial)

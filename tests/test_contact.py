@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from rodwarp.errors import RodwarpError, SimulationBlowUp
-from rodwarp.sim.model import STEEL, Material, Model  # noqa: F401
 from rodwarp.rodset import RodSet
-from rodwarp.scenes import log_cabin, straight_rod, straightened, tilted_gravity
+from rodwarp.sim.model import STEEL, Material, Model  # noqa: F401
 from rodwarp.sim.solver import RodSolver, run
+from rodwarp.testing.scenes import log_cabin, straight_rod, straightened, tilted_gravity
 
 G = 9.81
 
@@ -82,7 +82,7 @@ def test_log_cabin_collapses_without_friction():
 
 def ladder_slip(phi, mu, rod_model, duration=1.0, iterations=40):
     """Largest slip (m) of the rod's ends along the floor and the wall over ``duration``."""
-    from rodwarp.scenes import leaning_rod
+    from rodwarp.testing.scenes import leaning_rod
 
     model = Model(leaning_rod(phi), STEEL, gravity=(0, 0, -G), mu=mu, rod_contacts=False, rod_model=rod_model)
     model.add_plane((0, 0, 1), 0.0, name="floor")
@@ -95,7 +95,7 @@ def ladder_slip(phi, mu, rod_model, duration=1.0, iterations=40):
 
 
 def test_ladder_stands_without_creep_when_friction_suffices():
-    from rodwarp.scenes import ladder_min_angle
+    from rodwarp.testing.scenes import ladder_min_angle
 
     assert ladder_min_angle(0.5, 0.5) == pytest.approx(36.87, abs=0.01)
     assert ladder_slip(60.0, 0.5, "rigid") < 1e-6
@@ -111,7 +111,7 @@ def test_elastic_ladder_stands_at_the_default_effort():
 
 @pytest.mark.parametrize("rod_model", ["elastic", "rigid"])
 def test_ladder_slides_down_when_friction_is_too_small(rod_model):
-    from rodwarp.scenes import ladder_min_angle
+    from rodwarp.testing.scenes import ladder_min_angle
 
     assert ladder_min_angle(0.2, 0.2) > 60.0
     assert ladder_slip(60.0, 0.2, rod_model, duration=0.3) > 0.05
@@ -153,7 +153,7 @@ def test_no_tunnelling_of_thin_fast_rod(factor):
                   pinned=np.arange(10))
     solver = RodSolver(model, allow_unstable=True)
     dt = factor * solver.default_dt()
-    from rodwarp.geometry import segment_distance
+    from rodwarp.rodset import segment_distance
 
     gaps, sides = [], []
 

@@ -7,11 +7,11 @@ the contacts are visited in the same order, so results agree to round-off (toler
 import numpy as np
 import pytest
 
-from rodwarp.sim import STEEL, Model, State
 from rodwarp.packing import random_packing
-from rodwarp.scenes import TEST_DENSITY, TEST_YOUNG, cantilever
+from rodwarp.sim import STEEL, Model, State
 from rodwarp.sim.model import Material
 from rodwarp.sim.solver import RodSolver, run
+from rodwarp.testing.scenes import TEST_DENSITY, TEST_YOUNG, cantilever
 
 
 def small_pile(device, coloring, steps=60, seed=3):

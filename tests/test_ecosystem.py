@@ -54,7 +54,7 @@ def test_trajectory_opens_in_xarray_with_named_dims(run):
 
 
 def test_fields_open_in_xarray_with_coordinates(run):
-    from rodwarp.fieldset import Fields
+    from rodwarp.analysis import Fields
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")

@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 from rodwarp.errors import RodwarpError, SimulationBlowUp
-from rodwarp.sim.model import STEEL, Model
 from rodwarp.rodset import RodSet
-from rodwarp.scenes import log_cabin, straight_rod, straightened
+from rodwarp.sim.model import STEEL, Model
 from rodwarp.sim.solver import RodSolver, run
+from rodwarp.testing.scenes import log_cabin, straight_rod, straightened
 
 G = 9.81
 
@@ -282,7 +282,7 @@ def test_rod_fired_at_five_diameters_per_step_is_stopped_by_speculative_contacts
         assert_names_step(err, state, dt)
         assert "rods overlap by" in str(err) and "contacts under-resolved" in err.cause and "contact bound" in err.cause
     else:
-        from rodwarp.geometry import segment_distance
+        from rodwarp.rodset import segment_distance
 
         x = state.positions()
         a, b = x[:10], x[10:]

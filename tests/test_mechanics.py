@@ -1,4 +1,4 @@
-"""Rod mechanics against analytic answers (REFERENCE.md section 3)."""
+"""Rod mechanics against analytic answers (docs/physics.md)."""
 
 import math
 
@@ -7,7 +7,7 @@ import pytest
 
 from rodwarp.sim.model import Material, Model
 from rodwarp.rodset import RodSet
-from rodwarp.scenes import (
+from rodwarp.testing.scenes import (
     TEST_DENSITY, TEST_RADIUS, TEST_YOUNG, cantilever, cantilever_frequency, cantilever_sag, straightened,
 )
 from rodwarp.sim.solver import RodSolver, run

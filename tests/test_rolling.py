@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from rodwarp.rodset import RodSet
-from rodwarp.scenes import straight_rod, tilted_gravity
 from rodwarp.sim import STEEL, Model, RodSolver, run
+from rodwarp.testing.scenes import straight_rod, tilted_gravity
 
 G = 9.81
 R = 0.01
@@ -116,7 +116,7 @@ def test_rod_pushed_through_its_axis_rolls_at_two_thirds_of_F_over_m():
 
 def test_static_twist_of_a_clamped_rod_under_an_end_torque():
     """Twist angle T x / (G J) along a rod clamped at x = 0 (edge midpoints at x)."""
-    from rodwarp.scenes import cantilever
+    from rodwarp.testing.scenes import cantilever
 
     rods, pinned = cantilever(9, radius=R)
     model = Model(rods, STEEL, gravity=(0, 0, 0), pinned=pinned, rod_contacts=False, damping=0.0)

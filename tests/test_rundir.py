@@ -63,7 +63,7 @@ def test_read_only_location_is_refused_before_work(tmp_path, monkeypatch):
 
 
 def test_write_failure_names_the_file(tmp_path):
-    from rodwarp.atomic import atomic_path
+    from rodwarp.rodset.files import atomic_path
 
     target = tmp_path / "summary.json"
     with pytest.raises(OSError) as e:
@@ -77,7 +77,7 @@ def test_write_failure_names_the_file(tmp_path):
 def test_disk_full_during_the_run_names_the_file_and_keeps_earlier_results(tmp_path, monkeypatch):
     # a mocked failure of the 4th VTK frame (a full disk); the CLI prints the path, exit 2, and
     # the frames and metrics written before are readable
-    import rodwarp.outputs as outputs
+    import rodwarp.rodset.trajectory as outputs
 
     real = outputs.write_vtp
     calls = []
@@ -120,7 +120,7 @@ def test_real_small_tmpfs_full_before_and_during_the_run(tmp_path, monkeypatch):
         assert not (mnt / "big").exists()
         # during: the estimate fits, then something else fills the disk after the third frame;
         # the real ENOSPC is reported with the file it hit
-        import rodwarp.outputs as outputs
+        import rodwarp.rodset.trajectory as outputs
 
         real, n = outputs.write_vtp, []
 

@@ -1,6 +1,6 @@
 """Phantom scans with ground truth for the things real reconstructions contain.
 
-Each case is a small synthetic CT (``rodwarp.phantom``) of a known rod set with one difficulty
+Each case is a small synthetic CT (:func:`rodwarp.ct.render_phantom`) of a known rod set with one difficulty
 of real scans: a field-of-view mask, cupping, rings, anisotropic voxels, mixed radii, bundles
 of touching rods, thin rods, dark rods on a bright background, gently curved rods, a tangle of
 curved wires; plus the easy cases (isolated straight rods at CNR 5 and 2, rods cut by the
@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rodwarp import phantom as ph
+from rodwarp.ct._phantom import phantom_truth, render_phantom
+from rodwarp.ct._scenes import scene_arcs, scene_bundles, scene_random_packing, scene_wire_tangle
 from rodwarp.rodset import RodSet
 
 __all__ = ["ScanCase", "CASES", "make_case", "crop_straight", "scored_subset"]
@@ -84,14 +85,14 @@ def crop_straight(rods: RodSet, lo_xyz, hi_xyz, min_length: float = 0.0) -> RodS
         polys.append(np.stack([a + t0 * d, a + t1 * d]) - lo)
         radii.append(rods.radii[k])
     out = RodSet.from_polylines(polys, np.asarray(radii), units="voxel")
-    out.contacts = ph.phantom_truth(out)
+    out.contacts = phantom_truth(out)
     return out
 
 
 def _packing(shape, seed, cnr=5.0, blur=1.0, n_rods=40, radius=3.0, aspect=12.0, **render):
-    truth = ph.scene_random_packing(shape, n_rods=n_rods, radius=radius, aspect=aspect, seed=seed,
+    truth = scene_random_packing(shape, n_rods=n_rods, radius=radius, aspect=aspect, seed=seed,
                                     max_attempts=200000, fov_radius=render.pop("fov_radius", None))
-    vol = ph.render_phantom(truth, shape, blur_sigma=blur, cnr=cnr, seed=seed, **render)
+    vol = render_phantom(truth, shape, blur_sigma=blur, cnr=cnr, seed=seed, **render)
     return truth, vol
 
 
@@ -105,8 +106,8 @@ def _case_cnr2(seed):
 
 def _case_faces(seed):
     big = (224, 224, 224)
-    truth = ph.scene_random_packing(big, n_rods=70, radius=3.0, aspect=14.0, seed=seed, max_attempts=200000)
-    vol = ph.render_phantom(truth, big, blur_sigma=1.0, cnr=5.0, seed=seed)
+    truth = scene_random_packing(big, n_rods=70, radius=3.0, aspect=14.0, seed=seed, max_attempts=200000)
+    vol = render_phantom(truth, big, blur_sigma=1.0, cnr=5.0, seed=seed)
     o = 32
     vol = np.ascontiguousarray(vol[o:o + 160, o:o + 160, o:o + 160])
     # rods cut by the faces end at the last voxel centre inside (x = -0 .. 159)
@@ -133,16 +134,16 @@ def _case_cupping_rings(seed):
 
 def _case_mixed_radii(seed):
     shape = (160, 160, 160)
-    truth = ph.scene_random_packing(shape, n_rods=40, radius=(2.0, 5.0), aspect=10.0, seed=seed,
+    truth = scene_random_packing(shape, n_rods=40, radius=(2.0, 5.0), aspect=10.0, seed=seed,
                                     max_attempts=200000)
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=seed)
+    vol = render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=seed)
     return (truth, vol), {}
 
 
 def _case_bundles(seed):
     shape = (128, 128, 128)
-    truth = ph.scene_bundles(shape, n_bundles=10, sizes=(3, 5), radius=3.0, length=80.0, seed=seed)
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=seed)
+    truth = scene_bundles(shape, n_bundles=10, sizes=(3, 5), radius=3.0, length=80.0, seed=seed)
+    vol = render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=seed)
     return (truth, vol), {}
 
 
@@ -157,34 +158,34 @@ def _case_thin_faint(seed):
 def _case_anisotropic(seed):
     # z voxels twice as thick as x, y: 160 x 160 x 160 voxel widths in 80 slices
     shape = (80, 160, 160)
-    full = ph.scene_random_packing((160, 160, 160), n_rods=40, radius=3.0, aspect=12.0, seed=seed,
+    full = scene_random_packing((160, 160, 160), n_rods=40, radius=3.0, aspect=12.0, seed=seed,
                                    max_attempts=200000)
     # thick slice k is centred at z = 2k (voxel widths): keep the rods within the 80 slices
     truth = full.copy()
     truth.points[:, 2] -= 0.5
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=seed, z_thickness=2)
+    vol = render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=seed, z_thickness=2)
     return (truth, vol), {"voxel_size": (2.0, 1.0, 1.0)}
 
 
 def _case_dark(seed):
-    truth = ph.scene_random_packing((160, 160, 160), n_rods=40, radius=3.0, aspect=12.0, seed=seed,
+    truth = scene_random_packing((160, 160, 160), n_rods=40, radius=3.0, aspect=12.0, seed=seed,
                                     max_attempts=200000)
-    vol = ph.render_phantom(truth, (160, 160, 160), blur_sigma=1.0, cnr=5.0, seed=seed,
+    vol = render_phantom(truth, (160, 160, 160), blur_sigma=1.0, cnr=5.0, seed=seed,
                             background=50000, foreground=20000)
     return (truth, vol), {}
 
 
 def _case_arcs(seed):
     shape = (160, 160, 160)
-    truth = ph.scene_arcs(shape, n_rods=20, radius=3.0, length=100.0, curvature_radius=(2.0, 5.0), seed=seed)
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=seed)
+    truth = scene_arcs(shape, n_rods=20, radius=3.0, length=100.0, curvature_radius=(2.0, 5.0), seed=seed)
+    vol = render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=seed)
     return (truth, vol), {"curved": True}
 
 
 def _case_wires(seed):
     shape = (160, 160, 160)
-    truth = ph.scene_wire_tangle(shape, n_wires=20, radius=2.5, seed=seed)
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=seed)
+    truth = scene_wire_tangle(shape, n_wires=20, radius=2.5, seed=seed)
+    vol = render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=seed)
     return (truth, vol), {"curved": True}
 
 

@@ -3,31 +3,32 @@
 NumPy/SciPy only, so the statistics stage runs wherever the fields can be read (no Warp).
 
 Conventions
-    Field arrays have axis order (z, y, x), like :class:`rodwarp.fieldset.Fields`; everything
+    Field arrays have axis order (z, y, x), like :class:`rodwarp.analysis.Fields`; everything
     reported per axis (extents, bounding boxes, percolation) is in (x, y, z) order.
     Lengths are in the units of the fields (``Fields.units``: m, mm, um or CT voxels).
 
 The paper (Jung et al., "Entanglement transition in random rod packings") calls voxels with
 ``e > e_lb`` outliers and their connected clusters *tangles*; it compares the tangle bounding-box
 sizes xi_x, xi_y, xi_z with the system size and uses sigma_e / mu_e as its order parameter.
+``docs/fields.md`` gives the outlier bound, its Q1/Q3 variants and the authors' cluster bug.
+Which fields get a mean, a histogram and a z-profile is the field registry's to say
+(:data:`rodwarp.analysis.FIELDS`).
 """
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 from scipy import ndimage
 
+from rodwarp._util import json_safe
+from rodwarp.analysis._registry import fields_with
 from rodwarp.errors import RodwarpError
 
 __all__ = ["outlier_bound", "find_tangles", "histogram", "z_profiles", "field_statistics",
-           "STAT_FIELDS", "PROFILE_FIELDS", "AXES"]
+           "AXES"]
 
-# Fields summarised by moments and histograms; ``n`` (rods per ball) is a count, profiled only.
-STAT_FIELDS = ("phi", "S", "c", "e")
-PROFILE_FIELDS = ("phi", "S", "c", "e", "n")
 AXES = ("x", "y", "z")
 # Array axis of each reported axis: arrays are (z, y, x).
 _ARRAY_AXIS = {"x": 2, "y": 1, "z": 0}
@@ -251,19 +252,20 @@ def z_profiles(fields) -> dict[str, np.ndarray]:
 
     Parameters
     ----------
-    fields : rodwarp.fieldset.Fields
+    fields : rodwarp.analysis.Fields
 
     Returns
     -------
     dict
-        ``z`` (voxel-centre heights, length units) and, for phi, S, c, e, n, an array of the
+        ``z`` (voxel-centre heights, length units) and, for every field with a z-profile
+        panel in the registry (phi, S, c, e, n, n_ends), an array of the
         mean over the valid voxels of each z layer whose value is finite (NaN where there is
         none), in the units of the field.
     """
     valid = fields.valid
     out = {"z": np.asarray(fields.z, dtype=np.float64).copy()}
-    for name in PROFILE_FIELDS:
-        a = getattr(fields, name)
+    for name in (f.name for f in fields_with("zprofile")):
+        a = fields.get(name)
         m = valid & np.isfinite(a)
         count = m.sum(axis=(1, 2))
         total = np.where(m, a, 0.0).sum(axis=(1, 2))
@@ -277,35 +279,13 @@ def z_profiles(fields) -> dict[str, np.ndarray]:
 # summary
 # ----------------------------------------------------------------------------------------------
 
-def _finite_or_none(x) -> float | None:
-    x = float(x)
-    return x if math.isfinite(x) else None
-
-
-def _jsonify(obj: Any) -> Any:
-    """Lists instead of arrays and None instead of NaN/inf, so json.dumps writes strict JSON."""
-    if isinstance(obj, dict):
-        return {k: _jsonify(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonify(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonify(obj.tolist())
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return _finite_or_none(obj)
-    return obj
-
-
 def field_statistics(fields, method: str = "q3", connectivity: int = 26, bins: int = 40,
                      contact_cluster_fraction: float | None = None) -> dict[str, Any]:
     """Summary statistics of one set of fields, JSON-serialisable.
 
     Parameters
     ----------
-    fields : rodwarp.fieldset.Fields
+    fields : rodwarp.analysis.Fields
         The fields; only voxels in ``fields.valid`` count.
     method : {"q3", "q1"}
         Outlier bound, see :func:`outlier_bound`.
@@ -320,7 +300,8 @@ def field_statistics(fields, method: str = "q3", connectivity: int = 26, bins: i
     Returns
     -------
     dict
-        ``mean_phi``, ``mean_S``, ``mean_c``, ``mean_e``, ``mean_n`` (means over valid voxels;
+        The summary key of every field with a reducer in the registry (``mean_phi``,
+        ``mean_S``, ``mean_c``, ``mean_e``, ``mean_n``, ``mean_n_ends``: means over valid voxels;
         None for a field with no finite valid value), ``std_e`` (population standard deviation),
         ``cv_e`` (= std_e / mean_e, the paper's sigma_e / mu_e; None when mean_e is 0),
         ``median_e``, ``e_lb``, ``q1_e``, ``q3_e``, ``iqr_e``, ``outlier_method``,
@@ -331,7 +312,8 @@ def field_statistics(fields, method: str = "q3", connectivity: int = 26, bins: i
         the largest tangle, zeros when there is none), ``largest_tangle_xi`` ({axis: xi}),
         ``percolates`` (any tangle spans the system along some axis), ``percolating_axes``,
         ``tangles`` (the 50 largest, see :func:`find_tangles`), ``tangles_truncated``,
-        ``histograms`` ({field: histogram as lists, or None}), ``z_profiles`` (lists, None
+        ``histograms`` ({field: histogram as lists, or None} for the fields with a histogram
+        panel), ``z_profiles`` (lists, None
         for NaN) and ``largest_contact_cluster_fraction``. Lengths are in ``units``.
 
     Raises
@@ -347,16 +329,21 @@ def field_statistics(fields, method: str = "q3", connectivity: int = 26, bins: i
 
     out: dict[str, Any] = {}
     samples = {}
-    for name in STAT_FIELDS + ("n",):
-        a = getattr(fields, name)
+    for spec in fields_with(reducer="mean"):
+        a = fields.get(spec.name)
         v = a[valid & np.isfinite(a)]
-        samples[name] = v
+        samples[spec.name] = v
         # an all-NaN field (not provided by the source) is "unknown", not a RuntimeWarning
-        out[f"mean_{name}"] = float(v.mean()) if v.size else None
+        out[spec.summary] = float(v.mean()) if v.size else None
+    hist_names = [f.name for f in fields_with("histogram")]
+    for name in hist_names:
+        if name not in samples:
+            a = fields.get(name)
+            samples[name] = a[valid & np.isfinite(a)]
 
     e = samples["e"]
     std_e = float(e.std())  # population (ddof = 0), as sigma_e in the paper
-    mean_e = out["mean_e"]
+    mean_e = float(e.mean())
     out["std_e"] = std_e
     out["cv_e"] = std_e / mean_e if mean_e else None
     out["median_e"] = float(np.median(e))
@@ -397,7 +384,7 @@ def field_statistics(fields, method: str = "q3", connectivity: int = 26, bins: i
     out["tangles_truncated"] = len(tangles) > _MAX_TANGLES_REPORTED
 
     hists = {}
-    for name in STAT_FIELDS:
+    for name in hist_names:
         v = samples[name]
         if v.size == 0:
             hists[name] = None
@@ -408,4 +395,4 @@ def field_statistics(fields, method: str = "q3", connectivity: int = 26, bins: i
     out["z_profiles"] = z_profiles(fields)
     out["largest_contact_cluster_fraction"] = (None if contact_cluster_fraction is None
                                                else float(contact_cluster_fraction))
-    return _jsonify(out)
+    return json_safe(out)

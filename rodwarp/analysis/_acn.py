@@ -1,7 +1,7 @@
 """Gauss linking integral and average crossing number (ACN) of polylines, exact per segment pair.
 
-The closed form lives in :mod:`rodwarp.kernels.acn`; these host functions allocate, launch
-and sum.  Every segment pair is evaluated exactly (no quadrature), so a polyline's result is
+The closed form (``docs/fields.md``, "The average crossing number") lives in
+:mod:`rodwarp.kernels.acn`; these host functions allocate, launch and sum.  Every segment pair is evaluated exactly (no quadrature), so a polyline's result is
 exact up to float64 round-off.
 """
 
@@ -101,7 +101,17 @@ def average_crossing_number(a, b, closed: bool = False, device: str | None = "cp
 
     (1 / 4 pi) times the double integral of |(t1 x t2).(r1 - r2)| / |r1 - r2|^3 over the two
     curves (each pair of points once): half the mean, over viewing directions, of the number
-    of crossings between the two projected curves (the paper's convention; a unit-segment pair
-    of REFERENCE.md gives 1/6).  Exact for polylines.  Open curves by default.
+    of crossings between the two projected curves (the paper's convention; the unit-segment
+    pair (-1,0,0)-(1,0,0), (0,-1,1)-(0,1,1) of ``docs/fields.md`` gives 1/6).  Exact for
+    polylines.  Open curves by default.
+
+    Parameters
+    ----------
+    a, b : array_like, shape (n, 3)
+        Vertices, any length unit (the result is dimensionless).
+    closed : bool
+        Treat both curves as closed polygons.
+    device : str
+        Warp device.
     """
     return _polyline_sums(a, b, closed, device)[1]

@@ -1,6 +1,8 @@
 """Small validation scenes with analytic answers (cantilevers, inclines, stacks, crossings).
 
-Used by the tests and the benchmarks; each returns rods in metres.
+Test material (:mod:`rodwarp.testing`): used by the tests and the benchmarks, not by rodwarp
+itself; each returns rods in metres.  The analytic answers they are checked against are
+listed in ``docs/physics.md``.
 """
 
 from __future__ import annotations
@@ -11,7 +13,8 @@ import numpy as np
 
 from rodwarp.rodset import RodSet
 
-# The REFERENCE.md test material: L = 1 m, r = 0.01 m, E = 1e9 Pa, rho = 1000 kg/m^3.
+# The test material of the analytic checks (docs/physics.md): L = 1 m, r = 0.01 m, E = 1e9 Pa,
+# rho = 1000 kg/m^3 (so E I = 7.854 N m^2 and rho A = 0.31416 kg/m).
 TEST_LENGTH = 1.0
 TEST_RADIUS = 0.01
 TEST_YOUNG = 1e9

@@ -18,9 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from rodwarp.atomic import atomic_path, write_json, write_text
+from rodwarp._util import progress_bar, versions
 from rodwarp.errors import RodwarpError
 from rodwarp.rodset import UNITS, RodSet
+from rodwarp.rodset.files import save_figure, write_json, write_text
 
 
 def to_physical(rods: RodSet, voxel_size: float, units: str) -> RodSet:
@@ -54,7 +55,8 @@ def _csv_text(header: list[str], rows) -> str:
 
 
 def write_rods_csv(path, rods: RodSet) -> Path:
-    """``rod,x,y,z,radius``, one row per vertex, in the rod set's units."""
+    """``rod,x,y,z,radius``, one row per vertex, in the rod set's units (the rod-set CSV format,
+    with the shortest decimals that read back exactly, for people reading the file)."""
     rid = rods.rod_index
     rows = ((int(rid[k]), *rods.points[k], rods.radii[rid[k]]) for k in range(rods.n_vertices))
     write_text(path, _csv_text(["rod", "x", "y", "z", "radius"], rows))
@@ -67,12 +69,6 @@ def write_contacts_csv(path, rods: RodSet) -> Path:
     rows = [] if c is None else ((int(c.rod_i[k]), int(c.rod_j[k]), *c.point[k], c.gap[k]) for k in range(len(c)))
     write_text(path, _csv_text(["rod_i", "rod_j", "x", "y", "z", "gap"], rows))
     return Path(path)
-
-
-def _save_fig(fig, path: Path) -> Path:
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    return path
 
 
 def _display(volume, z: int) -> np.ndarray:
@@ -125,7 +121,7 @@ def plot_qa_slices(path, volume, rods_vox: RodSet, *, slices=None) -> Path:
         ax.set_xlim(-0.5, img.shape[1] - 0.5)
         ax.set_ylim(img.shape[0] - 0.5, -0.5)
     fig.tight_layout()
-    return _save_fig(fig, Path(path))
+    return save_figure(fig, path)
 
 
 def plot_qa_projection(path, volume, rods_vox: RodSet) -> Path:
@@ -151,7 +147,7 @@ def plot_qa_projection(path, volume, rods_vox: RodSet) -> Path:
         ax.set_xlabel("x (column)")
         ax.set_ylabel("y (row)" if axis == 0 else "z (slice)")
     fig.tight_layout()
-    return _save_fig(fig, Path(path))
+    return save_figure(fig, path)
 
 
 def _mip(volume, axis: int, block: int = 64) -> np.ndarray:
@@ -235,7 +231,7 @@ def default_out(stack) -> Path:
 
 def parse_voxel_size_text(text) -> tuple[float, float, float] | None:
     """``"0.05"`` or ``"0.1,0.05,0.05"`` (z, y, x; commas or spaces) -> (dz, dy, dx); None stays None."""
-    from rodwarp.segment_prep import parse_voxel_size
+    from rodwarp.ct._prepare import parse_voxel_size
 
     if text is None:
         return None
@@ -267,7 +263,7 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     voxel_size : float, sequence of 3 floats, str or None
         Voxel edge in ``units`` (one value), or edges along (z, y, x); a string ``"0.05"`` or
         ``"0.1,0.05,0.05"``.  ``None``: read from the stack's metadata (ImageJ / OME-TIFF,
-        OME-Zarr, :func:`rodwarp.ctio.read_voxel_size`).
+        OME-Zarr, :func:`rodwarp.ct.read_voxel_size`).
     units : str, optional
         Unit of ``voxel_size``, ``diameter`` and every output length; default ``mm`` (or, with
         the voxel size from metadata, ``mm`` for voxels of 0.1 mm and more, else ``um``).
@@ -283,11 +279,9 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     import time
     from dataclasses import asdict, replace
 
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from rodwarp import __version__
-    from rodwarp.ctio import open_volume_lazy, read_voxel_size
-    from rodwarp.segment import SegmentParams, segment_volume
+    from rodwarp.ct._volume_io import open_volume_lazy, read_voxel_size
+    from rodwarp.ct._params import SegmentParams
+    from rodwarp.ct._segment import segment_volume
 
     t0 = time.perf_counter()
     if units is not None and units not in UNITS:
@@ -321,16 +315,8 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     h = min(vs)
     p = replace(p, diameter=None if diameter is None else diameter / h, chunk=chunk,
                 contact_tolerance=contact_tolerance)
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  disable=not progress) as bar:
-        tasks = {}
-
-        def cb(stage, done, total):
-            if stage not in tasks:
-                tasks[stage] = bar.add_task(stage, total=total)
-            bar.update(tasks[stage], completed=done, total=total)
-
-        result = segment_volume(volume, p, progress=cb, voxel_size=vs)
+    with progress_bar(progress) as update:
+        result = segment_volume(volume, p, progress=update, voxel_size=vs)
     outdir = Path(out) if out is not None else default_out(stack)
     summary = {
         "input": str(stack),
@@ -339,7 +325,8 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
         "voxel_size_zyx": list(vs),
         "voxel_size_source": source,
         "parameters": asdict(p),
-        "rodwarp_version": __version__,
+        "rodwarp_version": versions()["rodwarp"],
+        "versions": versions("skimage", "tifffile"),
         "out": str(outdir),
     }
     spacing = result.spacing if units != "voxel" else 1.0
@@ -351,5 +338,5 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     return s
 
 
-__all__ = ["run_segment", "parse_voxel_size_text", "default_out", "to_physical", "write_rods_csv", "write_contacts_csv", "plot_qa_slices", "plot_qa_projection",
-           "write_outputs"]
+__all__ = ["run_segment", "parse_voxel_size_text", "default_out", "to_physical", "write_rods_csv",
+           "write_contacts_csv", "plot_qa_slices", "plot_qa_projection", "write_outputs"]

@@ -1,7 +1,7 @@
 """Independent NumPy reference for the exact local fields (no Warp): test oracle and speed peer.
 
 Everything here is written from the formulas alone and shares no code with
-:mod:`rodwarp.kernels` (or :mod:`rodwarp.fields`), so that agreement between the two is
+:mod:`rodwarp.kernels` (or :mod:`rodwarp.analysis`), so that agreement between the two is
 evidence, not tautology:
 
 * **Clipping.**  Segment ``p0 -> p1`` meets the ball ``|y - x| <= R`` where
@@ -12,7 +12,7 @@ evidence, not tautology:
   part is the one segment ``p0 + t0 d -> p0 + t1 d``.
 * **Gauss integral.**  The signed Gauss linking integral of two straight segments is
   ``1/(4 pi)`` times the solid angle that the parallelogram with vertices ``a = p1-p3``,
-  ``b = p2-p3``, ``c = p2-p4``, ``d = p1-p4`` subtends at the origin (REFERENCE.md section 2).
+  ``b = p2-p3``, ``c = p2-p4``, ``d = p1-p4`` subtends at the origin (``docs/fields.md``, "The average crossing number").
   All four vertices lie in one plane at signed height ``h = a.(e1 x e2)``; a triangle's
   solid angle is ``2 atan2(u.(v x w), |u||v||w| + (u.v)|w| + (u.w)|v| + (v.w)|u|)``
   (Van Oosterom-Strackee).  Two decompositions, neither the Warp kernel's (which splits along
@@ -30,7 +30,7 @@ evidence, not tautology:
   - ``form="product"``: the same fan, but the four half-angles (each in (-pi/2, pi/2), since
     every denominator is positive) are added as the argument of the product of the four
     complex numbers ``den + i num``, one ``arctan2`` instead of four: rodwarp's Warp kernel
-    evaluates exactly this, so it is the same-formula speed peer of ``rodwarp.fields``.
+    evaluates exactly this, so it is the same-formula speed peer of ``rodwarp.analysis.compute_fields``.
   - ``form="diagonal"``: the two triangles ``(d, c, b)`` and ``(b, a, d)`` split along
     ``b - d``, the same cost and the same conditioning as the Warp kernel (speed peer).
 

@@ -35,13 +35,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
-from rodwarp.errors import RodwarpError
+from rodwarp._util import one_line_error as _fail
 
 __all__ = ["Prepared", "prepare_volume", "parse_voxel_size"]
-
-
-def _fail(msg: str) -> RodwarpError:
-    return RodwarpError(" ".join(str(msg).split()))
 
 
 def parse_voxel_size(voxel_size) -> tuple[float, float, float]:
@@ -218,7 +214,7 @@ def _trend(sl, inside, centre_yx, step=0.25):
 
 def prepare_volume(volume, voxel_size=None, *, dark=None, fov=None, background=None,
                    quality: dict | None = None) -> Prepared:
-    """Prepare a scan for :func:`rodwarp.segment.segment_volume` (see the module docstring).
+    """Prepare a scan for :func:`rodwarp.ct.segment_volume` (see the module docstring).
 
     Parameters
     ----------

@@ -1,14 +1,11 @@
-"""Local mesoscopic fields of a rod set on a voxel grid (host side of :mod:`kernels.fields`).
+"""Local mesoscopic fields of a rod set on a voxel grid (host side of :mod:`rodwarp.kernels.fields`).
 
 At every voxel centre x the ball Omega_R(x) of radius R is intersected exactly with every rod
-segment (each clipped part is one segment), and
-
-* ``n``   = rods with a clipped part in the ball,
-* ``phi`` = (pi d^2 / 4) (sum of clipped lengths) / (4/3 pi R^3)  (per-rod d),
-* ``S``   = largest eigenvalue of the clipped-length-weighted Q = <(3 u u^T - I) / 2>,
-* ``contacts`` = contact points in the ball, ``c`` = contacts / (rho Z V_ball / 2),
-* ``e``   = sum over pairs of distinct rods of the ACN of their clipped parts, every segment
-  pair by the exact closed form (pairs within one rod excluded).
+segment (each clipped part is one segment).  The Warp kernels measure each ball once
+(:class:`~rodwarp.analysis._registry.BallMeasures`: rods, clipped length and volume, the
+nematic order, the entanglement, and point counts), and every field of the registry
+(:data:`~rodwarp.analysis._registry.FIELDS`: ``phi``, ``S``, ``c``, ``e``, ``n``, ``contacts``,
+``n_ends``) is computed from those measures by its row; ``docs/fields.md`` defines them.
 
 Defaults follow the paper: R = sqrt(d l) with d the mean diameter and l the mean rod length,
 grid spacing R / 2.  Voxels whose ball leaves the domain (the container box when the rod set
@@ -26,9 +23,11 @@ import numpy as np
 import warp as wp
 
 from rodwarp import _warp
+from rodwarp.analysis._fieldset import Fields
+from rodwarp.analysis import _registry
+from rodwarp.analysis._registry import BallMeasures
 from rodwarp.errors import RodwarpError
-from rodwarp.fieldset import Fields
-from rodwarp.rodset import Contacts, RodSet
+from rodwarp.rodset import Contacts, RodSet, detect_contacts
 
 # Clipped parts held at once (each ~60 bytes): bounds memory on big grids.
 MAX_CLIPPED_PER_BATCH = 2_000_000
@@ -103,7 +102,18 @@ def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float 
 
 
 def grid_axes(p: FieldParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Voxel-centre coordinates (x, y, z), centred in the domain at the given spacing."""
+    """Voxel-centre coordinates along x, y and z, centred in the domain at the given spacing.
+
+    Parameters
+    ----------
+    p : FieldParams
+        From :func:`resolve_params` (domain and spacing in the rods' units).
+
+    Returns
+    -------
+    (x, y, z) : tuple of ndarray
+        Coordinates in the rods' units; the grid has ``len(z), len(y), len(x)`` voxels.
+    """
     out = []
     for k in range(3):
         lo, hi = p.domain[0, k], p.domain[1, k]
@@ -114,7 +124,19 @@ def grid_axes(p: FieldParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def inside_mask(p: FieldParams, x, y, z) -> np.ndarray:
-    """(nz, ny, nx) voxels whose ball lies inside the domain (to 1e-9 R)."""
+    """Voxels whose ball lies inside the domain (to 1e-9 R).
+
+    Parameters
+    ----------
+    p : FieldParams
+        Ball radius and domain.
+    x, y, z : ndarray
+        Voxel-centre coordinates (:func:`grid_axes`).
+
+    Returns
+    -------
+    ndarray of bool, shape (nz, ny, nx)
+    """
     eps = 1e-9 * p.radius
     ok = [(c - p.radius >= p.domain[0, k] - eps) & (c + p.radius <= p.domain[1, k] + eps)
           for k, c in enumerate((x, y, z))]
@@ -126,7 +148,7 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
                    keep_outside: bool = False, contacts: Contacts | None = None,
                    contact_tolerance: float | None = None, device: str | None = "cpu",
                    progress: Callable[[int, int], None] | None = None) -> Fields:
-    """Local fields phi, S, c, e and n of a rod set on a voxel grid (Warp kernels).
+    """Every registered local field (phi, S, c, e, n, ...) of a rod set on a voxel grid (Warp kernels).
 
     Parameters
     ----------
@@ -135,8 +157,9 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
     radius, spacing, diameter, length, domain, keep_outside, contact_tolerance
         See :func:`resolve_params`.
     contacts : Contacts, optional
-        Contact points; default the rod set's own contacts, else contacts detected from the
-        geometry (:func:`rodwarp.geometry.detect_contacts`, gap < ``contact_tolerance``).
+        The contacts of the packing (their contact points are counted per ball); default the
+        rod set's own contacts, else contacts detected from the geometry
+        (:func:`rodwarp.rodset.detect_contacts`, gap < ``contact_tolerance``).
     device : str
         Warp device (``cpu``, ``cuda``, ``auto``).
     progress : callable(done, total), optional
@@ -145,8 +168,8 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
     Returns
     -------
     Fields
-        Arrays (nz, ny, nx), NaN outside the domain; ``attrs`` record d, l, rho (rods per unit
-        volume), Z (contacts per rod), the contact source and timings.
+        One array (nz, ny, nx) per registered field, NaN outside the domain; ``attrs`` record
+        d, l, rho (rods per unit volume), Z (contacts per rod), the contact source and timings.
     """
     p = resolve_params(rods, radius=radius, spacing=spacing, diameter=diameter, length=length,
                        domain=domain, keep_outside=keep_outside, contact_tolerance=contact_tolerance)
@@ -225,59 +248,64 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
             progress(done, nv)
     t_fields = time.perf_counter() - t_pairs
 
-    # contacts in each ball
+    # the contacts of the packing, whose contact points are counted per ball
     if contacts is None:
         contacts, source = resolve_contacts(rods, p.contact_tolerance)
     else:
         source = "given"
-    n_contacts = len(contacts)
-    out_c = np.zeros(nv, np.int32)
-    if n_contacts and nv:
-        cgrid = wp.HashGrid(128, 128, 128, device=dev)
-        pts = np.asarray(contacts.point, dtype=np.float64)
-        cq = float(p.radius * (1 + 1e-5) + 1e-5 * (float(np.abs(pts).max()) + p.radius))
-        cgrid.build(wp.array(pts.astype(np.float32), dtype=wp.vec3, device=dev), radius=cq)
-        w_c = wp.zeros(nv, dtype=wp.int32, device=dev)
-        wp.launch(k.count_contacts_in_ball, dim=nv, device=dev,
-                  inputs=[cgrid.id, w_vox, nx, ny, origin, h, R, cq,
-                          wp.array(pts, dtype=wp.vec3d, device=dev), w_c])
-        out_c = w_c.numpy()
 
-    v_ball = 4.0 / 3.0 * math.pi * p.radius**3
+    def count_points(points: np.ndarray) -> np.ndarray:
+        return _count_points_in_balls(points, w_vox, nx, ny, origin, h, p.radius, dev)
+
     shape = (nz, ny, nx)
+    measures = BallMeasures(rods=out_n, length=out_len, volume=out_vol, order=out_S, entanglement=out_e,
+                            ball_volume=4.0 / 3.0 * math.pi * p.radius**3,
+                            rod_volume=0.25 * math.pi * p.diameter**2 * p.length,
+                            rod_set=rods, contacts=contacts, count_points=count_points)
 
     def scatter(vals):
         a = np.full(nz * ny * nx, np.nan)
         a[vox] = vals
         return a.reshape(shape)
 
-    phi = scatter(out_vol / v_ball)
-    n = scatter(out_n.astype(np.float64))
-    S = scatter(np.where(out_n > 0, out_S, np.nan))
-    e = scatter(out_e)
-    craw = scatter(out_c.astype(np.float64))
-    # rho from the mean volume fraction of the occupied voxels (the box may be partly empty)
-    occupied = out_n > 0
-    rod_volume = 0.25 * math.pi * p.diameter**2 * p.length
-    mean_phi = float(np.mean(out_vol[occupied] / v_ball)) if occupied.any() else 0.0
-    rho = mean_phi / rod_volume
-    Z = 2.0 * n_contacts / rods.n_rods
-    norm = rho * Z * v_ball / 2.0
-    c = craw / norm if norm > 0 else np.where(np.isnan(craw), np.nan, 0.0)
+    # every row of the registry, read now (not at import): the row is the one place a field is defined
+    arrays = {spec.name: scatter(spec.kernel(measures)) for spec in _registry.FIELDS}
     attrs = {
         "diameter": p.diameter, "length": p.length, "domain": p.domain.tolist(),
-        "keep_outside": p.keep_outside, "rho": rho, "Z": Z, "c_normalisation": norm,
-        "n_rods": rods.n_rods, "n_segments": int(len(seg_rod)), "n_contacts": n_contacts,
+        "keep_outside": p.keep_outside, "rho": measures.rho, "Z": measures.Z,
+        "c_normalisation": measures.contact_normalisation,
+        "n_rods": rods.n_rods, "n_segments": int(len(seg_rod)), "n_contacts": len(contacts),
         "contact_source": source, "contact_tolerance": p.contact_tolerance,
         "n_voxels_computed": int(nv), "clipped_parts": int(counts.sum()),
         "device": dev, "wall_s": time.perf_counter() - t_start, "pairs_s": t_fields,
     }
-    return Fields(phi=phi, S=S, c=c, e=e, n=n, x=x, y=y, z=z, radius=p.radius, spacing=p.spacing,
-                  units=rods.units, contacts=craw, attrs=attrs)
+    return Fields(**arrays, x=x, y=y, z=z, radius=p.radius, spacing=p.spacing, units=rods.units, attrs=attrs)
+
+
+def _count_points_in_balls(points, w_vox, nx: int, ny: int, origin, h, radius: float, dev) -> np.ndarray:
+    """Points (P, 3) within ``radius`` of each computed voxel's centre (int32 per voxel).
+
+    A float32 hash grid finds the candidates with a query radius widened by the float32
+    rounding of the points; ``count_contacts_in_ball`` re-tests each in float64.
+    """
+    from rodwarp.kernels import fields as k
+
+    nv = w_vox.shape[0]
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(points) == 0 or nv == 0:
+        return np.zeros(nv, np.int32)
+    grid = wp.HashGrid(128, 128, 128, device=dev)
+    cq = float(radius * (1 + 1e-5) + 1e-5 * (float(np.abs(points).max()) + radius))
+    grid.build(wp.array(points.astype(np.float32), dtype=wp.vec3, device=dev), radius=cq)
+    out = wp.zeros(nv, dtype=wp.int32, device=dev)
+    wp.launch(k.count_contacts_in_ball, dim=nv, device=dev,
+              inputs=[grid.id, w_vox, nx, ny, origin, h, wp.float64(radius), cq,
+                      wp.array(points, dtype=wp.vec3d, device=dev), out])
+    return out.numpy()
 
 
 def resolve_contacts(rods: RodSet, tolerance: float | None = None) -> tuple[Contacts, str]:
-    """The rod set's own contacts when it has them, else contacts detected from the geometry.
+    """The contacts of the packing: the rod set's own when it has them, else from its geometry.
 
     Parameters
     ----------
@@ -291,8 +319,6 @@ def resolve_contacts(rods: RodSet, tolerance: float | None = None) -> tuple[Cont
     """
     if rods.contacts is not None:
         return rods.contacts, "input"
-    from rodwarp.geometry import detect_contacts
-
     tol = 0.1 * float(np.mean(rods.diameters)) if tolerance is None else float(tolerance)
     return detect_contacts(rods, tol), f"detected (surface gap < {tol:g} {rods.units})"
 

@@ -14,15 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
+from rodwarp._util import one_line_error as _fail
 from rodwarp.errors import RodwarpError
 
 __all__ = ["read_volume", "open_volume_lazy", "write_tiff", "list_slices", "check_volume", "read_voxel_size"]
 
 _TIFF_SUFFIXES = (".tif", ".tiff")
-
-
-def _fail(msg: str) -> RodwarpError:
-    return RodwarpError(" ".join(str(msg).split()))
 
 
 def _natural_key(name: str):
@@ -319,7 +316,7 @@ def write_tiff(path, volume, *, voxel_size=None) -> Path:
     """
     import tifffile
 
-    from rodwarp.atomic import atomic_path
+    from rodwarp.rodset.files import atomic_path
 
     vol = np.asarray(volume)
     if vol.ndim != 3:
@@ -332,7 +329,7 @@ def write_tiff(path, volume, *, voxel_size=None) -> Path:
     if imagej:
         meta = {"axes": "ZYX"}
         if voxel_size is not None:
-            from rodwarp.segment_prep import parse_voxel_size
+            from rodwarp.ct._prepare import parse_voxel_size
 
             dz, dy, dx = (v * 1e6 for v in parse_voxel_size(voxel_size))
             meta.update(unit="um", spacing=dz)

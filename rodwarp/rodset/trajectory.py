@@ -1,4 +1,4 @@
-"""Run outputs: trajectory (zarr), ParaView series (VTK polylines), checkpoints, snapshots.
+"""A rod set through time: trajectory (zarr), ParaView series (VTK polylines), checkpoints, snapshots.
 
 Every writer is crash-safe: single files are written atomically (write, then rename), and
 the trajectory records how many frames are complete only after a frame is written, so a
@@ -12,20 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rodwarp.atomic import atomic_path, write_text
-
-
-def consolidate(path) -> None:
-    """Write zarr's consolidated metadata of the group at ``path``, so ``xarray.open_zarr``
-    reads every array's metadata in one go (and does not warn that it had to look for it)."""
-    import warnings
-
-    import zarr
-
-    with warnings.catch_warnings():
-        # zarr 3 notes that consolidated metadata is not in the v3 spec yet; xarray reads it
-        warnings.simplefilter("ignore")
-        zarr.consolidate_metadata(str(path))
+from rodwarp.rodset.files import atomic_path, consolidate_zarr, save_figure, write_text
 
 
 class Trajectory:
@@ -84,7 +71,7 @@ class Trajectory:
 
     def finish(self) -> None:
         """Consolidate the metadata once the last frame is written."""
-        consolidate(self.path)
+        consolidate_zarr(self.path)
 
 
 def _quiet_vtk() -> None:
@@ -198,15 +185,26 @@ def latest_checkpoint(directory):
 
 
 def plot_snapshots(path, frames, offsets, box=None) -> None:
-    """Side views (x-z) of the packing at the given (title, positions) frames, as one PNG."""
-    import matplotlib
+    """Side views (x-z) of the packing at the given (title, positions) frames, as one PNG.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    Parameters
+    ----------
+    path : path-like
+        PNG to write (atomically).
+    frames : sequence of (str, ndarray (V, 3))
+        Title and vertex positions (m) of each view.
+    offsets : (N+1,) int
+        Rod layout.
+    box : (2, 3) array-like, optional
+        Container corners (m), drawn dashed.
+    """
     from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
 
-    fig, axes = plt.subplots(1, len(frames), figsize=(3.2 * len(frames), 5.5), sharey=True)
-    axes = np.atleast_1d(axes)
+    # its own Figure (no pyplot): the process's matplotlib backend is left alone
+    fig = Figure(figsize=(3.2 * len(frames), 5.5))
+    axes = np.atleast_1d(fig.subplots(1, len(frames), sharey=True))
     for ax, (title, x) in zip(axes, frames):
         segs = [x[offsets[r]:offsets[r + 1]][:, [0, 2]] for r in range(len(offsets) - 1)]
         ax.add_collection(LineCollection(segs, linewidths=0.6, colors="0.2"))
@@ -214,11 +212,9 @@ def plot_snapshots(path, frames, offsets, box=None) -> None:
         ax.set_aspect("equal")
         ax.autoscale()
         if box is not None:
-            ax.add_patch(plt.Rectangle((box[0][0], box[0][2]), box[1][0] - box[0][0], box[1][2] - box[0][2],
-                                       fill=False, ls="--", lw=0.6, color="tab:blue"))
+            ax.add_patch(Rectangle((box[0][0], box[0][2]), box[1][0] - box[0][0], box[1][2] - box[0][2],
+                                   fill=False, ls="--", lw=0.6, color="tab:blue"))
         ax.set_xlabel("x (m)")
     axes[0].set_ylabel("z (m)")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)

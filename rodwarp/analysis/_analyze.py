@@ -10,23 +10,24 @@ Inputs
 
 Outputs in ``out`` (written atomically): ``fields.zarr``, ``summary.json``, ``rods.npz`` (the
 analysed rod set with its contacts), PNG figures (histograms, mid-plane slices, z-profiles,
-outliers and tangles).
+outliers and tangles).  The fields, their summary keys and their panels are the field
+registry's (:data:`rodwarp.analysis.FIELDS`).
 """
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
-from rodwarp.atomic import write_json
+from rodwarp._util import progress_bar, versions
+from rodwarp.analysis._fieldset import Fields
 from rodwarp.errors import RodwarpError
-from rodwarp.fieldset import Fields
 from rodwarp.rodset import RodSet
 from rodwarp.rodset import load as load_rods
+from rodwarp.rodset.files import write_json
 
 ROD_FILES = ("final.npz", "rods.npz", "rods.zarr", "final.zarr")
 
@@ -69,7 +70,21 @@ def _is_zarr_with(path: Path, key: str) -> bool:
 
 
 def load_input(path, opts: AnalyzeOptions) -> tuple[str, RodSet | Fields, Path]:
-    """Classify and read ``path``: returns ("rods", RodSet, file) or ("fields", Fields, file)."""
+    """Classify and read an input of :func:`analyze`.
+
+    Parameters
+    ----------
+    path : path-like
+        A simulate or segment output folder, a rod-set file (npz, zarr, CSV) or precomputed
+        fields (``fields.zarr``, an npz holding ``e`` and ``n``).
+    opts : AnalyzeOptions
+        ``diameter`` and ``units`` for a CSV; ``units`` converts npz/zarr rod sets.
+
+    Returns
+    -------
+    (kind, object, file)
+        ``("rods", RodSet, file)`` or ``("fields", Fields, file)``; ``file`` is what was read.
+    """
     path = Path(path)
     if not path.exists():
         raise RodwarpError(f"input '{path}' does not exist; pass a simulate/segment output directory, "
@@ -103,7 +118,17 @@ def _load_rods(path: Path, opts: AnalyzeOptions) -> RodSet:
 
 
 def default_out(path: Path) -> Path:
-    """``analysis/`` beside the input (inside it when the input is a directory of results)."""
+    """Default output folder of :func:`analyze`: ``analysis/`` beside the input.
+
+    Parameters
+    ----------
+    path : path-like
+        The input; a directory of results (not a ``.zarr``) gets ``analysis/`` inside it.
+
+    Returns
+    -------
+    pathlib.Path
+    """
     path = Path(path)
     if path.is_dir() and path.suffix != ".zarr":
         return path / "analysis"
@@ -131,10 +156,11 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
     Returns
     -------
     dict
-        The summary written to ``summary.json``.
+        The summary written to ``summary.json`` (lengths in the input's units): the grid, every
+        option, the versions, and :func:`rodwarp.analysis.field_statistics` (a mean per field
+        of the registry, cv_e, e_lb, tangles, histograms, z-profiles).
     """
-    from rodwarp import __version__
-    from rodwarp.stats import field_statistics, find_tangles
+    from rodwarp.analysis._stats import field_statistics, find_tangles
 
     opts = opts or AnalyzeOptions()
     opts.validate()
@@ -147,7 +173,7 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
         output_location(out, "--out")  # a file, read-only or full: refused before reading the input
     kind, obj, src = load_input(path, opts)
     if kind == "rods":
-        from rodwarp.fields import grid_axes, resolve_params
+        from rodwarp.analysis._fields import grid_axes, resolve_params
 
         fp = resolve_params(obj, radius=opts.radius, spacing=opts.spacing, diameter=opts.diameter,
                             length=opts.length, keep_outside=opts.keep_outside,
@@ -160,7 +186,9 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
     cluster = None
     if kind == "rods":
         rods: RodSet = obj
-        from rodwarp.fields import resolve_contacts
+        from rodwarp.analysis._fields import resolve_contacts
+        # the contact graph's largest cluster (metrics belongs to the simulation side, beside
+        # analysis: it imports no layer above)
         from rodwarp.metrics import largest_cluster_fraction
 
         tol = fp.contact_tolerance
@@ -192,11 +220,12 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
         **{k: v for k, v in fields.attrs.items() if k not in ("source",)},
         "options": asdict(opts),
         **stats,
-        "rodwarp_version": __version__,
+        "rodwarp_version": versions()["rodwarp"],
+        "versions": versions("matplotlib"),
         "analysis_wall_s": None,
     }
     if opts.figures:
-        from rodwarp import fieldplots
+        from rodwarp.analysis import _figures as fieldplots
 
         labels, _ = find_tangles(fields.e, fields.valid, stats["e_lb"], connectivity=opts.connectivity,
                                  spacing=fields.spacing, system_size=fields.system_size)
@@ -206,46 +235,16 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
                 fieldplots.plot_tangles(fields, labels, stats, out / "tangles.png")]
         summary["figures"] = [Path(f).name for f in figs]
     summary["analysis_wall_s"] = time.perf_counter() - t0
-    write_json(out / "summary.json", _finite(json.loads(json.dumps(summary, default=_jsonable))))
+    write_json(out / "summary.json", summary, finite=True)
     run.complete()
     return summary
 
 
-def _finite(o):
-    """NaN and infinities become null: strict JSON readers reject them."""
-    if isinstance(o, float):
-        return o if np.isfinite(o) else None
-    if isinstance(o, dict):
-        return {k: _finite(v) for k, v in o.items()}
-    if isinstance(o, list):
-        return [_finite(v) for v in o]
-    return o
-
-
-def _jsonable(o):
-    if isinstance(o, np.generic):
-        v = o.item()
-        return None if isinstance(v, float) and not np.isfinite(v) else v
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    return str(o)
-
-
 def _fields_with_progress(rods: RodSet, contacts, opts: AnalyzeOptions, progress: bool) -> Fields:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+    from rodwarp.analysis._fields import compute_fields
 
-    from rodwarp.fields import compute_fields
-
-    with Progress(TextColumn("fields"), BarColumn(), MofNCompleteColumn(), TextColumn("voxels"),
-                  TimeRemainingColumn(), disable=not progress, transient=False) as bar:
-        task = bar.add_task("fields", total=None)
-
-        def cb(done, total):
-            bar.update(task, completed=done, total=total)
-
+    with progress_bar(progress, unit="voxels") as update:
         return compute_fields(rods, radius=opts.radius, spacing=opts.spacing, diameter=opts.diameter,
                               length=opts.length, keep_outside=opts.keep_outside,
                               contact_tolerance=opts.contact_tolerance, contacts=contacts,
-                              device=opts.device, progress=cb)
+                              device=opts.device, progress=lambda done, total: update("fields", done, total))

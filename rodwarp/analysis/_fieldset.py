@@ -1,18 +1,11 @@
 """Mesoscopic fields on a voxel grid: one container, one file format.
 
-``Fields`` holds the local fields that ``rodwarp analyze`` computes (or reads back), each a
-float64 array of shape ``(nz, ny, nx)`` - axis order (z, y, x), like the paper's own field
-files - plus the 1-D voxel-centre coordinates ``x``, ``y``, ``z`` and the parameters.
-
-Arrays
-    ``phi``  local volume fraction (clipped rod volume / ball volume)
-    ``S``    local nematic order (largest eigenvalue of the length-weighted Q tensor)
-    ``c``    contact density: contacts in the ball / (rho Z V_ball / 2)
-    ``e``    local entanglement: sum over pairs of distinct rods of the ACN of their clipped parts
-    ``n``    rods with a clipped part in the ball
-    ``contacts``  raw number of contact points in the ball (optional)
-
-Voxels outside the analysed domain are NaN (``n`` too); ``valid`` is the mask of the others.
+``Fields`` holds the local fields that ``rodwarp analyze`` computes (or reads back), one float64
+array of shape ``(nz, ny, nx)`` per field of the registry (:data:`~rodwarp.analysis.FIELDS`:
+``phi``, ``S``, ``c``, ``e``, ``n``, ``contacts``, ``n_ends``, defined in ``docs/fields.md``) -
+axis order (z, y, x), like the paper's own field files - plus the 1-D voxel-centre coordinates
+``x``, ``y``, ``z`` and the parameters.  A field the source did not provide is all NaN; voxels
+outside the analysed domain are NaN (``n`` too); ``valid`` is the mask of the others.
 
 File format
     ``fields.zarr``: a zarr group holding the arrays above and ``x``, ``y``, ``z``; the group
@@ -26,27 +19,30 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from rodwarp.atomic import atomic_path
+from rodwarp._util import json_safe
+from rodwarp.analysis._registry import field_names
 from rodwarp.errors import RodwarpError
+from rodwarp.rodset.files import atomic_path, consolidate_zarr
 
-FIELD_NAMES = ("phi", "S", "c", "e", "n")
-OPTIONAL_NAMES = ("contacts",)
+__all__ = ["Fields"]
+
+_COORDS = ("x", "y", "z")
 
 
-@dataclass
 class Fields:
     """Local fields on a regular voxel grid, axis order (z, y, x).
 
     Parameters
     ----------
-    phi, S, c, e, n : ndarray, shape (nz, ny, nx)
-        The fields (NaN outside the domain).  ``c`` or ``phi``/``S`` may be all-NaN when
-        the source did not provide them.
+    e, n : ndarray, shape (nz, ny, nx)
+        Entanglement and rods per ball (required: ``n > 0`` marks the voxels in the packing).
+    **arrays : ndarray, shape (nz, ny, nx)
+        Any other registered field by name (``phi``, ``S``, ``c``, ``contacts``, ...); one not
+        given is all NaN (not provided by the source).  Read back as attributes (``f.phi``).
     x, y, z : ndarray
         Voxel-centre coordinates along each axis, in ``units``.
     radius : float
@@ -55,49 +51,66 @@ class Fields:
         Grid spacing, in ``units``.
     units : str
         Length unit of coordinates, radius and spacing (``m``, ``mm``, ``um`` or ``voxel``).
-    contacts : ndarray or None
-        Raw number of contact points in each ball.
     attrs : dict
         Everything else worth keeping (diameter, mean rod length, rho, Z, source, ...).
     """
 
-    phi: np.ndarray
-    S: np.ndarray
-    c: np.ndarray
-    e: np.ndarray
-    n: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    z: np.ndarray
-    radius: float
-    spacing: float
-    units: str = "m"
-    contacts: np.ndarray | None = None
-    attrs: dict = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        for name in FIELD_NAMES + OPTIONAL_NAMES:
-            a = getattr(self, name)
+    def __init__(self, *, x, y, z, radius: float, spacing: float, units: str = "m", attrs: dict | None = None,
+                 **arrays) -> None:
+        names = field_names()
+        unknown = sorted(set(arrays) - set(names))
+        if unknown:
+            raise RodwarpError(f"unknown field(s) {', '.join(unknown)}; registered: {', '.join(names)}")
+        for name in ("e", "n"):
+            if arrays.get(name) is None:
+                raise RodwarpError(f"fields need '{name}' (entanglement and rods per ball)")
+        data = {}
+        for name in ("e",) + tuple(n for n in names if n != "e"):
+            a = arrays.get(name)
             if a is None:
+                data[name] = np.full(data["e"].shape, np.nan)
                 continue
             a = np.asarray(a, dtype=np.float64)
             if a.ndim != 3:
                 raise RodwarpError(f"field '{name}' must be 3-D (z, y, x), got shape {a.shape}")
-            setattr(self, name, a)
-        shape = self.e.shape
-        for name in FIELD_NAMES + OPTIONAL_NAMES:
-            a = getattr(self, name)
-            if a is not None and a.shape != shape:
-                raise RodwarpError(f"field '{name}' has shape {a.shape}, expected {shape} like 'e'")
-        for name, size in zip("zyx", shape):
-            a = np.asarray(getattr(self, name), dtype=np.float64).reshape(-1)
+            if name != "e" and a.shape != data["e"].shape:
+                raise RodwarpError(f"field '{name}' has shape {a.shape}, expected {data['e'].shape} like 'e'")
+            data[name] = a
+        object.__setattr__(self, "_data", {n: data[n] for n in names})
+        shape = data["e"].shape
+        for name, values, size in zip(_COORDS, (x, y, z), shape[::-1]):
+            a = np.asarray(values, dtype=np.float64).reshape(-1)
             if a.size != size:
                 raise RodwarpError(f"coordinate '{name}' has {a.size} values but the grid has {size} along {name}")
-            setattr(self, name, a)
+            object.__setattr__(self, name, a)
+        self.radius = radius
+        self.spacing = spacing
+        self.units = units
+        self.attrs = {} if attrs is None else attrs
+
+    def __getattr__(self, name: str):
+        # only called when normal look-up fails: the registered fields
+        data = self.__dict__.get("_data", {})
+        if name in data:
+            return data[name]
+        raise AttributeError(f"Fields has no attribute {name!r} (fields: {', '.join(data)})")
+
+    def __setattr__(self, name: str, value) -> None:
+        if name in self.__dict__.get("_data", {}):
+            a = np.asarray(value, dtype=np.float64)
+            if a.shape != self.shape:
+                raise RodwarpError(f"field '{name}' must have shape {self.shape}, got {a.shape}")
+            self._data[name] = a
+        else:
+            object.__setattr__(self, name, value)
+
+    def __repr__(self) -> str:
+        return (f"Fields(shape={self.shape}, radius={self.radius:g}, spacing={self.spacing:g}, "
+                f"units={self.units!r}, fields={list(self._data)})")
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        return self.e.shape
+        return self._data["e"].shape
 
     @property
     def valid(self) -> np.ndarray:
@@ -114,12 +127,15 @@ class Fields:
             out[k] = (coord[idx[-1]] - coord[idx[0]] + self.spacing) if idx.size else 0.0
         return out
 
+    def get(self, name: str) -> np.ndarray:
+        """The array of the registered field ``name`` (all NaN when the source lacked it)."""
+        if name not in self._data:
+            raise KeyError(f"no field {name!r}; registered: {', '.join(self._data)}")
+        return self._data[name]
+
     def arrays(self) -> dict[str, np.ndarray]:
-        out = {name: getattr(self, name) for name in FIELD_NAMES}
-        if self.contacts is not None:
-            out["contacts"] = self.contacts
-        out.update(x=self.x, y=self.y, z=self.z)
-        return out
+        """Every field, then the coordinates x, y, z."""
+        return {**self._data, "x": self.x, "y": self.y, "z": self.z}
 
     def meta(self) -> dict:
         return {"radius": float(self.radius), "spacing": float(self.spacing), "units": self.units,
@@ -129,7 +145,7 @@ class Fields:
     def save(self, path: str | os.PathLike) -> Path:
         """Write ``fields.zarr`` (zarr group) or ``.npz`` atomically."""
         path = Path(path)
-        meta = json.loads(json.dumps(self.meta(), default=_jsonable))
+        meta = json_safe(self.meta(), finite=False)
         if path.suffix == ".npz":
             with atomic_path(path) as tmp:
                 with open(tmp, "wb") as fh:
@@ -138,8 +154,6 @@ class Fields:
         if path.suffix != ".zarr":
             raise RodwarpError(f"cannot write fields to '{path}': use a .zarr or .npz name")
         import zarr
-
-        from rodwarp.outputs import consolidate
 
         units = {"x": self.units, "y": self.units, "z": self.units}
         with atomic_path(path, directory=True) as tmp:
@@ -152,7 +166,7 @@ class Fields:
                 if name in units:
                     arr.attrs["units"] = units[name]
             g.attrs.update(meta)
-            consolidate(tmp)
+            consolidate_zarr(tmp)
         return path
 
     @classmethod
@@ -171,14 +185,6 @@ class Fields:
         except Exception as e:  # noqa: BLE001 - numpy raises many types for corrupt archives
             raise RodwarpError(f"cannot read '{path}' as an .npz archive ({type(e).__name__}: {e})") from None
         return _from_dict(data, path)
-
-
-def _jsonable(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
 
 
 def _load_zarr(path: Path) -> Fields:
@@ -229,6 +235,7 @@ def _from_dict(data: dict, path: Path) -> Fields:
     spacing = float(meta.pop("spacing", np.nan))
     units = str(meta.pop("units", "m"))
     meta.pop("axis_order", None)
-    return Fields(phi=data.get("phi", nan), S=data.get("S", nan), c=data.get("c", nan), e=e, n=n,
-                  x=data["x"], y=data["y"], z=data["z"], radius=radius, spacing=spacing, units=units,
-                  contacts=data.get("contacts"), attrs=meta)
+    # fields of this registry only: one a later rodwarp added is skipped, one an earlier lacked is NaN
+    present = {k: data[k] for k in field_names() if k in data and k not in ("e", "n")}
+    return Fields(**present, e=e, n=n, x=data["x"], y=data["y"], z=data["z"], radius=radius, spacing=spacing,
+                  units=units, attrs=meta)

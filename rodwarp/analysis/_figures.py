@@ -2,9 +2,10 @@
 
 Every function draws on its own ``matplotlib.figure.Figure``, which renders PNG through the Agg
 canvas without touching pyplot: no global state, no window, and an interactive session's
-backend is left alone. It writes the PNG atomically - a temporary file in the
-target directory, then ``os.replace`` - so a reader never sees a torn image, and returns the
-path. Panels of fields that are all NaN (not provided by the source) say "not available".
+backend is left alone. It writes the PNG atomically (:func:`rodwarp.rodset.files.save_figure`),
+so a reader never sees a torn image, and returns the path. Which fields get which panels, and
+their labels, come from the field registry (:data:`rodwarp.analysis.FIELDS`). Panels of fields
+that are all NaN (not provided by the source) say "not available".
 
 Arrays are (z, y, x); the images are drawn with physical coordinates (voxel centres +- half a
 spacing) in ``Fields.units``.
@@ -12,8 +13,7 @@ spacing) in ``Fields.units``.
 
 from __future__ import annotations
 
-import os
-import tempfile
+import math
 from pathlib import Path
 
 import matplotlib
@@ -21,40 +21,23 @@ import numpy as np
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 
-from rodwarp.stats import PROFILE_FIELDS, STAT_FIELDS, field_statistics, find_tangles, z_profiles
+from rodwarp.analysis._registry import field_spec, fields_with
+from rodwarp.analysis._stats import field_statistics, find_tangles, z_profiles
+from rodwarp.rodset.files import save_figure
 
 __all__ = ["plot_histograms", "plot_slices", "plot_zprofiles", "plot_tangles"]
-
-_LABELS = {
-    "phi": r"$\phi$ (volume fraction)",
-    "S": r"$S$ (nematic order)",
-    "c": r"$c$ (contact density)",
-    "e": r"$e$ (entanglement)",
-    "n": r"$n$ (rods per ball)",
-}
-_SHORT = {"phi": r"$\phi$", "S": r"$S$", "c": r"$c$", "e": r"$e$", "n": r"$n$"}
-
 
 #: fixed margins instead of constrained layout, which took most of each figure's time (the
 #: main job's four figures: 2.7 s, 1.5 s of it in the layout solver; benchmarks/RESULTS.md)
 _GRID = dict(left=0.08, right=0.97, bottom=0.08, top=0.92, wspace=0.25, hspace=0.32)
 
 
-def _save(fig: Figure, path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        # the temporary name has no .png suffix, so the format must be explicit
-        fig.savefig(tmp, format="png", dpi=110)
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; a figure is meant to be shared
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+def _label(name: str) -> str:
+    return field_spec(name).label
+
+
+def _symbol(name: str) -> str:
+    return field_spec(name).symbol
 
 
 def _not_available(ax, what: str) -> None:
@@ -83,6 +66,14 @@ def _mid_indices(fields) -> tuple[int, int, int]:
     return tuple(mids)
 
 
+def _mid_planes(fields):
+    """Indices of the mid xy plane (kz) and mid xz plane (jy), the length unit, and the imshow
+    extents of the two planes."""
+    kz, jy, _ = _mid_indices(fields)
+    h = float(fields.spacing)
+    return kz, jy, _units(fields), _extent(fields.x, fields.y, h), _extent(fields.x, fields.z, h)
+
+
 def _robust_range(a: np.ndarray) -> tuple[float, float] | None:
     """0.5 / 99.5 percentiles of the finite values: a long tail (e) should not wash out the map."""
     v = a[np.isfinite(a)]
@@ -99,14 +90,18 @@ def _robust_range(a: np.ndarray) -> tuple[float, float] | None:
 # ----------------------------------------------------------------------------------------------
 
 def plot_histograms(fields, stats: dict | None, path) -> Path:
-    """2 x 2 panel of p(phi), p(S), p(c), p(e), with the mean dashed and e_lb on p(e).
+    """Distributions p(phi), p(S), p(c), p(e), ... with the mean dashed and e_lb on p(e).
+
+    One panel per field with a histogram in the registry (two columns up to four fields,
+    three beyond).
 
     Parameters
     ----------
-    fields : rodwarp.fieldset.Fields
+    fields : rodwarp.analysis.Fields
         Used for the title (units, shape) and, when ``stats`` is None, to compute them.
     stats : dict or None
-        Output of :func:`rodwarp.stats.field_statistics` (its ``histograms``, means, ``e_lb``).
+        Output of :func:`rodwarp.analysis.field_statistics` (its ``histograms``, means,
+        ``e_lb``).
     path : path-like
         PNG to write.
 
@@ -116,18 +111,24 @@ def plot_histograms(fields, stats: dict | None, path) -> Path:
     """
     if stats is None:
         stats = field_statistics(fields)
-    fig = Figure(figsize=(9, 7))
-    axs = fig.subplots(2, 2, gridspec_kw=_GRID)
-    for ax, name in zip(axs.ravel(), STAT_FIELDS):
+    specs = fields_with("histogram")
+    ncols = 2 if len(specs) <= 4 else 3
+    nrows = max(1, math.ceil(len(specs) / ncols))
+    fig = Figure(figsize=(4.5 * ncols, 3.5 * nrows))
+    axs = fig.subplots(nrows, ncols, squeeze=False, gridspec_kw=_GRID).ravel()
+    for ax in axs[len(specs):]:
+        ax.set_axis_off()
+    for ax, spec in zip(axs, specs):
+        name = spec.name
         h = stats.get("histograms", {}).get(name)
         if h is None:
-            _not_available(ax, _LABELS[name])
+            _not_available(ax, spec.label)
             continue
         edges = np.asarray(h["edges"], dtype=float)
         dens = np.asarray([np.nan if d is None else d for d in h["density"]], dtype=float)
         ax.stairs(np.nan_to_num(dens), edges, fill=True, alpha=0.35, color="C0")
         ax.stairs(np.nan_to_num(dens), edges, color="C0")
-        mean = stats.get(f"mean_{name}")
+        mean = stats.get(spec.summary) if spec.summary else None
         if mean is not None:
             ax.axvline(mean, color="k", ls="--", lw=1, label=f"mean {mean:.3g}")
         if name == "e" and stats.get("e_lb") is not None:
@@ -136,14 +137,14 @@ def plot_histograms(fields, stats: dict | None, path) -> Path:
             ax.axvline(stats["e_lb"], color="C3", lw=1.5,
                        label=rf"$e_{{lb}}$ = {rule} + 1.5 IQR = {stats['e_lb']:.3g}")
             ax.axvspan(stats["e_lb"], edges[-1], color="C3", alpha=0.08)
-        ax.set_xlabel(_LABELS[name])
-        ax.set_ylabel(f"p({_SHORT[name]})")
+        ax.set_xlabel(spec.label)
+        ax.set_ylabel(f"p({spec.symbol})")
         ax.legend(fontsize=8, loc="upper right")
     cv = stats.get("cv_e")
     title = f"field distributions ({stats.get('n_valid_voxels', '?')} valid voxels"
     title += f", $\\sigma_e/\\mu_e$ = {cv:.3g})" if cv is not None else ")"
     fig.suptitle(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_slices(fields, path) -> Path:
@@ -151,7 +152,8 @@ def plot_slices(fields, path) -> Path:
 
     Parameters
     ----------
-    fields : rodwarp.fieldset.Fields
+    fields : rodwarp.analysis.Fields
+        One row of panels per field with slices in the registry.
     path : path-like
         PNG to write.
 
@@ -164,22 +166,19 @@ def plot_slices(fields, path) -> Path:
     "Mid" is the middle of the valid voxels' bounding box. Each row shares one colour scale and
     colourbar (0.5-99.5 percentiles of the whole field); NaN (outside the domain) is light grey.
     """
-    kz, jy, _ = _mid_indices(fields)
-    u = _units(fields)
-    h = float(fields.spacing)
-    x, y, z = fields.x, fields.y, fields.z
-    ext_xy = _extent(x, y, h)
-    ext_xz = _extent(x, z, h)
+    kz, jy, u, ext_xy, ext_xz = _mid_planes(fields)
+    y, z = fields.y, fields.z
     # keep panels to scale but not absurdly tall or flat
-    fig = Figure(figsize=(10, 3.0 * len(PROFILE_FIELDS)))
-    axs = fig.subplots(len(PROFILE_FIELDS), 2, squeeze=False,
+    names = [f.name for f in fields_with("slices")]
+    fig = Figure(figsize=(10, 3.0 * len(names)))
+    axs = fig.subplots(len(names), 2, squeeze=False,
                        gridspec_kw=dict(left=0.08, right=0.9, bottom=0.04, top=0.95, wspace=0.3, hspace=0.45))
-    for row, name in enumerate(PROFILE_FIELDS):
-        a = getattr(fields, name)
+    for row, name in enumerate(names):
+        a = fields.get(name)
         rng = _robust_range(a[fields.valid]) if np.any(fields.valid) else None
         if rng is None:
-            _not_available(axs[row, 0], _LABELS[name])
-            _not_available(axs[row, 1], _LABELS[name])
+            _not_available(axs[row, 0], _label(name))
+            _not_available(axs[row, 1], _label(name))
             continue
         cmap = matplotlib.colormaps["viridis"].with_extremes(bad="0.85")
         for col, (img, ext, xl, yl, ttl) in enumerate((
@@ -190,22 +189,23 @@ def plot_slices(fields, path) -> Path:
                            vmin=rng[0], vmax=rng[1], interpolation="nearest", aspect="equal")
             ax.set_xlabel(f"{xl} [{u}]")
             ax.set_ylabel(f"{yl} [{u}]")
-            ax.set_title(f"{_SHORT[name]}: {ttl}", fontsize=9)
+            ax.set_title(f"{_symbol(name)}: {ttl}", fontsize=9)
         # both planes share the row's scale, so one colourbar per row says it all
-        fig.colorbar(im, ax=axs[row, :], shrink=0.85, extend="both", label=_SHORT[name])
+        fig.colorbar(im, ax=axs[row, :], shrink=0.85, extend="both", label=_symbol(name))
     fig.suptitle(f"mid-plane slices (grid {fields.shape[2]} x {fields.shape[1]} x {fields.shape[0]}, "
-                 f"R = {fields.radius:.4g} {u}, spacing {h:.4g} {u})")
-    return _save(fig, path)
+                 f"R = {fields.radius:.4g} {u}, spacing {float(fields.spacing):.4g} {u})")
+    return save_figure(fig, path)
 
 
 def plot_zprofiles(source, path) -> Path:
-    """Horizontal means phi(z), S(z), c(z), e(z), n(z) against height.
+    """Horizontal means phi(z), S(z), c(z), e(z), n(z), ... against height.
 
     Parameters
     ----------
     source : Fields, dict
-        Fields, the output of :func:`rodwarp.stats.field_statistics` (its ``z_profiles``), or
-        the output of :func:`rodwarp.stats.z_profiles`.
+        Fields, the output of :func:`rodwarp.analysis.field_statistics` (its ``z_profiles``),
+        or the output of :func:`rodwarp.analysis.z_profiles`; one panel per field with a
+        z-profile in the registry.
     path : path-like
         PNG to write.
 
@@ -222,21 +222,22 @@ def plot_zprofiles(source, path) -> Path:
     if "z" not in prof:
         raise ValueError("plot_zprofiles needs Fields, field_statistics output or z_profiles output")
     z = np.asarray(prof["z"], dtype=float)
-    fig = Figure(figsize=(2.6 * len(PROFILE_FIELDS), 4.2))
-    axs = fig.subplots(1, len(PROFILE_FIELDS), sharey=True,
-                       gridspec_kw=dict(left=0.07, right=0.98, bottom=0.16, top=0.88, wspace=0.12))
-    for ax, name in zip(axs, PROFILE_FIELDS):
+    names = [f.name for f in fields_with("zprofile")]
+    fig = Figure(figsize=(2.6 * len(names), 4.2))
+    axs = fig.subplots(1, len(names), sharey=True, squeeze=False,
+                       gridspec_kw=dict(left=0.07, right=0.98, bottom=0.16, top=0.88, wspace=0.12))[0]
+    for ax, name in zip(axs, names):
         vals = prof.get(name)
         v = None if vals is None else np.asarray([np.nan if q is None else q for q in vals], dtype=float)
         if v is None or not np.any(np.isfinite(v)):
-            _not_available(ax, _LABELS[name])
+            _not_available(ax, _label(name))
             continue
         ax.plot(v, z, "o-", ms=3)
-        ax.set_xlabel(_LABELS[name])
+        ax.set_xlabel(_label(name))
         ax.grid(alpha=0.3)
     axs[0].set_ylabel(f"z [{units}]" if units else "z")
     fig.suptitle("horizontal averages against height")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _label_cmap(n: int) -> ListedColormap:
@@ -268,14 +269,15 @@ def plot_tangles(fields, labels, stats: dict | None, path) -> Path:
 
     Parameters
     ----------
-    fields : rodwarp.fieldset.Fields
+    fields : rodwarp.analysis.Fields
+        The fields (only ``e`` is drawn).
     labels : ndarray of int, shape (nz, ny, nx), or None
-        Tangle labels from :func:`rodwarp.stats.find_tangles` (1 = largest); None to compute
-        them from ``stats`` (its ``e_lb`` and ``connectivity``).
+        Tangle labels from :func:`rodwarp.analysis.find_tangles` (1 = largest); None to
+        compute them from ``stats`` (its ``e_lb`` and ``connectivity``).
     stats : dict or None
-        Output of :func:`rodwarp.stats.field_statistics`; None to compute it.
+        Output of :func:`rodwarp.analysis.field_statistics`, computed when None.
     path : path-like
-        PNG to write.
+        The PNG.
 
     Returns
     -------
@@ -289,12 +291,8 @@ def plot_tangles(fields, labels, stats: dict | None, path) -> Path:
     labels = np.asarray(labels)
     if labels.shape != fields.shape:
         raise ValueError(f"labels have shape {labels.shape}, the fields {fields.shape}")
-    kz, jy, _ = _mid_indices(fields)
-    u = _units(fields)
-    h = float(fields.spacing)
-    x, y, z = fields.x, fields.y, fields.z
-    ext_xy = _extent(x, y, h)
-    ext_xz = _extent(x, z, h)
+    kz, jy, u, ext_xy, ext_xz = _mid_planes(fields)
+    y, z = fields.y, fields.z
     n_lab = int(labels.max()) if labels.size else 0
     lcmap = _label_cmap(n_lab).with_extremes(bad=(1, 1, 1, 0))
     e_cmap = matplotlib.colormaps["Greys"].with_extremes(bad=(0.8, 0.87, 0.95))  # outside: pale blue
@@ -307,13 +305,13 @@ def plot_tangles(fields, labels, stats: dict | None, path) -> Path:
 
     def draw_e(ax, img, mask, ext, xl, yl, title):
         if rng is None:
-            _not_available(ax, _LABELS["e"])
+            _not_available(ax, _label("e"))
             return
         im = ax.imshow(np.ma.masked_invalid(img), origin="lower", extent=ext, cmap=e_cmap, vmin=rng[0],
                        vmax=rng[1], interpolation="nearest")
         if mask.any():
             ax.contour(mask.astype(float), levels=[0.5], colors="C3", linewidths=1.0, origin="lower", extent=ext)
-        fig.colorbar(im, ax=ax, shrink=0.8, extend="both", label=_SHORT["e"])
+        fig.colorbar(im, ax=ax, shrink=0.8, extend="both", label=_symbol("e"))
         ax.set(xlabel=f"{xl} [{u}]", ylabel=f"{yl} [{u}]")
         ax.set_title(title, fontsize=9)
 
@@ -349,4 +347,4 @@ def plot_tangles(fields, labels, stats: dict | None, path) -> Path:
            + ("; percolates along " + ",".join(stats["percolating_axes"]) if stats.get("percolates") else
               "; no tangle percolates"))
     fig.suptitle(sub, fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)

@@ -1,14 +1,40 @@
-"""Vectorised NumPy geometry on the host (segment distances), for checks and packing."""
+"""Geometry of a rod set on the host (vectorised NumPy): segment distances and its contacts.
+
+Three words are kept apart here and wherever these functions are used:
+
+* the **contacts of the packing** - touching rod pairs, one :class:`~rodwarp.rodset.Contacts`
+  entry per pair (what :func:`detect_contacts` returns);
+* **contact candidates** - segment pairs close enough to be tested (here from a k-d tree on
+  segment midpoints), most of which do not touch;
+* the **contact point** of a contact - the midpoint of the two closest points of its rods.
+
+Used by analysis (contacts when the input has none), CT segmentation and phantoms, random
+packing and the tests; this module must not import warp.
+"""
 
 from __future__ import annotations
 
 import numpy as np
+
+from rodwarp.rodset._rodset import Contacts
+
+__all__ = ["segment_closest_params", "segment_distance", "detect_contacts"]
 
 
 def segment_closest_params(p0, p1, q0, q1):
     """Closest-point parameters (s, t) in [0, 1] of segments p0-p1 and q0-q1 (broadcasting).
 
     Parallel pairs take the middle of their overlap, as the Warp narrowphase does.
+
+    Parameters
+    ----------
+    p0, p1, q0, q1 : array_like, shape (..., 3)
+        Segment ends, any length unit; leading axes broadcast.
+
+    Returns
+    -------
+    s, t : ndarray, shape (...)
+        The closest points are ``p0 + s (p1 - p0)`` and ``q0 + t (q1 - q0)``.
     """
     p0, p1, q0, q1 = (np.asarray(a, dtype=np.float64) for a in (p0, p1, q0, q1))
     d1 = p1 - p0
@@ -37,7 +63,18 @@ def segment_closest_params(p0, p1, q0, q1):
 
 
 def segment_distance(p0, p1, q0, q1):
-    """Distance between segments p0-p1 and q0-q1 (broadcasting over leading axes)."""
+    """Distance between segments p0-p1 and q0-q1 (broadcasting over leading axes).
+
+    Parameters
+    ----------
+    p0, p1, q0, q1 : array_like, shape (..., 3)
+        Segment ends, any length unit.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        Centreline distance, in the unit of the ends (subtract the radii for a surface gap).
+    """
     s, t = segment_closest_params(p0, p1, q0, q1)
     p0, p1, q0, q1 = (np.asarray(a, dtype=np.float64) for a in (p0, p1, q0, q1))
     pa = p0 + s[..., None] * (p1 - p0)
@@ -46,10 +83,11 @@ def segment_distance(p0, p1, q0, q1):
 
 
 def detect_contacts(rods, tolerance: float | None = None):
-    """Rod-rod contacts from geometry alone: rod pairs whose surfaces come within ``tolerance``.
+    """The contacts of a packing from its geometry: rod pairs whose surfaces come within ``tolerance``.
 
-    Used when a rod set carries no contacts (a CSV of centrelines, for example).  Candidate
-    segment pairs come from a k-d tree on segment midpoints; gaps are exact capsule gaps.
+    Used when a rod set carries no contacts (a CSV of centrelines, for example).  Contact
+    candidates (segment pairs of distinct rods) come from a k-d tree on segment midpoints; each
+    candidate's gap is its exact capsule gap.
 
     Parameters
     ----------
@@ -63,11 +101,10 @@ def detect_contacts(rods, tolerance: float | None = None):
     -------
     Contacts
         One entry per touching rod pair: the closest of its segment pairs, contact point at
-        the midpoint of the two closest points, gap = centreline distance - r_i - r_j.
+        the midpoint of the two closest points, gap = centreline distance - r_i - r_j (the
+        rod set's units).
     """
     from scipy.spatial import cKDTree
-
-    from rodwarp.rodset import Contacts
 
     p0, p1, rod = rods.segments()
     if tolerance is None:
@@ -77,10 +114,10 @@ def detect_contacts(rods, tolerance: float | None = None):
     mid = 0.5 * (p0 + p1)
     half = 0.5 * float(np.max(np.linalg.norm(p1 - p0, axis=1)))
     reach = 2.0 * half + 2.0 * float(np.max(rods.radii)) + tolerance
-    pairs = cKDTree(mid).query_pairs(reach, output_type="ndarray")
-    if len(pairs) == 0:
+    candidates = cKDTree(mid).query_pairs(reach, output_type="ndarray")
+    if len(candidates) == 0:
         return Contacts.empty()
-    a, b = pairs[:, 0], pairs[:, 1]
+    a, b = candidates[:, 0], candidates[:, 1]
     keep = rod[a] != rod[b]
     a, b = a[keep], b[keep]
     s, t = segment_closest_params(p0[a], p1[a], p0[b], p1[b])

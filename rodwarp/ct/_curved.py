@@ -1,6 +1,6 @@
 """Curved filaments (wires, fibres, arcs) traced as polylines from a greyscale CT volume.
 
-Used by :func:`rodwarp.segment.segment_volume` with ``shape="curved"`` (or ``"auto"`` when
+Used by :func:`rodwarp.ct.segment_volume` with ``shape="curved"`` (or ``"auto"`` when
 the skeleton's branches bend).  Inputs are the prepared volume and the global levels of the
 straight-rod pipeline; coordinates are ``(x, y, z)`` in working voxels.
 
@@ -35,7 +35,6 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from rodwarp.rodset import RodSet
 
 __all__ = ["trace_filaments", "bend_fraction"]
 
@@ -100,32 +99,16 @@ def _smooth(poly: np.ndarray, sigma: float) -> np.ndarray:
 def _branches(mask: np.ndarray, r0: float, junction_radius: float):
     """Skeleton branches (ordered (m, 3) xyz arrays) with junction neighbourhoods removed;
     also the junction voxels (xyz) and the skeleton size."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
-    from skimage.morphology import skeletonize
+    from rodwarp.ct._seeds import _components, _skeleton
 
-    sk = skeletonize(mask)
-    idx = np.argwhere(sk)
+    idx, junc, keep = _skeleton(mask, r0, junction_radius)
     if len(idx) == 0:
         return [], np.zeros((0, 3)), 0
-    tree = cKDTree(idx)
-    nb = tree.query_ball_point(idx, 1.75, return_length=True) - 1
-    junc = idx[nb >= 3]
-    keep = np.ones(len(idx), bool)
-    if len(junc):
-        d, _ = cKDTree(junc).query(idx, distance_upper_bound=junction_radius * r0 + 1.0 + 1e-6)
-        keep = ~np.isfinite(d)
     pts = idx[keep]
     out = []
     if len(pts):
-        pairs = cKDTree(pts).query_pairs(1.75, output_type="ndarray")
+        pairs, _, ncomp, lab, order, bounds = _components(pts)
         n = len(pts)
-        g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)) if len(pairs) else \
-            coo_matrix((n, n))
-        ncomp, lab = connected_components(g, directed=False)
-        order = np.argsort(lab, kind="stable")
-        bounds = np.searchsorted(lab[order], np.arange(ncomp + 1))
         pl = lab[pairs[:, 0]] if len(pairs) else np.zeros(0, int)
         porder = np.argsort(pl, kind="stable")
         pb = np.searchsorted(pl[porder], np.arange(ncomp + 1))
@@ -352,9 +335,9 @@ def trace_filaments(raw: np.ndarray, st, P, quality: dict, progress=None):
     ----------
     raw : ndarray (z, y, x) float32
         The prepared volume.
-    st : rodwarp.segment._Stats
+    st : rodwarp.ct._levels._Levels
         Background and foreground levels, threshold, coarse radius ``r0`` (voxels).
-    P : rodwarp.segment.SegmentParams
+    P : rodwarp.ct.SegmentParams
         Knobs (``smooth_sigma``, ``junction_radius``, ``min_length``, ``window_margin``).
     quality : dict
         Updated with ``branches``, ``joins``, ``filaments``, ``bend_fraction``.
@@ -364,7 +347,7 @@ def trace_filaments(raw: np.ndarray, st, P, quality: dict, progress=None):
     (list of (m, 3) arrays, radii (n,))
         Centrelines (x, y, z) in voxels, vertices about one voxel apart, and radii (voxels).
     """
-    from rodwarp.segment import _BlockSampler
+    from rodwarp.ct._voxels import _BlockSampler
 
     g = ndimage.gaussian_filter(raw, P.smooth_sigma) if P.smooth_sigma > 0 else raw
     scale = 1.0 / (st.fg_smooth - st.bg)
