@@ -56,7 +56,7 @@ class ProtocolParams:
     dt: float | None = None
     iterations: int = 10
     rod_model: str = "auto"
-    step_safety: float = 1.0
+    step_safety: float = 0.5
     rolling: bool = True
     save_every: float = 0.1
     checkpoint_every: float = 1.0

@@ -82,7 +82,11 @@ class RodSolver:
     warm_start : float
         Fraction of last step's impulses reused (0 disables warm starting).
     baumgarte : float
-        Fraction of an existing overlap (beyond the slop) removed per step.
+        Fraction of an overlap (beyond the slop) removed per position sweep of the
+        post-stabilisation.
+    position_sweeps : int
+        Gauss-Seidel sweeps of the post-stabilisation that removes overlaps from the
+        end-of-step positions (0: none, overlaps are then only prevented, never undone).
     slop : float
         Overlap left alone, in units of the smallest diameter: a resting contact is not
         pushed apart, so its velocity problem repeats from step to step, warm starting holds
@@ -116,9 +120,10 @@ class RodSolver:
         bending: str = "auto",
         coloring: str = "auto",
         warm_start: float = 1.0,
-        baumgarte: float = 0.5,
+        baumgarte: float = 0.8,
         slop: float = 0.01,
         relax: float = 1.5,
+        position_sweeps: int = 4,
         penetration_limit: float = 0.25,
         speed_limit: float | None = None,
         allow_unstable: bool = False,
@@ -182,6 +187,8 @@ class RodSolver:
         self._active = wp.zeros(max(model.n_rods, 1), dtype=wp.int32, device=d)
         self._n_active = wp.zeros(1, dtype=wp.int32, device=d)
         self._solve_out = wp.zeros(3, dtype=wp.float64, device=d)
+        self._proj_out = wp.zeros(1, dtype=wp.float64, device=d)
+        self.position_sweeps = int(position_sweeps)
         self._frames = wp.empty(max(16, 4 * model.n_segments), dtype=ContactFrame, device=d)
         self._walls_struct = None
         self._walls_key = None
@@ -539,6 +546,8 @@ class RodSolver:
 
         self._launch("elastics", elastics.integrate_positions, dim=V, device=dev,
                      inputs=[state_in.x, state_out.v, fdt, state_out.x])
+        if self.position_sweeps and (n_contacts or P):
+            self._project_positions(rs_in, state_out, contacts, walls, wc, params, P)
         self._launch("elastics", frames.advance_frames, dim=V, device=dev, inputs=[
             m.arrays, state_in.x, state_out.x, state_in.director, state_in.theta, state_out.spin, fdt,
             state_out.director, state_out.theta])
@@ -569,6 +578,32 @@ class RodSolver:
                         float(res), float(sres), vmax_out, theta)
         self.last_info = info
         return info
+
+    def _project_positions(self, rs_in, state_out, contacts, walls, wc, params, P):
+        """Post-stabilisation: overlaps beyond the slop removed from the end-of-step positions
+        (velocities untouched), so the velocity solve carries no Baumgarte term."""
+        m = self.model
+        dev = m.device
+        f = self.factors
+        if self.fused:
+            self._launch("friction", friction.project_positions_sequential, dim=1, device=dev, inputs=[
+                self.position_sweeps, m.arrays, rs_in.x, contacts, self._frames, f.tangent, walls, wc, params,
+                state_out.x, self._proj_out])
+            return
+        n_active = int(self._n_active.numpy()[0]) if P else 0
+        for _ in range(self.position_sweeps):
+            if contacts.count:
+                ids = self.contacts.color_ids
+                if self.coloring:
+                    for c0, c1 in self.contacts.color_ranges:
+                        self._launch("friction", friction.project_rod_contacts, dim=c1 - c0, device=dev,
+                                     inputs=[ids[c0:c1], 1, m.arrays, contacts, self._frames, params, state_out.x])
+                else:
+                    self._launch("friction", friction.project_rod_contacts, dim=contacts.count, device=dev,
+                                 inputs=[ids, 0, m.arrays, contacts, self._frames, params, state_out.x])
+            if n_active:
+                self._launch("friction", friction.project_wall_contacts, dim=n_active, device=dev, inputs=[
+                    m.arrays, rs_in.x, f.tangent, walls, wc, params, state_out.x])
 
     def _sweeps(self, rs_in, state_out, contacts, walls, wc, params, P):
         """Gauss-Seidel sweeps as separate launches (coloured contacts; the GPU path)."""
