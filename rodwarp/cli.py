@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import inspect
 import sys
+import typing
 from pathlib import Path
 from typing import Optional
 
@@ -54,6 +55,47 @@ def _swp(name: str, **kw):
 def _csv(values) -> str:
     """A tuple or list default as the comma-separated text its option takes (``1,1,2.5``)."""
     return ",".join(f"{v:g}" for v in values)
+
+
+def _field_options(cls, table: dict, order: tuple[str, ...]):
+    """Give a command that takes ``**fields`` one option per field of ``cls`` named in ``order``.
+
+    ``order`` is the ``--help`` order of every option of the command. A name that is a
+    parameter of the command keeps that parameter (an option of the command's own, or a field
+    taken in another form, such as a tuple given as 'X,Y,Z'); any other name is a field of
+    ``cls`` whose option takes its type from the dataclass and its default and help from
+    ``table``, so none of them is restated here. typer reads the resulting signature.
+    """
+    hints = typing.get_type_hints(cls)
+    keyword = inspect.Parameter.KEYWORD_ONLY
+
+    def option_type(tp):
+        # `int | None` as typing.Optional, which every typer version reads
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        return typing.Optional[args[0]] if len(args) == 1 and len(typing.get_args(tp)) == 2 else tp
+
+    def decorate(fn):
+        sig = inspect.signature(fn)
+        own = {n: p for n, p in sig.parameters.items() if p.kind is not inspect.Parameter.VAR_KEYWORD}
+        params = [p for n, p in own.items() if n not in order]  # the context
+        for name in order:
+            if name in own:
+                params.append(own[name].replace(kind=keyword))
+            else:
+                default, help_text = table[name]
+                params.append(inspect.Parameter(name, keyword, default=typer.Option(default, help=help_text),
+                                                annotation=option_type(hints[name])))
+        fn.__signature__ = sig.replace(parameters=params)
+        return fn
+
+    return decorate
+
+
+#: `rodwarp simulate`'s options in --help order: ProtocolParams fields, and the command's own
+_SIMULATE_OPTIONS = ("alpha", "freq", "amplitude", "gravity", "duration", "entangle_duration", "entangle_freq",
+                     "entangle_amplitude", "static_load", "n_rods", "length", "vertices", "box", "mu", "young",
+                     "density", "dt", "iterations", "step_safety", "rod_model", "rolling", "save_every",
+                     "checkpoint_every", "resume", "overwrite", "entangle", "seed", "device", "out", "initial", "quiet")
 
 app = typer.Typer(add_completion=False, no_args_is_help=False,
                   help="Simulate and analyse packings of elastic rods (NVIDIA Warp).",
@@ -136,50 +178,25 @@ def version():
 @app.command(epilog="Example: rodwarp simulate --alpha 100 --freq 10   (the main job, about 3 min on one core; "
                      "writes runs/alpha100_freq10_g0.5_seed0/)")
 @_friendly
+@_field_options(ProtocolParams, _P, _SIMULATE_OPTIONS)
 def simulate(
     ctx: typer.Context,
-    alpha: float = _sim("alpha"),
-    freq: float = _sim("freq"),
-    amplitude: float = _sim("amplitude"),
-    gravity: float = _sim("gravity"),
-    duration: float = _sim("duration"),
-    entangle_duration: float = _sim("entangle_duration"),
-    entangle_freq: float = _sim("entangle_freq"),
-    entangle_amplitude: float = _sim("entangle_amplitude"),
-    static_load: float = _sim("static_load"),
-    n_rods: Optional[int] = _sim("n_rods"),
-    length: float = _sim("length"),
-    vertices: int = _sim("vertices"),
     box: str = _sim("box", default=_csv(_P["box"][0])),
-    mu: float = _sim("mu"),
-    young: float = _sim("young"),
-    density: float = _sim("density"),
-    dt: Optional[float] = _sim("dt"),
-    iterations: int = _sim("iterations"),
-    step_safety: float = _sim("step_safety"),
-    rod_model: str = _sim("rod_model"),
-    rolling: bool = _sim("rolling"),
-    save_every: float = _sim("save_every"),
-    checkpoint_every: float = _sim("checkpoint_every"),
     resume: bool = typer.Option(False, help="Continue a killed run from its newest checkpoint in --out (only the "
                                             "folder's own run, same parameters)."),
     overwrite: bool = typer.Option(False, help="Replace the run that --out holds (its outputs are removed first)."),
-    entangle: bool = _sim("entangle"),
-    seed: int = _sim("seed"),
-    device: str = _sim("device"),
     out: Optional[Path] = typer.Option(None, help="Output directory (default runs/alpha{A}_freq{F}_g{G}_seed{S}, "
                                                   "plus every other parameter that differs from its default)."),
     initial: Optional[Path] = _sim("initial"),
     quiet: bool = typer.Option(False, help="No progress bar."),
+    **fields,
 ):
     """Random packing, entangling by vibration, then the vibration stability test."""
     from rodwarp.experiments import default_run_name, run_protocol
     from rodwarp.rodset.rundir import mark_failed
 
-    # every option that is a ProtocolParams field, by name; the two whose types differ converted
-    values = {name: ctx.params[name] for name in _P}
-    values.update(box=_parse_box(box), initial=str(initial) if initial else None)
-    params = ProtocolParams(**values)
+    # the options that are ProtocolParams fields, the two taken in another form converted
+    params = ProtocolParams(**fields, box=_parse_box(box), initial=str(initial) if initial else None)
     params._explicit = _given(ctx, "alpha", "length", "n_rods", "vertices", "box", "seed")
     params.validate()
     outdir = out or Path("runs") / default_run_name(params)
