@@ -59,6 +59,7 @@ class ProtocolParams:
     alpha: float = _param(100.0, "Rod aspect ratio l / d (> 1).")
     freq: float = _param(10.0, "Floor vibration frequency of the stability test (Hz).")
     amplitude: float = _param(0.001, "Floor vibration amplitude of the stability test (m).", "amp")
+    # the paper's rescaled gravity (docs/protocol.md, "Parameters and their rodwarp simulate options")
     gravity: float = _param(0.5, "Gravitational acceleration (m/s^2), rescaled as in the paper.")
     duration: float = _param(5.0, "Stability-test duration (s).", "dur")
     entangle_duration: float = _param(5.0, "Entangling duration (s); 0 skips entangling.", "edur")
@@ -115,7 +116,7 @@ class ProtocolParams:
     @property
     def effective_gravity(self) -> float:
         """Gravity with the static load as an extra body load, g (1 + 4 F~ / pi) (m/s^2;
-        docs/protocol.md, "Static load")."""
+        docs/protocol.md, "The experiment")."""
         return self.gravity * (1.0 + 4.0 * self.static_load / math.pi)
 
 
@@ -191,7 +192,7 @@ def _build(params: ProtocolParams, rods, device, rod_model: str):
     return model, RodSolver(model, iterations=params.iterations), (lo, hi)
 
 
-#: walls removed for the stability test (the floor stays and vibrates)
+#: walls removed for the stability test (the floor stays and vibrates; docs/protocol.md)
 SIDE_WALLS = ("ceiling", "x-", "x+", "y-", "y+")
 
 
