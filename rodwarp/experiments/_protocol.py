@@ -73,7 +73,7 @@ class ProtocolParams:
     mu: float = _param(0.2, "Friction coefficient (rod-rod and walls).")
     young: float = _param(200e9, "Young's modulus (Pa).", "E")
     density: float = _param(7850.0, "Density (kg/m^3).", "rho")
-    dt: float | None = _param(None, "Time step (s); default from the scene's stability bound.")
+    dt: float | None = _param(None, "Time step (s); default from the scene's step bound.")
     iterations: int = _param(10, "Most Gauss-Seidel sweeps per step (10: the knee of the effort benchmark; "
                                  "overlaps < 0.07 d).", "it")
     rod_model: str = _param("auto", f"auto (rigid when the rods' self-weight sag is below {RIGID_SAG:g} d), rigid "
