@@ -68,6 +68,9 @@ def _field_options(cls, table: dict, order: tuple[str, ...]):
     """
     hints = typing.get_type_hints(cls)
     keyword = inspect.Parameter.KEYWORD_ONLY
+    missing = sorted(set(table) - set(order))
+    if missing:  # a new field must be placed in the command's --help order
+        raise TypeError(f"{cls.__name__} fields {', '.join(missing)} have no place in the command's options")
 
     def option_type(tp):
         # `int | None` as typing.Optional, which every typer version reads

@@ -333,9 +333,11 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     from rodwarp.experiments import _verdict as vd
     from rodwarp.experiments._checks import check_step_count, output_bytes
     from rodwarp.experiments._packing import orientation_statistics, random_packing
-    from rodwarp.experiments._recorder import Recorder
+    from rodwarp.experiments._recorder import Recorder, plot_metrics
     from rodwarp.rodset import load, rundir
-    from rodwarp.sim import State, centroid_height
+    from rodwarp.rodset.files import write_json
+    from rodwarp.rodset.trajectory import plot_snapshots
+    from rodwarp.sim import State, centroid_height, rod_contacts
 
     params.validate()
     thresholds = thresholds or vd.DEFAULT_THRESHOLDS
@@ -395,24 +397,17 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     state, control = _step_stages(params, model, solver, stages, state, other, control, loop, rec, longest, progress)
 
     wall = time.perf_counter() - t_wall
-    from rodwarp.sim import rod_contacts
-
     c = rod_contacts(model, state)
     final = sim_rods.with_points(state.positions(), velocities=state.velocities())
     final.contacts = c
     final.attrs.update({"time": state.time})
     final.save(outdir / "final.npz")
     rec.snapshot("end", state.positions())
-    from rodwarp.rodset.trajectory import plot_snapshots
-
     plot_snapshots(outdir / "snapshots.png", rec.snapshots, sim_rods.offsets, box=(box_lo, box_hi))
     floor = control.floor_height(state.time)
     summary = _summary(params, model, rec.rows, loop, vd.judge_rows(rec.rows, loop.pile_ref.time, thresholds),
                        c, centroid_height(model, state, 0.0 if floor is None else floor), rule,
                        {"device": device, "wall_time_s": wall, "resumed": bool(resume), "initial_orientation": orient})
-    from rodwarp.experiments._recorder import plot_metrics
-    from rodwarp.rodset.files import write_json
-
     rec.write_metrics()
     write_json(outdir / "summary.json", summary)
     plot_metrics(outdir / "metrics.png", rec.rows, summary)
