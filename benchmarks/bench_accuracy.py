@@ -326,7 +326,8 @@ def _cantilever_dt(quick: bool, device: str) -> dict:
 
 
 def _pile_metrics(model, state) -> dict:
-    from rodwarp.metrics import centroid_height, contacts_per_rod, rod_contacts
+    from rodwarp.rodset import contacts_per_rod
+    from rodwarp.sim import centroid_height, rod_contacts
 
     c = rod_contacts(model, state)
     x = state.positions()

@@ -36,7 +36,7 @@ KEYS = ("Z", "f", "h", "tau")
 
 
 def _defaults():
-    from rodwarp.protocol import ProtocolParams
+    from rodwarp.experiments import ProtocolParams
 
     p = ProtocolParams()
     return p.iterations, p.step_safety

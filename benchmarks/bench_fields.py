@@ -34,7 +34,7 @@ TITLE = "Local fields (phi, S, c, e) on voxel grids: Warp kernels vs vectorised 
 
 
 def _packing(alpha: float, device: str):
-    from rodwarp.packing import random_packing
+    from rodwarp.experiments import random_packing
 
     return random_packing(round(5.4 * alpha), 1.0, 1.0 / alpha, (1.0, 1.0, 2.5), seed=0, device=device)
 

@@ -32,7 +32,7 @@ WINDOW = (4000, 6000)
 
 
 def _rodwarp(rod_model: str, device: str, steps: int) -> dict:
-    from rodwarp.packing import random_packing
+    from rodwarp.experiments import random_packing
     from rodwarp.sim import STEEL, Model, RodSolver, State
 
     rods = random_packing(N_RODS, LENGTH, DIAMETER, BOX, seed=0, device=device)

@@ -534,7 +534,7 @@ def _pe_state(rods):
 
 def _pile(ea, quick: bool, device: str) -> dict:
     from rodwarp.sim.model import STEEL, Model
-    from rodwarp.packing import random_packing
+    from rodwarp.experiments import random_packing
     from rodwarp.sim.solver import RodSolver
 
     p = STEEL_PILE

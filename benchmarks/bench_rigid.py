@@ -6,7 +6,7 @@ difference is the seed-to-seed noise of the outcome) and elastic rods (seed 0). 
 the end of the test: contacts per rod Z, the largest contact cluster f and the height kept
 h. Cost: wall time of the run (one core per run, two runs at a time).
 
-The rule (``rodwarp.protocol.rod_model_rule``) picks rigid rods when the self-weight sag
+The rule (``rodwarp.experiments.rod_model_rule``) picks rigid rods when the self-weight sag
 5 q l^4 / (384 E I) is below ``RIGID_SAG`` diameters. The chart puts each point's
 |rigid - elastic| difference against its sag / d, with the seed noise as a band: the
 threshold belongs where the difference leaves the noise, and the cost ratio says what the
@@ -72,7 +72,7 @@ def _run_point(p: dict) -> dict:
 
 
 def run(quick: bool, device: str) -> dict:
-    from rodwarp.protocol import RIGID_SAG
+    from rodwarp.experiments import RIGID_SAG
 
     RUNS.mkdir(parents=True, exist_ok=True)
     with ThreadPoolExecutor(max_workers=2) as pool:

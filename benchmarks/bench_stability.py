@@ -103,7 +103,7 @@ def _kinked(points, offsets, amplitude: float, rng) -> np.ndarray:
 def scene(alpha: float, n_vertices: int, extensible: bool, device: str, seed: int = 0):
     """The small falling pile of the module docstring."""
     from rodwarp.sim.model import STEEL, Model
-    from rodwarp.packing import random_packing
+    from rodwarp.experiments import random_packing
     from rodwarp.rodset import RodSet
 
     d = common.LENGTH / alpha

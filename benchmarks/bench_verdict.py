@@ -5,13 +5,13 @@ a/g = 1 (A = 1 mm, f = sqrt(g / (4 pi^2 A)) = 15.92 Hz), one seed, for alpha = 2
 (quick) and also 200, 300 (full), run with ``rodwarp sweep`` on a local Dask cluster of two
 workers; finished points under ``runs/verdict`` are reused, so a repeated command only
 collects. For every run: the height kept h(t), the largest contact cluster f(t), the rods
-that left the pile and the persistence tau (:mod:`rodwarp.verdict`).
+that left the pile and the persistence tau (:mod:`rodwarp.experiments`, docs/verdict.md).
 
 Choosing the thresholds: the end heights h(T), sorted, split at their widest gap (the
 threshold sits at its midpoint); tau is then computed with that height threshold and f >=
 0.5, and split the same way. The record holds each run's h, f, tau and rods left, the
 chosen thresholds and the margins of the split, and the verdict of
-``rodwarp.verdict.DEFAULT_THRESHOLDS`` on every run (a problem is recorded when the
+``rodwarp.experiments.DEFAULT_THRESHOLDS`` on every run (a problem is recorded when the
 defaults disagree with the measured split).
 """
 
@@ -62,8 +62,8 @@ def widest_gap(values) -> dict:
 
 
 def run(quick: bool, device: str) -> dict:
-    from rodwarp import verdict as vd
-    from rodwarp.sweep import SweepSpec, run_sweep
+    from rodwarp import experiments as vd
+    from rodwarp.experiments import SweepSpec, run_sweep
 
     spec = SweepSpec(alphas=_alphas(quick), freqs=[FREQ], gravities=[GRAVITY], static_loads=[0.0], seeds=[0],
                      entangle_duration=5.0, duration=5.0, amplitude=AMPLITUDE, device=device)

@@ -55,7 +55,7 @@ def meshio_write_vtu(path, positions, offsets, radii, t):
 
 
 def _frames(seed=0):
-    from rodwarp.packing import random_packing
+    from rodwarp.experiments import random_packing
 
     rods = random_packing(N_RODS, 1.0, 0.01, np.array([1.0, 1.0, 2.5]), n_vertices=N_VERTICES, seed=seed)
     rng = np.random.default_rng(seed)

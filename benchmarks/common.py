@@ -194,7 +194,7 @@ def pile_model(n_rods: int, diameter: float, box, *, seed: int = 0, device: str 
                n_vertices: int = 10):
     """Random (RSA) steel packing in ``box`` with floor and four side walls, gravity -z."""
     from rodwarp.sim.model import STEEL, Model
-    from rodwarp.packing import random_packing
+    from rodwarp.experiments import random_packing
 
     rods = random_packing(n_rods, LENGTH, diameter, box, seed=seed, device=device, n_vertices=n_vertices)
     model = Model(rods, STEEL, gravity=(0.0, 0.0, -9.81), mu=mu, device=device)
@@ -215,7 +215,8 @@ def settled_tile(device: str = "cpu", diameter: float = TILE["diameter"], durati
     broadphase benchmark, the dense pile point and the iteration sweep; tiling it side by side
     gives settled piles of any size without simulating them.
     """
-    from rodwarp.metrics import centroid_height, contacts_per_rod, rod_contacts
+    from rodwarp.rodset import contacts_per_rod
+    from rodwarp.sim import centroid_height, rod_contacts
     from rodwarp.sim.solver import RodSolver
 
     box = np.array(TILE["box"], float)

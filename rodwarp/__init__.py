@@ -5,9 +5,11 @@ Host-side API (SI units throughout)::
     from rodwarp import RodSet, Model, RodSolver, Control, State
 
 Subpackages, each with a flat public face: :mod:`rodwarp.rodset` (the rod set, its formats and
-contacts), :mod:`rodwarp.analysis` (local fields, ACN, statistics, figures),
-:mod:`rodwarp.ct` (CT volumes, phantoms, segmentation), :mod:`rodwarp.sim` (the engine);
-:mod:`rodwarp.testing` holds test material.  The README's "Layout" section draws the layers.
+contacts, files, run folders), :mod:`rodwarp.sim` (the engine), :mod:`rodwarp.analysis`
+(local fields, ACN, statistics, figures), :mod:`rodwarp.ct` (CT volumes, phantoms,
+segmentation), :mod:`rodwarp.experiments` (the paper's protocol, the verdict, sweeps, the
+phase diagram); :mod:`rodwarp.testing` holds test material.  The README's "Layout" section
+draws the layers; docs/physics.md and docs/protocol.md describe the model and the experiment.
 """
 
 from rodwarp.errors import RodwarpError, SimulationBlowUp

@@ -132,33 +132,51 @@ def version_line() -> str:
 
 
 @contextlib.contextmanager
-def progress_bar(enabled: bool = True, unit: str = "") -> Iterator[Callable[[str, int, int | None], None]]:
-    """A progress display for a computation in stages; yields ``update(stage, done, total)``.
+def progress_bar(enabled: bool = True, unit: str = "", *, seconds: bool = False, remaining: bool = False,
+                 note: bool = False) -> Iterator[Callable[..., None]]:
+    """A progress display for a computation in stages; yields ``update(stage, done, total, note=None)``.
 
     Parameters
     ----------
     enabled : bool
         False: ``update`` does nothing and nothing is printed (``--quiet``).
     unit : str
-        What ``done`` counts (``"voxels"``), shown after the counts.
+        What ``done`` counts (``"voxels"``, ``"points"``), shown after the counts.
+    seconds : bool
+        ``done`` and ``total`` are simulated seconds, shown as ``t=0.50/5.00 s`` (a simulation's
+        stages) instead of counts.
+    remaining : bool
+        Show the estimated time remaining as well as the time elapsed.
+    note : bool
+        Show the text last passed as ``update(..., note=...)`` (a rate, the item just done).
 
     Yields
     ------
-    callable(stage, done, total)
+    callable(stage, done, total=None, note=None)
         Each new ``stage`` name gets its own bar; ``total`` None means not known yet.
     """
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                               TimeRemainingColumn)
 
-    columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn()]
+    counts = TextColumn("t={task.completed:.2f}/{task.total:.2f} s") if seconds else MofNCompleteColumn()
+    columns = [TextColumn("{task.description}"), BarColumn(), counts]
     if unit:
         columns.append(TextColumn(unit))
-    with Progress(*columns, TimeElapsedColumn(), disable=not enabled, transient=False) as bar:
+    columns.append(TimeElapsedColumn())
+    if remaining:
+        columns.append(TimeRemainingColumn())
+    if note:
+        columns.append(TextColumn("{task.fields[note]}"))
+    with Progress(*columns, disable=not enabled, transient=False) as bar:
         tasks: dict[str, Any] = {}
 
-        def update(stage: str, done: int, total: int | None = None) -> None:
+        def update(stage: str, done: float, total: float | None = None, note: str | None = None) -> None:
             if stage not in tasks:
-                tasks[stage] = bar.add_task(stage, total=total)
-            bar.update(tasks[stage], completed=done, total=total)
+                tasks[stage] = bar.add_task(stage, total=total, note="")
+            if note is None:
+                bar.update(tasks[stage], completed=done, total=total)
+            else:
+                bar.update(tasks[stage], completed=done, total=total, note=note)
 
         yield update
 

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 from rodwarp.analysis import Fields
 from rodwarp.cli import app
-from rodwarp.packing import random_packing
+from rodwarp.experiments import random_packing
 from rodwarp.rodset import load as load_rods
 
 runner = CliRunner()

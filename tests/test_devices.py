@@ -7,7 +7,7 @@ the contacts are visited in the same order, so results agree to round-off (toler
 import numpy as np
 import pytest
 
-from rodwarp.packing import random_packing
+from rodwarp.experiments import random_packing
 from rodwarp.sim import STEEL, Model, State
 from rodwarp.sim.model import Material
 from rodwarp.sim.solver import RodSolver, run

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from rodwarp.errors import RodwarpError
-from rodwarp.packing import orientation_statistics, random_packing
+from rodwarp.experiments import orientation_statistics, random_packing
 from rodwarp.rodset import segment_distance
 
 

@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from rodwarp.analysis import Fields, FieldSpec, _figures, _registry, analyze, compute_fields, field_spec
-from rodwarp.packing import random_packing
+from rodwarp.experiments import random_packing
 
 runner = CliRunner()
 

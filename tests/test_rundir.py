@@ -15,7 +15,8 @@ import pytest
 from typer.testing import CliRunner
 
 from rodwarp.cli import app
-from rodwarp.rundir import MANIFEST, default_run_name
+from rodwarp.experiments import default_run_name
+from rodwarp.rodset.rundir import MANIFEST
 
 runner = CliRunner()
 SHORT = ["simulate", "--alpha", "20", "--n-rods", "12", "--entangle-duration", "0.02", "--duration", "0.02",
@@ -218,7 +219,7 @@ def test_analyze_replaces_its_own_analysis_but_not_another_run(tmp_path):
 
 
 def test_default_folder_names_every_distinguishing_parameter():
-    from rodwarp.protocol import ProtocolParams
+    from rodwarp.experiments import ProtocolParams
 
     base = default_run_name(ProtocolParams())
     assert base == "alpha100_freq10_g0.5_seed0"
@@ -236,7 +237,7 @@ def test_default_folder_names_every_distinguishing_parameter():
 
 def test_manifest_is_written_first(tmp_path, monkeypatch):
     # the folder is taken before the work: a run stopped at its first step already owns it
-    import rodwarp.protocol as protocol
+    from rodwarp.experiments import _protocol as protocol
     from rodwarp.errors import RodwarpError
 
     def stop(*a, **k):

@@ -90,8 +90,9 @@ def test_settled_stack_converges_below_the_tolerance_and_does_not_creep():
 def _settle(seed, fine: bool):
     """50 rigid rods (alpha 50) dropped into a 0.6 m box, 1.6 s: adaptive steps, or a fixed step
     10x finer than the adaptive run's median. Returns Z, f, centroid height, steps."""
-    from rodwarp.metrics import centroid_height, contacts_per_rod, largest_cluster_fraction, rod_contacts
-    from rodwarp.packing import random_packing
+    from rodwarp.experiments import random_packing
+    from rodwarp.rodset import contacts_per_rod, largest_cluster_fraction
+    from rodwarp.sim import centroid_height, rod_contacts
 
     rods = random_packing(50, 0.5, 0.01, (0.6, 0.6, 0.6), seed=seed)
     model = Model(rods, STEEL, gravity=(0, 0, -G), mu=0.3, rod_model="rigid")

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from rodwarp import verdict as vd
+from rodwarp import experiments as vd
 from rodwarp.errors import RodwarpError
 
 T0, T = 5.0, 5.0
@@ -124,7 +124,7 @@ def test_floor_height_follows_the_wall_and_the_drive():
 
 def test_raised_floor_run_reports_heights_above_its_floor(tmp_path):
     """--initial rods in a container whose floor is at z = 2: h is measured from z = 2."""
-    from rodwarp.protocol import ProtocolParams, run_protocol
+    from rodwarp.experiments import ProtocolParams, run_protocol
     from rodwarp.rodset import RodSet
 
     rng = np.random.default_rng(1)

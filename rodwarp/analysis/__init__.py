@@ -16,6 +16,7 @@ One private module per job, their public names re-exported here (scikit-image's 
 ``_stats``         :func:`field_statistics`, :func:`outlier_bound`, :func:`find_tangles`, ...
 ``_figures``       :func:`plot_histograms`, :func:`plot_slices`, :func:`plot_zprofiles`, ...
 ``_analyze``       :func:`analyze` - the ``rodwarp analyze`` pipeline, input to files
+``_checks``        :func:`check_analyze` - the command's options, before any work
 =================  ==========================================================================
 
 Definitions, the exact clipping, the outlier bound and what the authors' field code got wrong
@@ -43,6 +44,7 @@ _WHERE = {
     "plot_tangles": "_figures",
     # the pipeline
     "analyze": "_analyze", "AnalyzeOptions": "_analyze", "load_input": "_analyze", "default_out": "_analyze",
+    "check_analyze": "_checks", "check_grid_memory": "_checks",
 }
 
 __all__ = sorted(_WHERE)

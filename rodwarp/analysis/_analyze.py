@@ -51,8 +51,8 @@ class AnalyzeOptions:
 
     def validate(self) -> None:
         """Raise :class:`RodwarpError` (one line) for any option that is not finite, out of
-        range or unknown (:func:`rodwarp.validation.check_analyze`)."""
-        from rodwarp.validation import check_analyze
+        range or unknown (:func:`rodwarp.analysis._checks.check_analyze`)."""
+        from rodwarp.analysis._checks import check_analyze
 
         check_analyze(self)
 
@@ -151,7 +151,7 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
         Show a progress bar over the voxel batches.
     overwrite : bool
         Write into ``out`` even when it holds another kind of run (whose outputs are then
-        removed). An earlier analysis in ``out`` is always replaced (:mod:`rodwarp.rundir`).
+        removed). An earlier analysis in ``out`` is always replaced (:mod:`rodwarp.rodset.rundir`).
 
     Returns
     -------
@@ -165,8 +165,9 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
     opts = opts or AnalyzeOptions()
     opts.validate()
     t0 = time.perf_counter()
-    from rodwarp import rundir
-    from rodwarp.validation import check_grid_memory, output_location
+    from rodwarp.analysis._checks import check_grid_memory
+    from rodwarp.rodset import rundir
+    from rodwarp.validation import output_location
 
     out = Path(out) if out is not None else default_out(Path(path))
     if Path(path).exists():
@@ -187,9 +188,7 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
     if kind == "rods":
         rods: RodSet = obj
         from rodwarp.analysis._fields import resolve_contacts
-        # the contact graph's largest cluster (metrics belongs to the simulation side, beside
-        # analysis: it imports no layer above)
-        from rodwarp.metrics import largest_cluster_fraction
+        from rodwarp.rodset import largest_cluster_fraction
 
         tol = fp.contact_tolerance
         contacts, source = resolve_contacts(rods, tol)

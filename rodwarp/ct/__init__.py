@@ -27,6 +27,7 @@ re-exported here (scikit-image's layout); segmentation is split by stage, in the
 ``_segment``      :func:`segment_volume`, the driver
 ``_score``        :func:`match_rods`, :func:`match_polylines`, :func:`score_contacts`
 ``_report``       :func:`run_segment`: the files of ``rodwarp segment``
+``_checks``       :func:`check_phantom`, :func:`check_segment`: the commands' options, before any work
 ================  ============================================================================
 
 Shared helpers: ``_reader`` (lazy volume access) and ``_voxels`` (geometry in voxel space).
@@ -60,6 +61,7 @@ _WHERE = {
     "run_segment": "_report", "write_outputs": "_report", "to_physical": "_report", "write_rods_csv": "_report",
     "write_contacts_csv": "_report", "plot_qa_slices": "_report", "plot_qa_projection": "_report",
     "parse_voxel_size_text": "_report", "default_out": "_report",
+    "check_phantom": "_checks", "check_segment": "_checks",
 }
 
 __all__ = sorted(_WHERE)

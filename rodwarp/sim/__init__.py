@@ -8,13 +8,16 @@
 >>> state = run(solver, model.state(), 1.0, solver.default_dt(control), control=control)
 
 Host code lives here (one file per concern: ``model``, ``state``, ``control``, ``contacts``,
-``solver``); device code lives in :mod:`rodwarp.kernels`, grouped by stage.
+``solver`` with its step bounds in ``_bounds``, and ``metrics``: the contacts of the packing and
+the centroid height of a state); device code lives in :mod:`rodwarp.kernels`, grouped by stage.
+The model, its units and its step bounds are described in docs/physics.md.
 """
 
 from rodwarp.sim.control import Control, Drive
+from rodwarp.sim.metrics import centroid_height, rod_contacts
 from rodwarp.sim.model import ROD_MODELS, STEEL, Material, Model, Plane
 from rodwarp.sim.solver import RodSolver, StepInfo, run
 from rodwarp.sim.state import State
 
 __all__ = ["Control", "Drive", "Material", "Model", "Plane", "ROD_MODELS", "RodSolver", "STEEL", "State",
-           "StepInfo", "run"]
+           "StepInfo", "centroid_height", "rod_contacts", "run"]

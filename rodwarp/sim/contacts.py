@@ -1,16 +1,26 @@
 """The contact pipeline of a step: broadphase (Verlet list), narrowphase, order, warm start, colours.
 
+Three things are called contacts in rodwarp, and this module makes two of them (docs/physics.md,
+"Contact"):
+
+* *contact candidates*: segment pairs the broadphase lists as close enough to meet
+  (``pairs``, the Verlet list);
+* *contact points*: where the solver acts this step, one or more per candidate pair that the
+  narrowphase keeps (``StepInfo.n_contacts``, speculative ones included);
+* the *contacts of the packing* (touching rod pairs, one per pair) are measured from the
+  contact points by :func:`rodwarp.sim.rod_contacts`, and only there.
+
 1. broadphase: segment midpoints in a Warp hash grid; candidate segment pairs whose capsule
    gap is below the step's reach plus a skin, kept (a Verlet list) until some vertex has
    moved by half the skin;
 2. narrowphase: the exact capsule gap of every candidate (segment-segment closest points,
-   line contacts as two extra points); a contact when the gap is below the contact
+   line contacts as two extra points); a contact point when the gap is below the contact
    distance plus what both segments can close in one step (speculative contacts: no
    tunnelling at large steps);
-3. contacts sorted by key (segment pair, point) so the visiting order, and so the result,
+3. contact points sorted by key (segment pair, point) so the visiting order, and so the result,
    is the same on every run and device;
 4. warm start: last step's impulse of the same key;
-5. on a GPU, colours: independent sets of contacts (no shared vertex) solved concurrently.
+5. on a GPU, colours: independent sets of contact points (no shared vertex) solved concurrently.
 """
 
 from __future__ import annotations

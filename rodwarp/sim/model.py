@@ -200,7 +200,8 @@ class Model:
     rolling : bool
         Let rods spin about their axes (friction at the surface rolls them). False locks the
         spin (an infinite axial inertia): friction then acts on the centreline only, the
-        model of the seed paper's disMech, kept for comparison.
+        model of the seed paper's disMech, kept for comparison (docs/physics.md, "Coulomb
+        friction at the surface, and rolling").
     device : str
         ``cpu``, ``cuda``, ``cuda:N`` or ``auto``.
     """

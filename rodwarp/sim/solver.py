@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +29,7 @@ import warp as wp
 from rodwarp.errors import RodwarpError, SimulationBlowUp
 from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, solve
 from rodwarp.kernels.structs import ContactFrame, RodFactors, StepParams, WallContacts, Walls
+from rodwarp.sim._bounds import StepBounds
 from rodwarp.sim.contacts import ContactPipeline
 from rodwarp.sim.model import Model
 from rodwarp.sim.state import State
@@ -41,6 +41,15 @@ class StepInfo:
 
     Attributes
     ----------
+    iterations : int
+        Gauss-Seidel sweeps actually run.
+    n_contacts : int
+        Contact points solved (rod-rod, speculative ones included; docs/physics.md,
+        "Contact"), not the contacts of the packing (:func:`rodwarp.sim.rod_contacts`).
+    max_speed : float
+        Fastest vertex speed at the end of the step (m/s).
+    theta : float
+        Bending integration of the step: 0 explicit (symplectic), 1 implicit Euler.
     contact_residual : float
         Largest velocity change (m/s) that any contact caused in the last Gauss-Seidel sweep;
         0 for a fully converged solve.
@@ -51,7 +60,7 @@ class StepInfo:
     step: int
     time: float
     dt: float
-    iterations: int  # sweeps actually run
+    iterations: int
     n_contacts: int
     contact_residual: float
     stretch_residual: float
@@ -59,8 +68,12 @@ class StepInfo:
     theta: float
 
 
-class RodSolver:
+class RodSolver(StepBounds):
     """Advance a :class:`~rodwarp.sim.model.Model` from ``state_in`` to ``state_out``.
+
+    The step bounds, the default and adaptive steps and the step guard (``step_bound``,
+    ``max_stable_dt``, ``default_dt``, ``adaptive_dt``, ``check_dt``, ...) come from
+    :class:`~rodwarp.sim._bounds.StepBounds`; docs/physics.md describes them.
 
     Parameters
     ----------
@@ -74,7 +87,8 @@ class RodSolver:
         shortest edge; 0 always runs ``iterations`` sweeps. Checked every second sweep.
     bending : {"auto", "implicit", "explicit"}
         Bending integration. ``auto`` uses symplectic (explicit) bending when the step is
-        below its stability bound, which conserves energy, and implicit Euler above it.
+        below 0.8 of its numerical stability bound 2 / omega_max, which conserves energy, and
+        implicit Euler above it.
         Curved rods always bend implicitly (their bending is coupled to twist).
     coloring : {"auto", "on", "off"}
         Colour rod-rod contacts so that each colour can be solved in parallel without data
@@ -102,7 +116,7 @@ class RodSolver:
         characteristic speed (free fall over the scene height, drive speed, initial speeds
         and the speed the initial elastic energy could give all rods).
     allow_unstable : bool
-        Accept a step above the stability bound with a warning instead of an error.
+        Accept a step above the step bound with a warning instead of an error.
     energy_check_every : int
         Steps between energy-jump checks (0 disables them).
     skin : float, optional
@@ -222,161 +236,6 @@ class RodSolver:
             self._default_control = self.model.control()
         return self._default_control
 
-    # ------------------------------------------------------------------ stability
-    def explicit_bending_dt(self) -> float:
-        if self._eb_dt is None:
-            self._eb_dt = self._explicit_bending_dt()
-        return self._eb_dt
-
-    def _explicit_bending_dt(self) -> float:
-        """Largest stable step of symplectic (explicit) bending (s): 2 / omega_max.
-
-        omega_max^2 is bounded by the Gershgorin row sums of M^-1 K, which is exact for the
-        uniform stencil (16 E I / (rho A h^4)).
-        """
-        m = self.model
-        rows = np.zeros(m.n_vertices)
-        offs = m.rods.offsets
-        h = m.rest_length_np
-        free = (~m.pinned).astype(np.float64)
-        for r in range(m.n_rods):
-            a, b = offs[r], offs[r + 1]
-            if b - a < 3:
-                continue
-            i = np.arange(a + 1, b - 1)
-            cm = 1.0 / h[i - 1]
-            cp = 1.0 / h[i]
-            c0 = cm + cp
-            k = m.bend_stiffness_np[r] * 2.0 / (h[i - 1] + h[i])
-            # pinned vertices do not move, so their columns do not enter the eigenproblem
-            tot = cm * free[i - 1] + c0 * free[i] + cp * free[i + 1]
-            np.add.at(rows, i - 1, k * cm * tot)
-            np.add.at(rows, i, k * c0 * tot)
-            np.add.at(rows, i + 1, k * cp * tot)
-        fr = ~m.pinned
-        lam = np.max(rows[fr] / m.mass_np[fr]) if np.any(fr) else 0.0
-        return math.inf if lam <= 0 else 2.0 / math.sqrt(lam)
-
-    def explicit_stretch_dt(self) -> float:
-        """Explicit axial limit h_min / sqrt(E / rho) (s); rodwarp's constraints do not need it."""
-        m = self.model
-        h = m.rest_length_np
-        # edges with both ends pinned (a clamp's ghost edge) never move: leave them out
-        moving = (h > 0) & ~(m.pinned & np.roll(m.pinned, -1))
-        return float(h[moving].min() / m.material.wave_speed)
-
-    def characteristic_speed(self, control=None) -> float:
-        """Free-fall speed over the scene height plus the drive's peak speed (m/s)."""
-        m = self.model
-        control = self._control(control)
-        bb = m.box if m.box is not None else m.rods.bounding_box()
-        g = float(np.linalg.norm(m.gravity))
-        # the fall height is the scene's extent along gravity, not its widest side
-        down = m.gravity / g if g > 0 else np.array([0.0, 0.0, -1.0])
-        height = float(np.abs(bb[1] - bb[0]) @ np.abs(down))
-        v0 = 0.0 if m.rods.velocities is None else float(np.linalg.norm(m.rods.velocities, axis=1).max())
-        return math.sqrt(2.0 * g * height) + control.drive.peak_speed + v0 + 1e-3
-
-    def contact_dt(self, control=None, speed: float | None = None, reach: float = 1.0) -> float:
-        """Resolution bound of the contact model (s): a rod crosses at most one diameter per
-        step relative to the walls, so speculative contacts see every approach and the
-        linearised normals stay valid; and gravity alone moves a resting vertex by at most 1%
-        of a diameter per step (g dt^2 <= 0.01 d), which keeps frictional stacks from creeping.
-
-        ``speed`` (m/s) is the fastest vertex now; without it, the worst case of the scene
-        (free fall over its height, :meth:`characteristic_speed`), which holds whatever happens.
-        """
-        control = self._control(control)
-        d = self.model.min_diameter
-        if speed is None:
-            v = self.characteristic_speed(control)
-        else:
-            v = float(speed) + control.drive.peak_speed + 1e-3
-        b = reach * d / v
-        g = float(np.linalg.norm(self.model.gravity))
-        if g > 0:
-            b = min(b, math.sqrt(0.01 * d / g))
-        return b
-
-    def max_stable_dt(self, bending: str | None = None, control=None, speed: float | None = None,
-                      reach: float = 1.0) -> float:
-        """Stability bound of this scene for the chosen bending integration (s), at ``speed``
-        (m/s) when given, else for the worst case (see :meth:`contact_dt`; ``reach``: diameters
-        a rod may cross per step)."""
-        mode = bending or self.bending
-        b = self.contact_dt(control, speed, reach)
-        if mode == "explicit":
-            b = min(b, self.explicit_bending_dt())
-        return b
-
-    def default_dt(self, control=None, safety: float = 0.5, speed: float | None = None) -> float:
-        """Default step: ``safety`` x the stability bound, and at least 40 steps per drive period."""
-        control = self._control(control)
-        dt = safety * self.max_stable_dt(control=control, speed=speed)
-        f = control.drive.frequency
-        if f > 0:
-            dt = min(dt, 1.0 / (40.0 * f))
-        return dt
-
-    def adaptive_dt(self, control, speed: float, previous: float | None = None, safety: float = 0.5,
-                    growth: float = 1.25) -> float:
-        """A step that follows the motion (s): :meth:`default_dt` at the current fastest
-        vertex speed, growing by at most ``growth`` per step (falling at once), so a resting
-        pile takes large steps and an impact small ones. Deterministic: the same state and
-        previous step give the same step.
-
-        Parameters
-        ----------
-        speed : float
-            Fastest vertex speed at the end of the last step (m/s), ``StepInfo.max_speed``.
-        previous : float, optional
-            The last step (s).
-        """
-        dt = self.default_dt(control, safety=safety, speed=speed)
-        if previous is not None and previous > 0:
-            dt = min(dt, growth * previous)
-        return dt
-
-    def theta_for(self, dt: float) -> float:
-        if self.bending == "implicit" or self.model.curved:
-            return 1.0
-        if self.bending == "explicit":
-            return 0.0
-        return 0.0 if dt <= 0.8 * self.explicit_bending_dt() else 1.0
-
-    def check_dt(self, dt: float, control=None, speed: float | None = None) -> None:
-        """Refuse (or, with ``allow_unstable``, flag) a step above the stability bound (at
-        ``speed`` when given, see :meth:`contact_dt`)."""
-        if not (dt > 0 and math.isfinite(dt)):
-            raise RodwarpError(f"time step must be a positive number, got {dt}")
-        control = self._control(control)
-        if speed is not None and not self._can_touch(control):
-            # nothing to touch: the contact bound does not apply, only explicit bending's
-            if self.bending != "explicit" or dt <= self.explicit_bending_dt():
-                return
-        # at the actual speeds, speculative contacts resolve approaches of up to two diameters
-        # per step (the narrowphase's reach covers twice the travel)
-        bound = self.max_stable_dt(control=control, speed=speed,
-                                   reach=self.guard_factor if speed is not None else 1.0)
-        if dt > bound * (1.0 + 1e-9):
-            msg = (f"time step {dt:.3g} s exceeds this scene's stability bound {bound:.3g} s "
-                   f"({self._bound_reason(control, speed)}); use dt <= {bound:.3g} s")
-            if not self.allow_unstable:
-                raise RodwarpError(msg + " or allow_unstable=True")
-            warnings.warn(msg, stacklevel=3)
-
-    def _can_touch(self, control) -> bool:
-        """Whether any contact is possible: rod-rod contacts on, or a wall in place."""
-        m = self.model
-        return (m.rod_contacts and m.n_segments > 1) or bool(len(m.planes) and control.walls_in_place())
-
-    def _bound_reason(self, control=None, speed=None) -> str:
-        if self.bending == "explicit" and self.explicit_bending_dt() < self.contact_dt(control, speed):
-            return "explicit bending, 2/omega_max"
-        if speed is None:
-            return "contact resolution, d_min / characteristic speed"
-        return f"contact resolution, d_min / (fastest vertex {speed:.3g} m/s + drive speed)"
-
     # ------------------------------------------------------------------ profiling
     def _launch(self, stage: str, kernel, **kw) -> None:
         if self.timings is None:
@@ -445,7 +304,7 @@ class RodSolver:
         Raises
         ------
         RodwarpError
-            ``dt`` above the stability bound (unless ``allow_unstable``).
+            ``dt`` above the step bound (unless ``allow_unstable``).
         SimulationBlowUp
             Non-finite or runaway velocities, or rods overlapping deeper than
             ``penetration_limit`` diameters; ``state_in`` is left untouched.
@@ -674,7 +533,7 @@ class RodSolver:
             cause = (f"contacts under-resolved (tunnelling or too few iterations: {self.iterations}); "
                      f"lower dt (now {dt:.3g} s, contact bound {self.contact_dt(control):.3g} s) or raise iterations")
         else:
-            cause = (f"step {dt:.3g} s too large for this scene (bound {self.max_stable_dt(control=control):.3g} s) "
+            cause = (f"step {dt:.3g} s too large for this scene (step bound {self.step_bound(control=control):.3g} s) "
                      f"or too few iterations")
         return SimulationBlowUp(f"simulation blew up at step {step} (t = {t:.6g} s): {what}; likely cause: {cause}",
                                 step=step, time=t, cause=cause)

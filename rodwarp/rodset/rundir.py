@@ -27,8 +27,8 @@ import time
 import uuid
 from pathlib import Path
 
-from rodwarp.rodset.files import write_json
 from rodwarp.errors import RodwarpError
+from rodwarp.rodset.files import write_json
 from rodwarp.validation import disk_fits, output_location
 
 MANIFEST = "rodwarp-run.json"
@@ -270,45 +270,3 @@ def _size(p: Path) -> int:
                 except OSError:
                     pass
     return total
-
-
-def default_run_name(params) -> str:
-    """Default simulate folder name: alpha, freq, gravity and seed always, then every other
-    parameter that differs from its default (``key<value>``), so that runs differing in any
-    parameter never share a folder; a short hash stands in for a list that would be too long."""
-    import hashlib
-    from dataclasses import asdict, fields
-
-    from rodwarp.protocol import ProtocolParams
-
-    d = asdict(params)
-    defaults = {f.name: f.default for f in fields(ProtocolParams)}
-
-    def fmt(v):
-        if isinstance(v, float):
-            return f"{v:g}"
-        if isinstance(v, (tuple, list)):
-            return "x".join(fmt(x) for x in v)
-        return str(v)
-
-    if params.initial:
-        head = f"{Path(params.initial).stem}_freq{fmt(params.freq)}_g{fmt(params.gravity)}"
-        skip = {"freq", "gravity", "initial", "device", "alpha", "length", "seed"}
-    else:
-        head = f"alpha{fmt(params.alpha)}_freq{fmt(params.freq)}_g{fmt(params.gravity)}_seed{params.seed}"
-        skip = {"alpha", "freq", "gravity", "seed", "device", "initial"}
-    short = {"amplitude": "amp", "duration": "dur", "entangle_duration": "edur", "entangle_freq": "efreq",
-             "entangle_amplitude": "eamp", "static_load": "F", "n_rods": "n", "length": "l", "vertices": "v",
-             "iterations": "it", "save_every": "save", "checkpoint_every": "ckpt", "young": "E", "density": "rho",
-             "entangle": "entangle"}
-    def differs(k, v):
-        dv = defaults.get(k)
-        if isinstance(v, (tuple, list)) and isinstance(dv, (tuple, list)):
-            return list(v) != list(dv)
-        return v != dv
-
-    extra = [f"{short.get(k, k)}{fmt(v)}" for k, v in d.items() if k not in skip and differs(k, v)]
-    name = "_".join([head, *extra])
-    if len(name) > 120:
-        name = head + "_" + hashlib.sha1("_".join(extra).encode()).hexdigest()[:10]
-    return name.replace("/", "-")

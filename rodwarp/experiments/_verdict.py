@@ -18,7 +18,8 @@ entangled (the paper's Fig. 1F, tau = t_entangled / T). The verdict (:func:`judg
 A pile that spreads into a mat on the floor while its rods still touch fails on h; one that
 holds, then collapses midway has tau near 1/2; one that breaks into loose rods fails on f.
 The thresholds are set from measurement (``benchmarks/bench_verdict.py``, ``docs/verdict.md``):
-they sit where the measured runs separate into two groups.
+they sit where the measured runs separate into two groups. The experiment they judge is
+``docs/protocol.md``.
 
 Everything here is plain NumPy on metric series, so a finished run can be judged again with
 other thresholds from its ``metrics.csv`` (:func:`judge_metrics_csv`).

@@ -1,11 +1,18 @@
-"""Packing metrics from a simulation state: contacts, contact clusters, centroid height."""
+"""What a simulation state measures: the contacts of the packing and the centroid height.
+
+The *contacts of the packing* (:func:`rod_contacts`) are touching rod pairs, one per pair: the
+surface gap of the pair's closest segments below the contact distance (d / 10 by default,
+docs/protocol.md).  They are not the solver's *contact points* (``StepInfo.n_contacts``: every
+segment pair a step solves, speculative ones included) nor its *contact candidates* (the
+broadphase's pair list, :class:`~rodwarp.sim.contacts.ContactPipeline`).  The contact graph's
+measures (contacts per rod, the largest cluster) need no engine and live in
+:mod:`rodwarp.rodset`.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 import warp as wp
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from rodwarp.kernels import narrowphase
 from rodwarp.rodset import Contacts
@@ -14,7 +21,7 @@ from rodwarp.sim.state import State
 
 
 def rod_contacts(model: Model, state: State, tolerance: float | None = None) -> Contacts:
-    """Rod-rod contacts of ``state``: segment pairs with surface gap below ``tolerance``.
+    """The contacts of the packing in ``state``: rod pairs whose surface gap is below ``tolerance``.
 
     Gaps are re-evaluated at the state's positions for the pairs the last step detected
     (its speculative margin includes every pair within the contact distance).
@@ -61,32 +68,6 @@ def rod_contacts(model: Model, state: State, tolerance: float | None = None) -> 
     first = np.ones(len(lo), bool)
     first[1:] = (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])
     return Contacts(lo[first].astype(np.int64), hi[first].astype(np.int64), pts[first], g[first])
-
-
-def contacts_per_rod(n_rods: int, c: Contacts) -> float:
-    """Mean number of rod-rod contacts per rod Z = 2 K / N."""
-    return 2.0 * len(c) / max(n_rods, 1)
-
-
-def largest_cluster(n_rods: int, c: Contacts) -> np.ndarray:
-    """Membership (N,) bool of the largest connected component of the contact graph
-    (the lowest-labelled one among equal sizes, so the choice is deterministic)."""
-    if n_rods == 0:
-        return np.zeros(0, bool)
-    if len(c) == 0:
-        m = np.zeros(n_rods, bool)
-        m[0] = True
-        return m
-    g = coo_matrix((np.ones(len(c)), (c.rod_i, c.rod_j)), shape=(n_rods, n_rods))
-    _, labels = connected_components(g, directed=False)
-    return labels == int(np.argmax(np.bincount(labels)))
-
-
-def largest_cluster_fraction(n_rods: int, c: Contacts) -> float:
-    """Rods in the largest connected component of the contact graph, over all rods (f)."""
-    if n_rods == 0:
-        return 0.0
-    return float(np.count_nonzero(largest_cluster(n_rods, c)) / n_rods)
 
 
 def centroid_height(model: Model, state: State, floor: float = 0.0) -> float:

@@ -98,7 +98,7 @@ def random_packing(
         c = rng.random((m, 3)) * box
         half = 0.5 * length * np.abs(d) + r  # half extent of each rod along each axis
         # uniform position and isotropic direction, rejected unless fully inside: in a box
-        # narrower than ~l this favours steep rods, as in the paper's procedure
+        # narrower than ~l this favours steep rods, as in the paper's procedure (docs/protocol.md)
         ok = np.all((c - half >= 0.0) & (c + half <= box), axis=1)
         d, c = d[ok], c[ok]
         if len(c) == 0:
