@@ -57,8 +57,8 @@ def _run_point(p: dict) -> dict:
                "--entangle-duration", f"{DURATIONS[0]:g}", "--duration", f"{DURATIONS[1]:g}",
                "--rod-model", p["rod_model"], "--seed", str(p["seed"]), "--device", "cpu", "--quiet",
                "--out", str(out)]
-        if (out / "checkpoints").exists():
-            cmd.append("--resume")
+        if out.exists():  # a run cut short: resume from its checkpoint, or start it again
+            cmd.append("--resume" if (out / "checkpoints").exists() else "--overwrite")
         t = time.time()
         r = subprocess.run(cmd, capture_output=True, text=True)
         common.log(f"rigid: {out.name}: {'ok' if r.returncode == 0 else r.stderr.strip()[-200:]} "
@@ -97,10 +97,46 @@ def run(quick: bool, device: str) -> dict:
                 case[f"noise_{k}"] = abs(rig[0][k] - rig[1][k]) if len(rig) > 1 else None
             cases.append(case)
     return {"title": "Rigid against elastic rods: protocol outcome and cost against the self-weight sag",
-            "rows": rows, "cases": cases, "rigid_sag_threshold": RIGID_SAG, "durations_s": list(DURATIONS),
+            "rows": rows, "cases": cases, "grid_estimate": grid_estimate(rows, RIGID_SAG), "rigid_sag_threshold": RIGID_SAG, "durations_s": list(DURATIONS),
             "amplitude": AMPLITUDE, "paper_durations_s": [5.0, 5.0],
             "problems": [f"{r['alpha']:g}/{r['gravity']:g}/{r['rod_model']}: {r['failure']}" for r in rows
                          if r["failure"]]}
+
+
+# the paper's grid: alpha x a/g at g = 0.5 (a/g 0.079, 7.9, 790) and at g = 10 (a/g 1, 2.5), 3 seeds
+GRID_SETTINGS = {0.5: 3, 10.0: 2}
+GRID_SEEDS = 3
+GRID_DURATION = 10.0
+
+
+def grid_estimate(rows, rigid_sag: float, workers: int = 2) -> dict:
+    """Wall time of the paper's grid at full durations, from the measured cost per simulated
+    second of each (alpha, g) at a/g = 1 (seed 0), the rod model chosen by the rule and, for
+    comparison, rigid rods everywhere. A lower bound where the grid's a/g exceeds 1 (faster
+    drives take smaller steps) and an upper one at a/g = 0.079."""
+    per_s = {}
+    for r in rows:
+        if r["failure"] or r["seed"] != 0:
+            continue
+        per_s[(r["alpha"], r["gravity"], r["rod_model"])] = (r["wall_s"] / sum(DURATIONS), r["sag_over_d"])
+    points, total_rule, total_rigid, missing = [], 0.0, 0.0, []
+    for g, settings in GRID_SETTINGS.items():
+        for a in sorted({k[0] for k in per_s}):
+            rig, ela = per_s.get((a, g, "rigid")), per_s.get((a, g, "elastic"))
+            if rig is None or ela is None:
+                missing.append(f"alpha {a:g}, g {g:g}")
+                continue
+            model = "rigid" if rig[1] <= rigid_sag else "elastic"
+            cost = (rig if model == "rigid" else ela)[0] * GRID_DURATION * settings * GRID_SEEDS
+            total_rule += cost
+            total_rigid += rig[0] * GRID_DURATION * settings * GRID_SEEDS
+            points.append({"alpha": a, "gravity": g, "rod_model": model,
+                           "s_per_simulated_s": (rig if model == "rigid" else ela)[0],
+                           "runs": settings * GRID_SEEDS, "cpu_s": cost})
+    return {"points": points, "missing": missing, "workers": workers, "runs": sum(p["runs"] for p in points),
+            "wall_h_rule": total_rule / workers / 3600.0, "wall_h_all_rigid": total_rigid / workers / 3600.0,
+            "basis": "measured wall time per simulated second at a/g = 1, seed 0, x 10 s x settings x 3 seeds, "
+                     f"shared between {workers} workers"}
 
 
 def summary(rec: dict) -> list[dict]:
@@ -112,6 +148,13 @@ def summary(rec: dict) -> list[dict]:
                     "peer": f"elastic: Z {c['Z_elastic']:.2f}, f {c['f_elastic']:.2f}, h {c['h_elastic']:.2f}, "
                             f"{c['wall_elastic_s']:.0f} s",
                     "ratio": c["cost_ratio"]})
+    ge = rec.get("grid_estimate")
+    if ge and ge["points"]:
+        out.append({"benchmark": f"paper's grid estimate ({ge['runs']} runs of 10 s, "
+                                 f"{ge['workers']} workers)",
+                    "rodwarp": f"{ge['wall_h_rule']:.1f} h with the rule's rod models",
+                    "peer": f"{ge['wall_h_all_rigid']:.1f} h with rigid rods everywhere",
+                    "ratio": ge["wall_h_rule"] / ge["wall_h_all_rigid"] if ge["wall_h_all_rigid"] else None})
     return out
 
 
