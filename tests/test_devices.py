@@ -73,7 +73,8 @@ def test_pile_cpu_and_cuda_agree_with_coloring():
     assert np.max(np.abs(s_cpu.positions() - s_gpu.positions())) < 1e-9
 
 
-KERNEL_MODULES = ("frames", "elastics", "friction", "narrowphase", "broadphase", "solve", "fields", "acn", "packing")
+KERNEL_MODULES = ("frames", "elastics", "friction", "overlap", "narrowphase", "broadphase", "solve", "fields", "acn",
+                  "packing")
 
 
 @pytest.mark.parametrize("name", KERNEL_MODULES)

@@ -27,7 +27,7 @@ import numpy as np
 import warp as wp
 
 from rodwarp.errors import RodwarpError, SimulationBlowUp
-from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, solve
+from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, overlap, solve
 from rodwarp.kernels.structs import ContactFrame, RodFactors, StepParams, WallContacts, Walls
 from rodwarp.sim._bounds import StepBounds
 from rodwarp.sim.contacts import ContactPipeline
@@ -445,7 +445,7 @@ class RodSolver(StepBounds):
         dev = m.device
         f = self.factors
         if self.fused:
-            self._launch("friction", friction.project_positions_sequential, dim=1, device=dev, inputs=[
+            self._launch("friction", overlap.project_positions_sequential, dim=1, device=dev, inputs=[
                 self.position_sweeps, m.arrays, rs_in.x, contacts, self._frames, f.tangent, walls, wc, params,
                 state_out.x, self._proj_out])
             return
@@ -455,13 +455,13 @@ class RodSolver(StepBounds):
                 ids = self.contacts.color_ids
                 if self.coloring:
                     for c0, c1 in self.contacts.color_ranges:
-                        self._launch("friction", friction.project_rod_contacts, dim=c1 - c0, device=dev,
+                        self._launch("friction", overlap.project_rod_contacts, dim=c1 - c0, device=dev,
                                      inputs=[ids[c0:c1], 1, m.arrays, contacts, self._frames, params, state_out.x])
                 else:
-                    self._launch("friction", friction.project_rod_contacts, dim=contacts.count, device=dev,
+                    self._launch("friction", overlap.project_rod_contacts, dim=contacts.count, device=dev,
                                  inputs=[ids, 0, m.arrays, contacts, self._frames, params, state_out.x])
             if n_active:
-                self._launch("friction", friction.project_wall_contacts, dim=n_active, device=dev, inputs=[
+                self._launch("friction", overlap.project_wall_contacts, dim=n_active, device=dev, inputs=[
                     m.arrays, rs_in.x, f.tangent, walls, wc, params, state_out.x])
 
     def _sweeps(self, rs_in, state_out, contacts, walls, wc, params, P):
