@@ -13,8 +13,8 @@ from pathlib import Path
 
 from benchmarks import common
 
-TARGET_S = 300.0
-STRETCH_S = 60.0
+TARGET_S = 30.0  # issue 13: the main job on one core
+STRETCH_S = 15.0
 
 
 def run(quick: bool, device: str) -> dict:
