@@ -355,19 +355,35 @@ def twist_residual(model: RodModel, state: RodState, spin: wp.array(dtype=wp.flo
 
 
 @wp.func
+def eliminated(r: wp.float64, diag: wp.array(dtype=wp.float64), off: wp.array(dtype=wp.float64),
+               rhs: wp.array(dtype=wp.float64), i: int, lo: int):
+    """Forward elimination of row i's right-hand side r in a symmetric tridiagonal system whose
+    rows lo..i-1 are factored already (``diag`` holds the pivots)."""
+    if i > lo:
+        return r - off[i - 1] / diag[i - 1] * rhs[i - 1]
+    return r
+
+
+@wp.func
+def back_substitute(diag: wp.array(dtype=wp.float64), off: wp.array(dtype=wp.float64),
+                    rhs: wp.array(dtype=wp.float64), lo: int, hi: int):
+    """Back substitution of the factored tridiagonal rows lo..hi-1: ``rhs`` becomes the solution."""
+    for k in range(hi - lo):
+        i = hi - 1 - k
+        val = rhs[i]
+        if i + 1 < hi:
+            val = val - off[i] * rhs[i + 1]
+        rhs[i] = val / diag[i]
+    return 0
+
+
+@wp.func
 def project_straight_twist(a: int, b: int, model: RodModel, state: RodState, spin: wp.array(dtype=wp.float64),
                            factors: RodFactors, dt: wp.float64, inv_dt: wp.float64, inv_dt2: wp.float64):
     for i in range(a + 1, b - 1):
         rj = -twist_residual(model, state, spin, factors, dt, i) - model.twist_compliance[i] * inv_dt2 * factors.tlam[i]
-        if i > a + 1:
-            rj = rj - factors.toff[i - 1] / factors.tdiag[i - 1] * factors.trhs[i - 1]
-        factors.trhs[i] = rj
-    for k in range(b - a - 2):
-        i = b - 2 - k
-        val = factors.trhs[i]
-        if i + 1 < b - 1:
-            val = val - factors.toff[i] * factors.trhs[i + 1]
-        factors.trhs[i] = val / factors.tdiag[i]
+        factors.trhs[i] = eliminated(rj, factors.tdiag, factors.toff, factors.trhs, i, a + 1)
+    back_substitute(factors.tdiag, factors.toff, factors.trhs, a + 1, b - 1)
     for i in range(a + 1, b - 1):
         dl = factors.trhs[i]
         factors.tlam[i] = factors.tlam[i] + dl
@@ -449,15 +465,8 @@ def project_rod(r: int, model: RodModel, state: RodState, v: wp.array(dtype=wp.v
         cval = wp.length(e) - model.rest_length[j]
         worst = wp.max(worst, wp.abs(cval))
         rj = -cval - model.compliance[j] * inv_dt2 * factors.slam[j]
-        if j > a:
-            rj = rj - factors.soff[j - 1] / factors.sdiag[j - 1] * factors.srhs[j - 1]
-        factors.srhs[j] = rj
-    for k in range(b - a - 1):
-        j = b - 2 - k
-        val = factors.srhs[j]
-        if j + 1 < b - 1:
-            val = val - factors.soff[j] * factors.srhs[j + 1]
-        factors.srhs[j] = val / factors.sdiag[j]
+        factors.srhs[j] = eliminated(rj, factors.sdiag, factors.soff, factors.srhs, j, a)
+    back_substitute(factors.sdiag, factors.soff, factors.srhs, a, b - 1)
     for j in range(a, b - 1):
         dl = factors.srhs[j]
         factors.slam[j] = factors.slam[j] + dl
