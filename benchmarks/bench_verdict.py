@@ -8,8 +8,8 @@ collects. For every run: the height kept h(t), the largest contact cluster f(t),
 that left the pile and the persistence tau (:mod:`rodwarp.experiments`, docs/verdict.md).
 
 Choosing the thresholds: the end heights h(T), sorted, split at their widest gap (the
-threshold sits at its midpoint); tau is then computed with that height threshold and f >=
-0.5, and split the same way. The record holds each run's h, f, tau and rods left, the
+threshold sits at its midpoint), and the end clusters f(T) the same way; tau is then computed
+with these two thresholds and split the same way. The record holds each run's h, f, tau and rods left, the
 chosen thresholds and the margins of the split, and the verdict of
 ``rodwarp.experiments.DEFAULT_THRESHOLDS`` on every run (a problem is recorded when the
 defaults disagree with the measured split).
@@ -84,11 +84,13 @@ def run(quick: bool, device: str) -> dict:
         runs.append(one)
 
     split_h = widest_gap([x["h"][-1] for x in runs])
+    split_f = widest_gap([x["f"][-1] for x in runs])
     h_thr = split_h["threshold"]
+    f_thr = split_f["threshold"] if split_f["threshold"] is not None else 0.5
     if h_thr is None:
         split_tau = {"threshold": None}
     else:
-        thr_h = vd.Thresholds(height_kept=h_thr, cluster=0.5, persistence=0.5)
+        thr_h = vd.Thresholds(height_kept=h_thr, cluster=f_thr, persistence=0.5)
         for x in runs:
             x["tau_measured_split"] = vd.persistence(np.array(x["t"]) + x["t0"], x["t0"],
                                                      vd.entangled(x["h"], x["f"], thr_h))
@@ -98,17 +100,19 @@ def run(quick: bool, device: str) -> dict:
         v = vd.judge(np.array(x["t"]) + x["t0"], x["t0"], x["h"], x["f"], x["rods_left"], default)
         x["verdict"] = v.to_dict()
         if h_thr is not None:
-            measured = x["h"][-1] >= h_thr and x["f"][-1] >= 0.5 and x["tau_measured_split"] >= \
+            measured = x["h"][-1] >= h_thr and x["f"][-1] >= f_thr and x["tau_measured_split"] >= \
                 (split_tau["threshold"] if split_tau["threshold"] is not None else 0.5)
             x["stable_measured_split"] = bool(measured)
             if measured != v.stable:
                 problems.append(f"alpha {x['alpha']:g}: the default thresholds call it stable = {v.stable}, "
                                 f"the measured split {measured}")
-    if h_thr is not None and not (split_h["below"] < default.height_kept < split_h["above"]):
-        problems.append(f"default height_kept {default.height_kept:g} lies outside the measured gap "
-                        f"({split_h['below']:.3f}, {split_h['above']:.3f})")
+    for name, split in (("height_kept", split_h), ("cluster", split_f), ("persistence", split_tau)):
+        value = getattr(default, name)
+        if split.get("threshold") is not None and not (split["below"] < value < split["above"]):
+            problems.append(f"default {name} {value:g} lies outside the measured gap "
+                            f"({split['below']:.3f}, {split['above']:.3f})")
     return {"title": "Stability verdict: height kept, persistence and f at g = 10, a/g = 1 (full durations)",
-            "runs": runs, "split_height_kept": split_h, "split_persistence": split_tau,
+            "runs": runs, "split_height_kept": split_h, "split_cluster": split_f, "split_persistence": split_tau,
             "default_thresholds": default.to_dict(), "freq_hz": FREQ, "gravity": GRAVITY, "amplitude": AMPLITUDE,
             "durations_s": [5.0, 5.0], "seed": 0, "problems": problems,
             "sweep_command": (f"rodwarp sweep --alpha {','.join(f'{a:g}' for a in spec.alphas)} --freq {FREQ:.6f} "
@@ -131,6 +135,11 @@ def summary(rec: dict) -> list[dict]:
         out.append({"benchmark": "measured split of the end heights h(T)",
                     "rodwarp": f"gap ({sh['below']:.3f}, {sh['above']:.3f}) -> threshold {sh['threshold']:.3f}",
                     "peer": f"default height_kept = {rec['default_thresholds']['height_kept']:g}", "ratio": None})
+    sf = rec.get("split_cluster", {})
+    if sf.get("threshold") is not None:
+        out.append({"benchmark": "measured split of the end cluster f(T)",
+                    "rodwarp": f"gap ({sf['below']:.3f}, {sf['above']:.3f}) -> threshold {sf['threshold']:.3f}",
+                    "peer": f"default cluster = {rec['default_thresholds']['cluster']:g}", "ratio": None})
     if st.get("threshold") is not None:
         out.append({"benchmark": "measured split of the persistence tau",
                     "rodwarp": f"gap ({st['below']:.3f}, {st['above']:.3f}) -> threshold {st['threshold']:.3f}",
