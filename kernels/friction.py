@@ -153,6 +153,7 @@ def contact_side(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array
     c.t = t
     r = model.vertex_rod[i]
     c.ispin = model.inv_inertia[i]
+    c.length = model.rest_length[i]
     c.rigid = model.rigid[r]
     if c.rigid != 0:
         xc = (x[i] + x[i + 1]) * HALF
@@ -174,13 +175,12 @@ def contact_side(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array
 
 
 @wp.func
-def side_velocity(c: ContactSide, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64),
-                  rest_length: wp.float64):
+def side_velocity(c: ContactSide, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
     """Velocity of the side's material point (m/s)."""
     i = c.i
     if c.rigid != 0:
         # rigid body: v_c + omega x lever, omega = rotation across the axis + spin about it
-        w = wp.cross(c.t, v[i + 1] - v[i]) / rest_length + c.t * spin[i]
+        w = wp.cross(c.t, v[i + 1] - v[i]) / c.length + c.t * spin[i]
         return (v[i] + v[i + 1]) * HALF + wp.cross(w, c.lever)
     return v[i] * (F1 - c.s) + v[i + 1] * c.s + c.g * spin[i]
 
@@ -272,23 +272,25 @@ def prepare_rod_contacts(
 @wp.func
 def solve_rod_contact(
     k: int,
-    model: RodModel,
-    contacts: RodContacts,
     frames: wp.array(dtype=ContactFrame),
+    impulse: wp.array(dtype=wp.vec3d),
+    normal: wp.array(dtype=wp.vec3d),
     params: StepParams,
     v: wp.array(dtype=wp.vec3d),
     spin: wp.array(dtype=wp.float64),
 ):
-    """Exact local solve of rod-rod contact k; returns the velocity change it caused (m/s)."""
+    """Exact local solve of rod-rod contact k (its frame, accumulated impulse and normal);
+    returns the velocity change it caused (m/s). Takes the arrays it reads rather than the
+    model and contact bundles: the innermost call of every sweep, so nothing else is copied."""
     f = frames[k]
-    u = side_velocity(f.a, v, spin, model.rest_length[f.a.i]) - side_velocity(f.b, v, spin, model.rest_length[f.b.i])
-    P = contacts.impulse[k]
-    n = contacts.normal[k]
+    u = side_velocity(f.a, v, spin) - side_velocity(f.b, v, spin)
+    P = impulse[k]
+    n = normal[k]
     P_new = relaxed(solve_local(u, f, n, P, params.mu), P, n, params.mu, params.relax)
     dP = P_new - P
     side_apply(f.a, dP, v, spin)
     side_apply(f.b, -dP, v, spin)
-    contacts.impulse[k] = P_new
+    impulse[k] = P_new
     return wp.length(f.W * dP)
 
 
@@ -308,7 +310,7 @@ def solve_rod_contacts(
     k = wp.tid()
     if use_ids != 0:
         k = ids[k]
-    wp.atomic_max(residual, 0, solve_rod_contact(k, model, contacts, frames, params, v, spin))
+    wp.atomic_max(residual, 0, solve_rod_contact(k, frames, contacts.impulse, contacts.normal, params, v, spin))
 
 
 @wp.kernel
@@ -425,7 +427,7 @@ def solve_rod_walls(
                 continue
             n = walls.normal[p]
             c = contact_side(model, x, tangent, e, se, n * (-rr))
-            u = side_velocity(c, v, spin, model.rest_length[e]) - wall_velocity(walls, p)
+            u = side_velocity(c, v, spin) - wall_velocity(walls, p)
             P = contacts.impulse[k]
             P_new = relaxed(solve_local(u, local_frame(c.W, n, approach_target(gap, params)), n, P, walls.mu[p]), P, n,
                             walls.mu[p], params.relax)

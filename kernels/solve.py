@@ -44,7 +44,7 @@ def gauss_seidel_sequential(
         cres = F0
         sres = F0
         for k in range(contacts.count):
-            cres = wp.max(cres, solve_rod_contact(k, model, contacts, frames, params, v, spin))
+            cres = wp.max(cres, solve_rod_contact(k, frames, contacts.impulse, contacts.normal, params, v, spin))
         for q in range(na):
             cres = wp.max(cres, solve_rod_walls(wall_contacts.active[q], model, state.x, factors.tangent, walls,
                                                 params, wall_contacts, v, spin))

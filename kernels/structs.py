@@ -100,6 +100,7 @@ class ContactSide:
     iinv: wp.mat33d  # rigid: inverse inertia tensor
     im: wp.float64  # rigid: 1 / m
     ispin: wp.float64  # inverse axial inertia of the edge
+    length: wp.float64  # rest length of the edge (m)
     W: wp.mat33d  # mobility of the point (m / (N s))
 
 
