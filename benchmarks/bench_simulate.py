@@ -64,7 +64,7 @@ def summary(rec: dict) -> list[dict]:
          "rodwarp": f"Z = {r0['contacts_per_rod']:.2f}, f = {r0['largest_cluster_fraction']:.3f}, "
                     f"stable = {r0['stable']}, max overlap {r0['max_penetration_over_d']:.3f} d, "
                     f"h = {r0['height_kept']:.3f}, tau = {r0['persistence']:.2f}; mean dt "
-                    f"{', '.join(f'{k} {v['mean']:.3g} s' for k, v in r0['dt'].items())}",
+                    + ", ".join(f"{k} {v['mean']:.3g} s" for k, v in r0["dt"].items()),
          "peer": "paper: alpha = 100 near alpha* ~ 100", "ratio": None},
     ]
 
