@@ -129,6 +129,7 @@ def plot(rec: dict, outdir) -> list[dict]:
 
     fig, ax = plt.subplots(2, 4, figsize=(17, 7))
     ref = rec["reference"]
+    now = dict(zip(("iterations", "step_safety"), _defaults()))  # the defaults chosen from this chart
     for row, (key, label, dflt) in enumerate((("by_iterations", "iterations", rec["default_iterations"]),
                                               ("by_safety", "step_safety", rec["default_safety"]))):
         groups = rec[key]
@@ -142,7 +143,9 @@ def plot(rec: dict, outdir) -> list[dict]:
                        label="mean, range over seeds")
             if ref:
                 a.axhline(ref[name], color="k", ls=":", label="reference (10x finer step, 40 sweeps)")
-            a.axvline(dflt, color="tab:red", ls="-.", lw=1, label=f"default {dflt:g}")
+            a.axvline(dflt, color="tab:red", ls="-.", lw=1, label=f"default during the run {dflt:g}")
+            if now[label] != dflt:
+                a.axvline(now[label], color="tab:green", ls="--", lw=1, label=f"default now {now[label]:g}")
             a.set_xscale("log")
             a.set_xlabel(label)
             a.set_ylabel(title)
