@@ -41,7 +41,7 @@ def main(argv=None) -> int:
         return 0
 
     from rodwarp import _warp
-    from rodwarp.atomic import write_json
+    from rodwarp.rodset.files import write_json
 
     quick = not args.full
     names = args.only or list(DEFAULT)

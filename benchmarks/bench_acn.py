@@ -1,7 +1,7 @@
 """ACN of segment pairs: the exact closed form against tensor Gauss-Legendre quadrature.
 
 Quantity: the signed Gauss linking integral G of two straight segments (the pair's average
-crossing number is |G|; see REFERENCE.md section 2).  Errors are errors of |G|.
+crossing number is |G|; see docs/fields.md, "The average crossing number").  Errors are errors of |G|.
 
 Pair sets (float64 endpoints, fixed seeds):
 
@@ -19,9 +19,9 @@ Methods, all over the whole set, one pair per thread:
   solid-angle form, the parallelogram fanned into four triangles from the foot of the
   perpendicular from the origin (height divided out), the four half-angles added as the
   argument of one complex product (one atan2).
-* **Gauss-Legendre q x q** (``rodwarp.kernels.acn_quadrature``), q = 2, 4, 8, 16, 32, 64,
+* **Gauss-Legendre q x q** (``benchmarks.acn_quadrature``), q = 2, 4, 8, 16, 32, 64,
   of the double integral (1/4 pi) int int (e1 x e2).(r1 - r2) / |r1 - r2|^3 ds dt.
-* **NumPy closed form** (``rodwarp.reference.gauss_linking_numpy``), vectorised NumPy:
+* **NumPy closed form** (``rodwarp.testing.reference.gauss_linking_numpy``), vectorised NumPy:
   ``form="product"`` (the kernel's formula, step for step) is the same-run speed peer of the
   Warp kernel; ``form="foot"`` (the same fan, four arctan2) is the reference; ``form=
   "diagonal"`` (two triangles split along b - d) shows what a two-triangle split costs in
@@ -244,7 +244,7 @@ def _errors(g, truth):
 
 
 def _longdouble_foot(P):
-    from rodwarp.reference import _gauss_cf
+    from rodwarp.testing.reference import _gauss_cf
 
     return _gauss_cf(*(np.ascontiguousarray(p.T).astype(np.longdouble) for p in P), form="foot")
 
@@ -265,8 +265,8 @@ def _measure_set(name, P, meta, quick, device, rng):
     import warp as wp
 
     from rodwarp.kernels import acn as kcf
-    from rodwarp.kernels import acn_quadrature as kq
-    from rodwarp.reference import gauss_linking_numpy
+    from benchmarks import acn_quadrature as kq
+    from rodwarp.testing.reference import gauss_linking_numpy
 
     n = len(P[0])
     reps = common.n_repeats(quick)
@@ -289,7 +289,7 @@ def _measure_set(name, P, meta, quick, device, rng):
     e_np.update({"time_s": t_np, "per_pair_s": t_np["median"] / n, "numpy_over_warp": t_np["median"] / t_cf["median"]})
     rec = {
         "n_pairs": n,
-        "truth": {"method": "rodwarp.reference.gauss_linking_numpy(form='foot'), float64",
+        "truth": {"method": "rodwarp.testing.reference.gauss_linking_numpy(form='foot'), float64",
                   "time_s": t_foot, "per_pair_s": t_foot["median"] / n,
                   "numpy_foot_over_warp": t_foot["median"] / t_cf["median"],
                   "max_abs_dev_from_longdouble": ld_dev},
@@ -358,7 +358,7 @@ def _measure_set(name, P, meta, quick, device, rng):
 
 def _split_conditioning(gaps, per, device, rng):
     """Kernel error for crossings within 3 gaps of a diagonal (s = t), per gap."""
-    from rodwarp.reference import gauss_linking_numpy
+    from rodwarp.testing.reference import gauss_linking_numpy
 
     rows = []
     for g in gaps:
@@ -391,7 +391,7 @@ def run(quick: bool, device: str) -> dict:
     _warp.init()
     # import both kernel modules before the first launch
     from rodwarp.kernels import acn as _kcf  # noqa: F401
-    from rodwarp.kernels import acn_quadrature as _kq  # noqa: F401
+    from benchmarks import acn_quadrature as _kq  # noqa: F401
 
     _warm_allocator()
     rng = np.random.default_rng(2024)
@@ -427,7 +427,7 @@ def run(quick: bool, device: str) -> dict:
         "name": NAME, "title": TITLE,
         "settings": {"orders": list(ORDERS), "random_pairs": n_random, "gaps": [float(g) for g in gaps],
                      "angles_deg": list(ANGLES), "pairs_per_angle_and_gap": per, "seed": 2024,
-                     "truth": "rodwarp.reference.gauss_linking_numpy(form='foot') in float64",
+                     "truth": "rodwarp.testing.reference.gauss_linking_numpy(form='foot') in float64",
                      "error": "| |G_method| - |G_truth| | per pair",
                      "timing": "one launch over the whole set, device synchronised, median of repeats",
                      "numpy_allocator": "warmed (one 16 MB block allocated and freed first, raising glibc's "
@@ -470,7 +470,7 @@ def summary(rec: dict) -> list[dict]:
                      "rodwarp": "closed form", "peer": f"q = {q6}" if q6 else f"none up to q = {ORDERS[-1]}",
                      "ratio": (r["quadrature"][str(q6)]["over_closed_form"] if q6 else None)})
         npc = r["numpy_closed_form"]
-        rows.append({"benchmark": f"{SET_LABELS[name]}: closed form, Warp vs NumPy (rodwarp.reference, same algorithm)",
+        rows.append({"benchmark": f"{SET_LABELS[name]}: closed form, Warp vs NumPy (rodwarp.testing.reference, same algorithm)",
                      "rodwarp": f"Warp {fmt_spread(cf['time_s'], 1e3, 'ms')}",
                      "peer": f"NumPy {fmt_spread(npc['time_s'], 1e3, 'ms')}, max err {fmt(npc['max_abs_err'])}",
                      "ratio": npc["numpy_over_warp"]})
@@ -576,7 +576,7 @@ def plot(rec: dict, outdir) -> list[dict]:
                f"{fmt(rr['closed_form']['max_abs_err'])}; {q_txt(rr, 16)}; {q_txt(rr, 64)}. Near-touching crossings: "
                f"closed form max error {fmt(tt['closed_form']['max_abs_err'])}; {q_txt(tt, 16)}; {q_txt(tt, 64)}; at gap "
                f"{fmt(g_lo)} even GL 64x64 is off by up to {fmt(worst_small)} (right panel: max error against the gap). "
-               f"The reference is rodwarp.reference's foot form in float64: within "
+               f"The reference is rodwarp.testing.reference's foot form in float64: within "
                f"{fmt(max(rr['truth']['max_abs_dev_from_longdouble'], tt['truth']['max_abs_dev_from_longdouble']))} of "
                f"its long-double evaluation on every pair, and within {fmt(rr['truth']['check']['max_abs_dev'])} "
                f"(random) and {fmt(tt['truth']['check']['max_abs_dev'])} (near-touching) of an independent adaptive "

@@ -1,4 +1,4 @@
-"""Independent ACN and linking-number implementations against ``rodwarp.acn``, same run.
+"""Independent ACN and linking-number implementations against ``rodwarp.analysis``, same run.
 
 Curve pairs (vertices in arbitrary units, both curves with n segments):
 
@@ -15,10 +15,10 @@ Sizes n = 100, 300, 1000, 2000 segments per curve (quick) or 100 ... 3000 (full)
 
 Methods, each on the same arrays in the same run:
 
-* rodwarp: ``rodwarp.acn.linking_number`` and ``average_crossing_number`` (closed form per
+* rodwarp: ``rodwarp.analysis.linking_number`` and ``average_crossing_number`` (closed form per
   segment pair, one Warp launch each; the timed call is ``average_crossing_number``, which
   evaluates every pair once).
-* NumPy: ``rodwarp.reference.gauss_linking_numpy`` (the fan-from-the-foot form, no shared code
+* NumPy: ``rodwarp.testing.reference.gauss_linking_numpy`` (the fan-from-the-foot form, no shared code
   with the Warp kernel) over all n^2 segment pairs in blocks, summed with ``math.fsum``: the
   signed sum and the sum of |G| from one pass.
 * PyElastica (if installed): its numba Klenin & Langowski (2000) per-pair solid angle
@@ -121,8 +121,8 @@ def _segments(p, closed):
 
 
 def numpy_sums(a, b, closed: bool, block: int = 1 << 18):
-    """(signed sum, sum of |G|) over all segment pairs with rodwarp.reference (NumPy)."""
-    from rodwarp.reference import gauss_linking_numpy
+    """(signed sum, sum of |G|) over all segment pairs with rodwarp.testing.reference (NumPy)."""
+    from rodwarp.testing.reference import gauss_linking_numpy
 
     a0, a1 = _segments(a, closed)
     b0, b1 = _segments(b, closed)
@@ -255,7 +255,7 @@ def _timed(fn, repeats: int, warmup: bool):
 
 def run(quick: bool, device: str) -> dict:
     from rodwarp import _warp
-    from rodwarp.acn import average_crossing_number, linking_number
+    from rodwarp.analysis import average_crossing_number, linking_number
 
     _warp.init()
     from benchmarks.bench_acn import _warm_allocator
@@ -390,7 +390,7 @@ def summary(rec: dict) -> list[dict]:
     rows.append({"benchmark": (f"ACN + Lk of two curves, {big} segments each ({big * big:,} pairs), median over "
                                f"{len(rw_big)} curve families (ratio rodwarp / NumPy time)"),
                  "rodwarp": f"{fmt(float(np.median(rw_big)) * 1e3)} ms",
-                 "peer": (f"NumPy rodwarp.reference: {fmt(float(np.median(np_big)) * 1e3)} ms; max |dLk| "
+                 "peer": (f"NumPy rodwarp.testing.reference: {fmt(float(np.median(np_big)) * 1e3)} ms; max |dLk| "
                           f"{fmt(ag['numpy_lk'])}, max |dACN| {fmt(ag['numpy_acn'])} over all cases"),
                  "ratio": _ratio_at(rec, "numpy", big)})
     if rec["pyelastica"]["available"]:

@@ -64,9 +64,16 @@ def _once(cmd, env, outdir) -> float:
 
 _WARM = """
 import importlib.util, json, sys, time
-from rodwarp.fieldset import Fields
-from rodwarp import fieldplots as new
-from rodwarp.stats import field_statistics, find_tangles
+from rodwarp.analysis import Fields
+from rodwarp.analysis import _figures as new
+from rodwarp.analysis import field_statistics, find_tangles
+# the baseline's figure module imports rodwarp.stats, which issue 16 moved into rodwarp.analysis:
+# give it that module under its old name, with the field lists it expects
+import types
+import rodwarp.analysis._stats as _st
+shim = types.ModuleType("rodwarp.stats")
+shim.__dict__.update(vars(_st), STAT_FIELDS=("phi", "S", "c", "e"), PROFILE_FIELDS=("phi", "S", "c", "e", "n"))
+sys.modules.setdefault("rodwarp.stats", shim)
 spec = importlib.util.spec_from_file_location("oldfp", sys.argv[2])
 old = importlib.util.module_from_spec(spec); spec.loader.exec_module(old)
 f = Fields.load(sys.argv[1])

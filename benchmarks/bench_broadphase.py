@@ -12,12 +12,12 @@ Methods, all on the same positions:
   figure is the ``broadphase + narrowphase`` stage time: midpoints into the hash grid, the
   Verlet candidate list (exact capsule filter at margin + skin) and the narrowphase over it
   (exact gaps, radix sort, warm-start lookup).  *rebuild*: the pair list is rebuilt from
-  scratch in the timed step (forced through the private ``solver._pairs_n = None``; a fresh
+  scratch in the timed step (forced through ``solver.invalidate_pairs()``; a fresh
   solver per repeat when that hook is gone); *reuse*: the list is still valid (typical step).
   Rodwarp's contacts are the step's contacts with gap < contact distance.
 * **cKDTree**: ``scipy.spatial.cKDTree`` on segment midpoints, ``query_pairs`` with rodwarp's
   own query radius (h_max + 2 r_max + margin + skin), then exact gaps with
-  ``rodwarp.geometry.segment_distance`` on the candidates; also with the smallest radius
+  ``rodwarp.rodset.segment_distance`` on the candidates; also with the smallest radius
   that still finds every contact (h_max + 2 r_max + contact distance), "cKDTree (tight)".
 * **all pairs**: exact gaps of every segment pair in NumPy (``segment_distance``, vectorised
   in chunks); skipped where its predicted time exceeds the limit (recorded as skipped).
@@ -60,7 +60,7 @@ def _exclude(model, i, j):
 
 
 def _gaps(model, x, i, j, chunk: int = 1 << 18):
-    from rodwarp.geometry import segment_distance
+    from rodwarp.rodset import segment_distance
 
     sv = model.seg_vertex_np
     r = model.radius_np[model.vertex_rod_np[sv]]
@@ -92,7 +92,7 @@ def ckdtree_contacts(model, x, radius: float):
 
 def all_pairs_contacts(model, x, chunk: int = 1 << 18):
     """Exact gap of every segment pair (upper triangle), in row blocks; returns (pairs, gaps)."""
-    from rodwarp.geometry import segment_distance
+    from rodwarp.rodset import segment_distance
 
     sv = model.seg_vertex_np
     S = len(sv)
@@ -124,7 +124,7 @@ def all_pairs_contacts(model, x, chunk: int = 1 << 18):
 
 def _calibrate_all_pairs(model, x) -> float:
     """Pairs per second of the all-pairs kernel (a small block, best of 3)."""
-    from rodwarp.geometry import segment_distance
+    from rodwarp.rodset import segment_distance
 
     sv = model.seg_vertex_np
     n = min(len(sv), 400)
@@ -157,8 +157,8 @@ def _compare(ref_pairs, ref_gaps, pairs, gaps, cd) -> dict:
 
 
 def _point(n_tiles: int, quick: bool, device: str, limit_s: float, rate: list) -> dict:
-    from rodwarp.model import State
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.state import State
+    from rodwarp.sim.solver import RodSolver
 
     repeats = common.n_repeats(quick)
     tile = common.settled_tile(device)
@@ -168,23 +168,23 @@ def _point(n_tiles: int, quick: bool, device: str, limit_s: float, rate: list) -
     dt = solver.default_dt()
     A = model.state()
     B = State(model, A.contact_capacity)
-    solver.step(A, B, dt)  # untimed: allocations, first-step energy evaluation
+    solver.step(A, B, None, dt)  # untimed: allocations, first-step energy evaluation
     x = A.positions()
     cd = model.contact_distance
 
-    hook = hasattr(solver, "_pairs_n")
+    hook = hasattr(solver, "invalidate_pairs")
 
     def timed_step(rebuild: bool):
         s = solver
         if rebuild:
             if hook:
-                s._pairs_n = None
+                s.invalidate_pairs()
             else:
                 s = RodSolver(model)
         s.reset_timings()
         common.sync(device)
         t = time.perf_counter()
-        s.step(A, B, dt)
+        s.step(A, B, None, dt)
         common.sync(device)
         wall = time.perf_counter() - t
         tm = s.timings

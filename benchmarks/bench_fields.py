@@ -7,9 +7,9 @@ balls leaving the box masked.
 
 Methods, in the same run on the same voxels:
 
-* **rodwarp**: :func:`rodwarp.fields.compute_fields` (hash-grid candidates, exact clipping,
+* **rodwarp**: :func:`rodwarp.analysis.compute_fields` (hash-grid candidates, exact clipping,
   closed-form Gauss integral per clipped segment pair, all five fields) on one CPU core;
-* **NumPy**: :func:`rodwarp.reference.fields_numpy` (``form="product"``: the kernel's
+* **NumPy**: :func:`rodwarp.testing.reference.fields_numpy` (``form="product"``: the kernel's
   closed form step for step), the same exact formulas vectorised per chunk of centres with
   scipy cKDTree candidates, timed with a warmed allocator (see ``bench_acn``).  Where NumPy over the whole grid would take
   too long (quick mode at alpha = 300) it runs on an evenly strided subset of the voxels and
@@ -34,7 +34,7 @@ TITLE = "Local fields (phi, S, c, e) on voxel grids: Warp kernels vs vectorised 
 
 
 def _packing(alpha: float, device: str):
-    from rodwarp.packing import random_packing
+    from rodwarp.experiments import random_packing
 
     return random_packing(round(5.4 * alpha), 1.0, 1.0 / alpha, (1.0, 1.0, 2.5), seed=0, device=device)
 
@@ -46,7 +46,7 @@ def _centres(f):
 
 
 def _numpy_fields(rods, centres, R):
-    from rodwarp.reference import fields_numpy
+    from rodwarp.testing.reference import fields_numpy
 
     p0, p1, rod = rods.segments()
     return fields_numpy(p0, p1, rod, 2 * rods.radii[rod], centres, R, form="product")
@@ -54,10 +54,10 @@ def _numpy_fields(rods, centres, R):
 
 def run(quick: bool, device: str) -> dict:
     from benchmarks.bench_acn import _warm_allocator
-    from rodwarp.fields import compute_fields
+    from rodwarp.analysis import compute_fields
 
     _warm_allocator()
-    from rodwarp.stats import field_statistics
+    from rodwarp.analysis import field_statistics
 
     reps = common.n_repeats(quick)
     speed = []

@@ -63,7 +63,7 @@ def _measure(model, solver, snapshot, dt: float, k: int, repeats: int, device: s
     def k_steps():
         x, y = a, b
         for _ in range(k):
-            info = solver.step(x, y, dt)
+            info = solver.step(x, y, None, dt)
             infos.append(info)
             x, y = y, x
 
@@ -118,8 +118,8 @@ def _measure(model, solver, snapshot, dt: float, k: int, repeats: int, device: s
 
 
 def _pile_point(n_rods: int, quick: bool, device: str, iteration_set) -> dict:
-    from rodwarp.model import State
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.state import State
+    from rodwarp.sim.solver import RodSolver
 
     repeats = common.n_repeats(quick)
     box = common.protocol_box(n_rods, ALPHA)
@@ -170,7 +170,7 @@ def _pile_point(n_rods: int, quick: bool, device: str, iteration_set) -> dict:
 
 
 def _dense_point(n_tiles: int, quick: bool, device: str) -> dict:
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.solver import RodSolver
 
     tile = common.settled_tile(device)
     model = common.tiled_model(tile, n_tiles, device=device, velocities=True)
@@ -191,7 +191,7 @@ def _dense_point(n_tiles: int, quick: bool, device: str) -> dict:
 
 
 def run(quick: bool, device: str) -> dict:
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.solver import RodSolver
 
     sizes = [100, 1000] if quick else [100, 1000, 10000]
     default_it = inspect.signature(RodSolver).parameters["iterations"].default

@@ -38,13 +38,13 @@ b. A pile of 100 steel rods (E = 200 GPa, rho = 7850 kg/m^3, Poisson 0.3, l = 1 
    ``RodRodContact`` (penalty k = 1e7 N/m, critical damping of two elements) and
    ``RodPlaneContactWithAnisotropicFriction`` for the five walls (k = 1e7 N/m, critical damping
    of one element, static and kinetic mu 0.2 in all directions), at dt = 0.95 x the largest
-   stable step of a free steel rod (bisection as above; REFERENCE: dt <= 1.6e-6 s).
+   stable step of a free steel rod (bisection as above; measured before: dt <= 1.6e-6 s).
    PyElastica registers contact per rod pair (and per rod-plane pair) in Python; the outcome run
    registers only those that can meet within T (gap at hand-over below reach_i + reach_j,
    reach = 1.5 v_max T + g T^2 + d / 4 per rod; checked at T/2 and T: no other pair
-   overlapped), and the cost with all 4950 rod pairs and 500 rod-plane pairs registered (as
-   REFERENCE measured) is timed on 20 steps per repeat.  Outcome, both codes: centroid height,
-   mean vertical velocity, kinetic energy, rod-rod contacts (gap < d/10), deepest rod-rod
+   overlapped), and the cost with all 4950 rod pairs and 500 rod-plane pairs registered (as the
+   earlier PyElastica measurement did) is timed on 20 steps per repeat.  Outcome, both codes:
+   centroid height, mean vertical velocity, kinetic energy, rod-rod contacts (gap < d/10), deepest rod-rod
    overlap and floor penetration (at vertices, and at element centres where PyElastica's plane
    contact acts) at T, and the RMS difference of the vertices between the two codes against
    their RMS displacement.
@@ -137,7 +137,7 @@ def _chunk_cost(walls) -> dict:
 
 
 def _test_props():
-    from rodwarp.scenes import TEST_DENSITY, TEST_LENGTH, TEST_RADIUS, TEST_YOUNG
+    from rodwarp.testing.scenes import TEST_DENSITY, TEST_LENGTH, TEST_RADIUS, TEST_YOUNG
 
     return TEST_YOUNG, TEST_DENSITY, TEST_RADIUS, TEST_LENGTH
 
@@ -217,7 +217,7 @@ def _pe_stable_dt(ea, build, lo: float, hi: float, steps: int, iters: int = 6) -
 # ----------------------------------------------------------------------------------------------
 
 def _exact():
-    from rodwarp.scenes import cantilever_frequency, cantilever_sag
+    from rodwarp.testing.scenes import cantilever_frequency, cantilever_sag
 
     return cantilever_sag(), cantilever_frequency()
 
@@ -277,7 +277,7 @@ def _pe_setting(ea, n: int, shift: bool, quick: bool) -> dict:
 def _rw_setting(n: int, dt: float, kind: str, device: str, repeats: int) -> dict:
     """One rodwarp (edges, dt) setting: sag or frequency error and cost per simulated second."""
     from benchmarks.bench_accuracy import _cantilever_model, _oscillation, _run_catching, _step_cost
-    from rodwarp.solver import RodSolver, run
+    from rodwarp.sim.solver import RodSolver, run
 
     sag0, f0 = _exact()
     row = {"code": "rodwarp", "n_edges": n, "dt_s": dt, "kind": kind}
@@ -319,7 +319,7 @@ def _cheapest(rows, err_key: str, cost_key: str, tol: float):
 def _batch_cost(ea, pe_row, rw_row, device: str, repeats: int) -> dict:
     """Per-rod cost per simulated second for BATCH independent cantilevers, both codes (sag setting)."""
     from benchmarks.bench_accuracy import _cantilever_model, _step_cost
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.solver import RodSolver
 
     out = {"rods": BATCH}
     if rw_row is not None:
@@ -412,7 +412,7 @@ def _cantilever(ea, quick: bool, device: str) -> dict:
 
 def _rod_gaps(pos: np.ndarray, radius: float, chunk: int = 600):
     """Surface gap of every rod pair (closest segment pair): (i, j, gap) with i < j."""
-    from rodwarp.geometry import segment_distance
+    from rodwarp.rodset import segment_distance
 
     N = pos.shape[0]
     a, b = pos[:, :-1], pos[:, 1:]
@@ -483,7 +483,7 @@ def _pe_pile_sim(ea, X, U, planes, pairs, plane_rods, dt: float):
     """PyElastica simulator of the hand-over state (positions X and velocities U, (N, V, 3)) with
     rod-rod contact on ``pairs`` and contact with plane p for the rods in ``plane_rods[p]``."""
     p = STEEL_PILE
-    from rodwarp.model import STEEL
+    from rodwarp.sim.model import STEEL
 
     r = 0.5 * p["diameter_m"]
     E, rho = STEEL.young, STEEL.density
@@ -533,9 +533,9 @@ def _pe_state(rods):
 
 
 def _pile(ea, quick: bool, device: str) -> dict:
-    from rodwarp.model import STEEL, Model
-    from rodwarp.packing import random_packing
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.model import STEEL, Model
+    from rodwarp.experiments import random_packing
+    from rodwarp.sim.solver import RodSolver
 
     p = STEEL_PILE
     repeats = common.n_repeats(quick)
@@ -636,7 +636,7 @@ def _pile(ea, quick: bool, device: str) -> dict:
     log(f"PyElastica pile: {fmt(pe_step['median'] * 1e3)} ms/step, {fmt(pe_cost['median'])} s per simulated s; "
         + (f"Z {pe_out['Z']:.2f}, RMS difference to rodwarp {diff * 1e3:.3g} mm" if pe_out else "non-finite"))
 
-    # 4. every pair and every rod-plane pair registered (as REFERENCE measured): finalize and a few steps
+    # 4. every pair and every rod-plane pair registered (as measured before): finalize and a few steps
     all_pairs = list(zip(iu.tolist(), ju.tolist()))
     sim_all, _, fin_all, _ = _pe_pile_sim(ea, X, U, planes, all_pairs, [list(range(N))] * len(planes), pdt)
     _pe_steps(ea, sim_all, pdt, 3)
@@ -667,7 +667,7 @@ def _pile(ea, quick: bool, device: str) -> dict:
 
 def _pe_free_steel(ea, dt: float):
     """One free steel rod (9 elements, d = 0.01 m, l = 1 m) under gravity: the stability probe of the pile."""
-    from rodwarp.model import STEEL
+    from rodwarp.sim.model import STEEL
 
     p = STEEL_PILE
     sim = _sim_class(ea)()

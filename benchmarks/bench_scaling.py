@@ -16,7 +16,7 @@ with the prediction).
 Method, per N: two untimed pre-roll steps (kernel compilation, the first pair-list build,
 energy evaluation), then windows of K = 10 steps from the same snapshot, repeated 3 (quick)
 / 5 (full) times (fewer where the budget requires, at least 1).  Every window starts with
-the Verlet pair list forced to rebuild (the private ``solver._pairs_n = None`` hook), so each
+the Verlet pair list forced to rebuild (``solver.invalidate_pairs()``), so each
 window holds the same number of rebuilds at every N (the tiles are identical copies and
 move alike; in free running the list is rebuilt about every 9 steps here, the count is
 recorded); K is the same at every N for the same reason:
@@ -54,7 +54,7 @@ STEPS = 10  # K, the same at every N so that every window holds the same pair-li
 
 
 def _measure(model, dt: float, quick: bool, device: str, budget: float) -> dict:
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.solver import RodSolver
 
     solver = RodSolver(model)
     snap = model.state()
@@ -80,12 +80,12 @@ def _measure(model, dt: float, quick: bool, device: str, budget: float) -> dict:
     def restore():
         a.copy_from(snap)
         infos.clear()
-        solver._pairs_n = None  # every window starts with a pair-list rebuild
+        solver.invalidate_pairs()  # every window starts with a pair-list rebuild
 
     def k_steps():
         x, y = a, b
         for _ in range(k):
-            infos.append(solver.step(x, y, dt))
+            infos.append(solver.step(x, y, None, dt))
             x, y = y, x
 
     solver.timings = None
@@ -112,9 +112,9 @@ def _measure(model, dt: float, quick: bool, device: str, budget: float) -> dict:
 
     # one step with the pair list rebuilt from scratch
     restore()
-    solver._pairs_n = None
+    solver.invalidate_pairs()
     solver.reset_timings()
-    solver.step(a, b, dt)
+    solver.step(a, b, None, dt)
     rebuild = dict(solver.timings)
     solver.timings = None
 
@@ -167,7 +167,7 @@ def slopes(points: list[dict]) -> dict:
 
 
 def run(quick: bool, device: str) -> dict:
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.solver import RodSolver
 
     tile = common.settled_tile(device)
     budget = BUDGET_S[quick]
@@ -213,7 +213,7 @@ def run(quick: bool, device: str) -> dict:
             "tile": common.tile_description(tile),
             "throughput_pass": "solver.timings = None (no synchronisation)",
             "stage_pass": "solver.reset_timings(): synchronise around every launch; host_overhead = wall - stages",
-            "rebuild_step": "one profiled step with solver._pairs_n = None (Verlet pair list rebuilt)",
+            "rebuild_step": "one profiled step with solver.invalidate_pairs() (Verlet pair list rebuilt)",
         },
         "points": points,
         "skipped": skipped,

@@ -1,20 +1,21 @@
 """CT segmentation: speed and accuracy on synthetic CT, accuracy against time over the main knobs,
 and a naive skeleton pipeline side by side.
 
-Scenes (``rodwarp.phantom``): random packings of straight rods of radius 3 voxels, aspect
+Scenes (``rodwarp.ct``): random packings of straight rods of radius 3 voxels, aspect
 ratio 30 (length 180 voxels), about half of them touching another (gaps either 0 or >= 2
 voxels), rendered with partial-volume edges, Gaussian blur sigma 1 voxel and Gaussian noise at
 contrast-to-noise 5.
 
 * **speed**: 256^3 voxels with 200 rods (the issue's speed case), default parameters, whole
   volume (and, in full mode, in chunks of 128): wall time (median of repeats), stage split,
-  rod F1, centreline and angle errors, contact F1 (``rodwarp.segment.match_rods`` /
+  rod F1, centreline and angle errors, contact F1 (``rodwarp.ct.match_rods`` /
   ``score_contacts``).
 * **knobs**: 200^3 voxels with 100 rods; one knob varied at a time from the defaults
   (greyscale refinement rounds, the disc radius that locates ends, the margin the refinement
   reads around each axis, the denoising sigma): accuracy (mean centreline error, median angle
   and endpoint errors, rod F1, contact F1) against wall time; the default marked.
-* **peer**: a naive pipeline of the kind REFERENCE.md section 3 warns about: Gaussian
+* **peer**: a naive pipeline of the kind that breaks at contacts (the 3-D skeleton of 30
+  touching rods has about 100 branches and 50 junctions; contacts cause them, not noise): Gaussian
   denoising, Otsu threshold, 3-D skeleton (``skimage.morphology.skeletonize``), every branch
   between junctions taken as a rod (PCA line through its voxels, extended to its extreme
   projections).  Same volume, same scoring: its branches per true rod and rod F1 against
@@ -42,20 +43,20 @@ KNOBS = {
 
 
 def _scene(shape, n_rods, seed):
-    from rodwarp import phantom as ph
+    from rodwarp import ct
 
     for s in range(seed, seed + 10):
         try:
-            rods = ph.scene_random_packing(shape, n_rods=n_rods, radius=3.0, aspect=30.0, touching_fraction=0.5, seed=s)
+            rods = ct.scene_random_packing(shape, n_rods=n_rods, radius=3.0, aspect=30.0, touching_fraction=0.5, seed=s)
             break
         except Exception:  # noqa: BLE001 - the packing may not fit for one seed; try the next
             continue
-    vol = ph.render_phantom(rods, shape, blur_sigma=1.0, cnr=5.0, seed=s)
+    vol = ct.render_phantom(rods, shape, blur_sigma=1.0, cnr=5.0, seed=s)
     return rods, vol, s
 
 
 def _score(result, truth) -> dict:
-    from rodwarp.segment import match_rods, score_contacts
+    from rodwarp.ct import match_rods, score_contacts
 
     m = match_rods(result.rods, truth)
     c = score_contacts(result.contacts, truth, m)
@@ -103,7 +104,7 @@ def naive_skeleton(volume, sigma: float = 1.0):
 
 
 def run(quick: bool, device: str) -> dict:
-    from rodwarp.segment import SegmentParams, segment_volume
+    from rodwarp.ct import SegmentParams, segment_volume
     from rodwarp.rodset import Contacts
 
     reps = 2 if quick else common.n_repeats(quick)
@@ -143,7 +144,7 @@ def run(quick: bool, device: str) -> dict:
     tp = common.time_repeats(go_peer, 1)
     prods, nbranch = peer["r"]
     if prods is not None:
-        from rodwarp.segment import SegmentResult  # noqa: F401 - same scoring path
+        from rodwarp.ct import SegmentResult  # noqa: F401 - same scoring path
 
         class _R:  # the scoring helper needs .rods, .contacts, .diameter
             rods = prods
@@ -188,7 +189,7 @@ def run(quick: bool, device: str) -> dict:
     if t["median"] is not None and t["median"] > 60:
         problems.append(f"256^3 / 200 rods took {t['median']:.0f} s (> 60 s)")
     out["problems"] = problems
-    out["scene"] = "rodwarp.phantom.scene_random_packing: radius 3, aspect 30, half touching; blur 1, CNR 5"
+    out["scene"] = "rodwarp.ct.scene_random_packing: radius 3, aspect 30, half touching; blur 1, CNR 5"
     return out
 
 

@@ -1,12 +1,12 @@
 """CT segmentation of realistic scans, before and after: every phantom case of
-``rodwarp.phantom_cases`` segmented by today's code and by the code at the baseline commit
+``rodwarp.ct`` segmented by today's code and by the code at the baseline commit
 (the segmenter before field-of-view masks, background correction, anisotropic voxels, per-rod
 radii, bundles and curved filaments), on the same machine in the same run; rod F1 against
 radius and against blur for both; and, in full mode, the 512^3 / 800-rod timing for both.
 
 The baseline runs in a subprocess on a copy of ``rodwarp/`` taken from git at
 ``BASELINE_COMMIT`` (``git archive``), fed the same volumes; scoring is the same for both
-(``rodwarp.segment.match_rods`` for straight truth, ``rodwarp.segment_score.match_polylines``
+(``rodwarp.ct.match_rods`` for straight truth, ``rodwarp.ct.match_polylines``
 for curved truth, ``score_contacts`` through either matching).  The baseline knows one
 isotropic voxel size only: its coordinates are scaled by the x voxel size.
 
@@ -38,7 +38,7 @@ BLURS = [0.5, 1.0, 1.5, 2.0, 2.5]
 _BASELINE_SCRIPT = r"""
 import json, sys, time
 import numpy as np
-from rodwarp.segment import segment_volume
+from rodwarp.segment import segment_volume  # the baseline tree's layout (before issue 16)
 from rodwarp.errors import RodwarpError
 vol = np.load(sys.argv[1])
 t = time.perf_counter()
@@ -90,7 +90,7 @@ def segment_before(volume, spacing_x: float = 1.0) -> dict:
 
 def segment_after(volume, voxel_size=(1.0, 1.0, 1.0)) -> dict:
     from rodwarp.errors import RodwarpError
-    from rodwarp.segment import segment_volume
+    from rodwarp.ct import segment_volume
 
     t = time.perf_counter()
     try:
@@ -103,14 +103,14 @@ def segment_after(volume, voxel_size=(1.0, 1.0, 1.0)) -> dict:
 
 def score(case, out: dict) -> dict:
     """Rod (or filament) F1, contact precision / recall, centreline error, self-contacts."""
-    from rodwarp.segment import match_rods, score_contacts
-    from rodwarp.segment_score import match_polylines
+    from rodwarp.ct import match_rods, score_contacts
+    from rodwarp.ct import match_polylines
 
     row = {"time_s": out.get("time_s")}
     if "error" in out:
         row.update(error=out["error"], rod_f1=0.0, contact_precision=None, contact_recall=None)
         return row
-    from rodwarp.phantom_cases import scored_subset
+    from rodwarp.ct import scored_subset
 
     shape_xyz = np.asarray(case.volume.shape[::-1], float) * np.asarray(case.voxel_size[::-1], float)
     found, con = scored_subset(out["rods"], out["contacts"], shape_xyz, case.face_margin)
@@ -134,7 +134,7 @@ def score(case, out: dict) -> dict:
 
 
 def run_case(name: str, seed: int = 0, before: bool = True, after: bool = True) -> dict:
-    from rodwarp.phantom_cases import make_case
+    from rodwarp.ct import make_case
 
     case = make_case(name, seed)
     rec = {"case": name, "notes": case.notes, "seed": seed, "shape": list(case.volume.shape),
@@ -147,17 +147,17 @@ def run_case(name: str, seed: int = 0, before: bool = True, after: bool = True) 
 
 
 def _sweep_volume(radius, blur, seed):
-    from rodwarp import phantom as ph
+    from rodwarp import ct
 
     shape = (128, 128, 128)
-    truth = ph.scene_random_packing(shape, n_rods=30, radius=radius, aspect=48.0 / (2 * radius) + 0.0,
+    truth = ct.scene_random_packing(shape, n_rods=30, radius=radius, aspect=48.0 / (2 * radius) + 0.0,
                                     seed=seed, max_attempts=200000)
-    vol = ph.render_phantom(truth, shape, blur_sigma=blur, cnr=5.0, seed=seed)
+    vol = ct.render_phantom(truth, shape, blur_sigma=blur, cnr=5.0, seed=seed)
     return truth, vol
 
 
 def run(quick: bool, device: str) -> dict:
-    from rodwarp.phantom_cases import CASES
+    from rodwarp.ct import CASES
 
     out: dict = {"title": TITLE, "baseline_commit": BASELINE_COMMIT}
     rows = []
@@ -169,7 +169,7 @@ def run(quick: bool, device: str) -> dict:
         rows.append(rec)
     out["cases"] = rows
 
-    from rodwarp.phantom_cases import ScanCase
+    from rodwarp.ct import ScanCase
 
     sweep = []
     for kind, values in (("radius", RADII), ("blur", BLURS)):
@@ -184,11 +184,11 @@ def run(quick: bool, device: str) -> dict:
     out["sweep"] = sweep
 
     if not quick:
-        from rodwarp import phantom as ph
+        from rodwarp import ct
 
         shape = (512, 512, 512)
-        truth = ph.scene_random_packing(shape, n_rods=800, radius=3.0, aspect=30.0, seed=0, max_attempts=400000)
-        vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=0)
+        truth = ct.scene_random_packing(shape, n_rods=800, radius=3.0, aspect=30.0, seed=0, max_attempts=400000)
+        vol = ct.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=0)
         case = ScanCase(name="512", volume=vol, truth=truth)
         tb, ta, sb, sa = [], [], None, None
         for _ in range(2):  # alternate, so that load from other work hits both alike

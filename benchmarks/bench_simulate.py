@@ -13,8 +13,8 @@ from pathlib import Path
 
 from benchmarks import common
 
-TARGET_S = 300.0
-STRETCH_S = 60.0
+TARGET_S = 30.0  # issue 13: the main job on one core
+STRETCH_S = 15.0
 
 
 def run(quick: bool, device: str) -> dict:
@@ -45,7 +45,8 @@ def run(quick: bool, device: str) -> dict:
         "user_command": "rodwarp simulate --alpha 100 --freq 10",
         "job_wall_s": common.spread(walls),
         "runs": [{k: x[k] for k in ("n_rods", "steps", "dt", "wall_time_s", "contacts_per_rod",
-                                    "largest_cluster_fraction", "stable", "max_penetration_over_d")} for x in summaries],
+                                    "largest_cluster_fraction", "height_kept", "persistence", "stable",
+                                    "max_penetration_over_d")} for x in summaries],
         "simulated_s": s["parameters"]["entangle_duration"] + s["parameters"]["duration"],
         "iterations": s["parameters"]["iterations"],
     }
@@ -62,7 +63,8 @@ def summary(rec: dict) -> list[dict]:
         {"benchmark": "outcome of the default run",
          "rodwarp": f"Z = {r0['contacts_per_rod']:.2f}, f = {r0['largest_cluster_fraction']:.3f}, "
                     f"stable = {r0['stable']}, max overlap {r0['max_penetration_over_d']:.3f} d, "
-                    f"dt = {', '.join(f'{k} {v:.3g} s' for k, v in r0['dt'].items())}",
+                    f"h = {r0['height_kept']:.3f}, tau = {r0['persistence']:.2f}; mean dt "
+                    + ", ".join(f"{k} {v['mean']:.3g} s" for k, v in r0["dt"].items()),
          "peer": "paper: alpha = 100 near alpha* ~ 100", "ratio": None},
     ]
 

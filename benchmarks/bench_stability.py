@@ -102,8 +102,8 @@ def _kinked(points, offsets, amplitude: float, rng) -> np.ndarray:
 
 def scene(alpha: float, n_vertices: int, extensible: bool, device: str, seed: int = 0):
     """The small falling pile of the module docstring."""
-    from rodwarp.model import STEEL, Model
-    from rodwarp.packing import random_packing
+    from rodwarp.sim.model import STEEL, Model
+    from rodwarp.experiments import random_packing
     from rodwarp.rodset import RodSet
 
     d = common.LENGTH / alpha
@@ -119,7 +119,7 @@ def scene(alpha: float, n_vertices: int, extensible: bool, device: str, seed: in
 def _trial(model, bending: str, dt: float, duration: float) -> dict:
     """Run ``duration`` seconds at ``dt``; stable unless SimulationBlowUp is raised."""
     from rodwarp.errors import SimulationBlowUp
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.solver import RodSolver
 
     solver = RodSolver(model, bending=bending, allow_unstable=True)
     a = model.state()
@@ -131,7 +131,7 @@ def _trial(model, bending: str, dt: float, duration: float) -> dict:
         warnings.simplefilter("ignore")
         try:
             for _ in range(n):
-                info = solver.step(a, b, dt)
+                info = solver.step(a, b, None, dt)
                 out["max_contacts"] = max(out["max_contacts"], int(info.n_contacts))
                 a, b = b, a
         except SimulationBlowUp as e:
@@ -192,7 +192,7 @@ def search(model, bending: str, bound: float, duration: float, n_bisect: int) ->
 
 
 def _bounds(model) -> dict:
-    from rodwarp.solver import RodSolver
+    from rodwarp.sim.solver import RodSolver
 
     s = RodSolver(model)
     return {

@@ -40,7 +40,7 @@ def legacy_write_vtp(path, positions, offsets, radii, t):
  </PolyData>
 </VTKFile>
 """
-    from rodwarp.atomic import write_text
+    from rodwarp.rodset.files import write_text
 
     write_text(path, text)
 
@@ -55,7 +55,7 @@ def meshio_write_vtu(path, positions, offsets, radii, t):
 
 
 def _frames(seed=0):
-    from rodwarp.packing import random_packing
+    from rodwarp.experiments import random_packing
 
     rods = random_packing(N_RODS, 1.0, 0.01, np.array([1.0, 1.0, 2.5]), n_vertices=N_VERTICES, seed=seed)
     rng = np.random.default_rng(seed)
@@ -63,7 +63,7 @@ def _frames(seed=0):
 
 
 def run(quick: bool, device: str) -> dict:
-    from rodwarp.outputs import write_vtp
+    from rodwarp.rodset.trajectory import write_vtp
 
     rods, frames = _frames()
     writers = [("ascii (before issue 15)", legacy_write_vtp, "vtp", "hand-written"),

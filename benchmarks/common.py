@@ -156,7 +156,7 @@ def loglog_slope(xs, ys) -> float | None:
 # ----------------------------------------------------------------------------------------------
 
 def new_state_like(model, state):
-    from rodwarp.model import State
+    from rodwarp.sim.state import State
 
     s = State(model, state.contact_capacity)
     s.copy_from(state)
@@ -167,7 +167,7 @@ def advance(solver, a, b, dt: float, n: int, callback=None):
     """``n`` steps ping-ponging states ``a`` and ``b``; returns (current, scratch, last StepInfo)."""
     info = None
     for _ in range(n):
-        info = solver.step(a, b, dt)
+        info = solver.step(a, b, None, dt)
         a, b = b, a
         if callback is not None:
             callback(a, info)
@@ -193,8 +193,8 @@ def protocol_box(n_rods: int, alpha: float) -> np.ndarray:
 def pile_model(n_rods: int, diameter: float, box, *, seed: int = 0, device: str = "cpu", mu: float = 0.2,
                n_vertices: int = 10):
     """Random (RSA) steel packing in ``box`` with floor and four side walls, gravity -z."""
-    from rodwarp.model import STEEL, Model
-    from rodwarp.packing import random_packing
+    from rodwarp.sim.model import STEEL, Model
+    from rodwarp.experiments import random_packing
 
     rods = random_packing(n_rods, LENGTH, diameter, box, seed=seed, device=device, n_vertices=n_vertices)
     model = Model(rods, STEEL, gravity=(0.0, 0.0, -9.81), mu=mu, device=device)
@@ -215,8 +215,9 @@ def settled_tile(device: str = "cpu", diameter: float = TILE["diameter"], durati
     broadphase benchmark, the dense pile point and the iteration sweep; tiling it side by side
     gives settled piles of any size without simulating them.
     """
-    from rodwarp.metrics import centroid_height, contacts_per_rod, rod_contacts
-    from rodwarp.solver import RodSolver
+    from rodwarp.rodset import contacts_per_rod
+    from rodwarp.sim import centroid_height, rod_contacts
+    from rodwarp.sim.solver import RodSolver
 
     box = np.array(TILE["box"], float)
     model = pile_model(TILE["n_rods"], diameter, box, seed=TILE["seed"], device=device)
@@ -281,7 +282,7 @@ def tiled_rods(tile: dict, n_tiles: int, gap: float = 0.05, velocities: bool = F
 
 def tiled_model(tile: dict, n_tiles: int, device: str = "cpu", velocities: bool = False):
     """Model of ``n_tiles`` settled tiles: steel, mu 0.2, gravity -z, floor and the outer walls."""
-    from rodwarp.model import STEEL, Model
+    from rodwarp.sim.model import STEEL, Model
 
     rods = tiled_rods(tile, n_tiles, velocities=velocities)
     model = Model(rods, STEEL, gravity=(0.0, 0.0, -9.81), mu=0.2, device=device)
@@ -304,7 +305,7 @@ def pyplot():
 
 def save_figure(fig, path: Path) -> str:
     """Save a figure as PNG atomically; returns the file name."""
-    from rodwarp.atomic import atomic_path
+    from rodwarp.rodset.files import atomic_path
 
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")

@@ -29,7 +29,7 @@ def load_records() -> list[dict]:
 
 
 def replot_all() -> None:
-    from rodwarp.atomic import write_json
+    from rodwarp.rodset.files import write_json
 
     for rec in load_records():
         try:
@@ -99,7 +99,7 @@ def render(recs: list[dict]) -> str:
 
 
 def write_results_md() -> Path:
-    from rodwarp.atomic import write_text
+    from rodwarp.rodset.files import write_text
 
     write_text(RESULTS_MD, render(load_records()))
     return RESULTS_MD

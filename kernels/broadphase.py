@@ -7,6 +7,8 @@ midpoint finds every candidate; the cost is linear in the number of segments.
 
 import warp as wp
 
+from rodwarp.kernels.narrowphase import closest_points_segments
+
 wp.set_module_options({"enable_backward": False})
 
 
@@ -31,3 +33,63 @@ def max_speed(v: wp.array(dtype=wp.vec3d), out: wp.array(dtype=wp.float64)):
         out[1] = wp.float64(1.0)
     else:
         wp.atomic_max(out, 0, s)
+
+
+@wp.kernel
+def max_displacement(x: wp.array(dtype=wp.vec3d), x_ref: wp.array(dtype=wp.vec3d), out: wp.array(dtype=wp.float64)):
+    i = wp.tid()
+    wp.atomic_max(out, 0, wp.length(x[i] - x_ref[i]))
+
+
+@wp.kernel
+def find_candidate_pairs(
+    grid: wp.uint64,
+    mid: wp.array(dtype=wp.vec3),
+    seg_vertex: wp.array(dtype=wp.int32),
+    vertex_rod: wp.array(dtype=wp.int32),
+    rod_radius: wp.array(dtype=wp.float64),
+    x: wp.array(dtype=wp.vec3d),
+    query_radius: float,
+    margin: wp.float64,
+    capacity: int,
+    count: wp.array(dtype=wp.int32),
+    pairs: wp.array(dtype=wp.vec2i),
+):
+    """Broadphase (Verlet list): every pair sa < sb whose capsule gap is below ``margin``
+    (contact margin + skin), found through the hash grid (midpoints within
+    ``query_radius`` = h_max + 2 r_max + margin). The list stays valid until some vertex has
+    moved by half the skin."""
+    sa = wp.tid()
+    ia = seg_vertex[sa]
+    ra = vertex_rod[ia]
+    ma = mid[sa]
+    r2 = query_radius * query_radius
+    query = wp.hash_grid_query(grid, ma, query_radius)
+    sb = int(0)
+    while wp.hash_grid_query_next(query, sb):
+        if sb <= sa:
+            continue
+        # the grid returns whole cells, most of them out of reach
+        dm = mid[sb] - ma
+        if wp.dot(dm, dm) > r2:
+            continue
+        ib = seg_vertex[sb]
+        rb = vertex_rod[ib]
+        if rb == ra and (ib == ia + 1 or ia == ib + 1):
+            continue
+        # the distance between the two infinite lines bounds the segments' from below: a cheap
+        # reject of most pairs of long (rigid) rods, which the midpoint test alone keeps
+        da = x[ia + 1] - x[ia]
+        db = x[ib + 1] - x[ib]
+        c = wp.cross(da, db)
+        cc = wp.dot(c, c)
+        if cc > wp.float64(1.0e-12) * wp.dot(da, da) * wp.dot(db, db):
+            if wp.abs(wp.dot(x[ib] - x[ia], c)) / wp.sqrt(cc) - rod_radius[ra] - rod_radius[rb] > margin:
+                continue
+        # exact capsule gap at build time: only pairs that can come within reach are kept
+        pair = closest_points_segments(x[ia], x[ia + 1], x[ib], x[ib + 1])
+        if pair.dist - rod_radius[ra] - rod_radius[rb] > margin:
+            continue
+        k = wp.atomic_add(count, 0, 1)
+        if k < capacity:
+            pairs[k] = wp.vec2i(sa, sb)

@@ -1,30 +1,49 @@
-"""Rod elastics: bending predictor and inextensibility (stretch) projection.
+"""Rod elastics: bending, stretching and twist, each solved exactly per rod.
 
 Bending
     Discrete isotropic bending energy of a polyline with rest edge lengths h_j,
 
-        E_b = sum_i  (E I / (2 l_i)) |kappa_i|^2,
+        E_b = sum_i  (E I / (2 l_i)) |kappa_i - T_i|^2,
         kappa_i = (x_{i+1} - x_i) / h_i - (x_i - x_{i-1}) / h_{i-1},   l_i = (h_{i-1} + h_i) / 2,
 
-    which equals the discrete-elastic-rod energy E I (2 tan(theta_i / 2))^2 / (2 l_i) to
-    second order in the turning angle theta_i for inextensible edges.  It is quadratic in x
-    with a constant pentadiagonal Hessian K (one copy per coordinate), so the implicit step
-    (M + theta dt^2 K) v' = M v + dt (f - K x) costs one banded LDL^T solve per rod and is
-    unconditionally stable for theta = 1, symplectic Euler for theta = 0.
+    T_i the rest curvature vector in the current material frame (0 for straight rods,
+    :mod:`rodwarp.kernels.frames`). It equals the discrete-elastic-rod energy
+    E I (2 tan(theta_i / 2))^2 / (2 l_i) to second order in the turning angle for
+    inextensible edges. kappa is linear in x with a constant stencil, so the implicit step
+    of a straight rod costs one banded (pentadiagonal, three right-hand sides) solve.
 
 Stretching
     Edge lengths are compliant constraints C_j = |x_{j+1} - x_j| - h_j with compliance
-    h_j / (E A) (XPBD).  The constraints of one rod form a chain, so their system
-    (J W J^T + alpha / dt^2) is tridiagonal and solved exactly per rod (Thomas algorithm),
-    which removes the explicit axial limit dt < h / sqrt(E / rho) altogether.
+    h_j / (E A) (XPBD) along the start-of-step edge directions (SHAKE), a tridiagonal solve
+    per rod: no explicit axial limit dt < h / sqrt(E / rho).
+
+Twist
+    Each edge carries a material angle theta_j and spin omega_j = d(theta_j)/dt with axial
+    moment of inertia I_j = m_j r^2 / 2. The twist constraint at interior vertex i,
+    C = theta_i - theta_{i-1} + (reference twist) - (rest twist), has compliance
+    l_i / (G J), J = pi r^4 / 2: a tridiagonal solve per rod, unconditionally stable, so the
+    stiff torsion of steel does not limit the step.
+
+Curved rods
+    T_i turns with the material angles, dT_i/dtheta_j = b_i x T_i / 2 for j = i-1, i, so
+    bending and twist are coupled: the multipliers of both (4 per interior vertex) form one
+    symmetric block-pentadiagonal system of 4 x 4 blocks, factored once per step
+    (block LDL^T) and solved exactly in every Gauss-Seidel sweep.
+
+Every block works on the predicted configuration (x + dt v, theta + dt omega) and changes
+velocities only (XPBD in velocity form), so contacts and elastics share one velocity state
+and one mass metric inside the sweep and the converged step is implicit Euler.
 """
 
 import warp as wp
+
+from rodwarp.kernels.structs import RodFactors, RodModel, RodState
 
 wp.set_module_options({"enable_backward": False})
 
 F0 = wp.float64(0.0)
 F1 = wp.float64(1.0)
+HALF = wp.float64(0.5)
 
 
 @wp.func
@@ -37,51 +56,55 @@ def bend_coeffs(rest_length: wp.array(dtype=wp.float64), i: int):
     return cm, -(cm + cp), cp, wp.float64(2.0) / (hm + hp)
 
 
-@wp.kernel
-def rest_curvature_targets(
-    rod_start: wp.array(dtype=wp.int32),
-    vertex_rod: wp.array(dtype=wp.int32),
-    x: wp.array(dtype=wp.vec3d),
-    rest_x: wp.array(dtype=wp.vec3d),
-    rest_kappa: wp.array(dtype=wp.vec3d),
-    target: wp.array(dtype=wp.vec3d),
-):
-    """Per vertex: the rest curvature vector rotated into the rod's current local frame.
+# ----------------------------------------------------------------------------- predictor
 
-    The frame is the rotation that best maps the rest window x_{i-2..i+2} onto the current
-    one (polar decomposition of their cross-covariance), so a naturally curved rod keeps
-    its shape, bend plane and torsion up to a rigid motion. Evaluated at the start of the
-    step, it leaves each bending constraint linear in x (same matrix as for straight rods).
+
+@wp.kernel
+def velocity_predictor(
+    model: RodModel,
+    state: RodState,
+    btarget: wp.array(dtype=wp.vec3d),
+    torque: wp.array(dtype=wp.float64),
+    body_accel: wp.vec3d,
+    damping: wp.float64,
+    dt: wp.float64,
+    explicit_bending: int,
+    v_out: wp.array(dtype=wp.vec3d),
+    spin_out: wp.array(dtype=wp.float64),
+):
+    """One thread per rod: velocity after damping, body force, (explicit) bending; spin after
+    damping and the applied axial torques (N m per edge).
+
+    Damping first decays the old velocity, v / (1 + gamma dt), so that static forces, and
+    the constraint forces that balance them, are not scaled by it. Implicit bending is not
+    applied here but inside the Gauss-Seidel sweep, so every block uses the same mass metric
+    and the fixed point of the step is the true static equilibrium.
     """
-    i = wp.tid()
-    r = vertex_rod[i]
-    a = rod_start[r]
-    b = rod_start[r + 1]
-    if i <= a or i >= b - 1:
-        target[i] = wp.vec3d(F0, F0, F0)
-        return
-    j0 = wp.max(a, i - 2)
-    j1 = wp.min(b - 1, i + 2)
-    cx = wp.vec3d(F0, F0, F0)
-    cr = wp.vec3d(F0, F0, F0)
-    for j in range(j0, j1 + 1):
-        cx = cx + x[j]
-        cr = cr + rest_x[j]
-    inv = F1 / wp.float64(j1 - j0 + 1)
-    cx = cx * inv
-    cr = cr * inv
-    A = wp.mat33d()
-    for j in range(j0, j1 + 1):
-        A = A + wp.outer(x[j] - cx, rest_x[j] - cr)
-    U = wp.mat33d()
-    sig = wp.vec3d()
-    V = wp.mat33d()
-    wp.svd3(A, U, sig, V)
-    R = U * wp.transpose(V)
-    if wp.determinant(R) < F0:
-        D = wp.mat33d(F1, F0, F0, F0, F1, F0, F0, F0, -F1)
-        R = U * D * wp.transpose(V)
-    target[i] = R * rest_kappa[i]
+    r = wp.tid()
+    a = model.rod_start[r]
+    b = model.rod_start[r + 1]
+    decay = F1 / (F1 + damping * dt)
+    for i in range(a, b):
+        if model.inv_mass[i] == F0:
+            v_out[i] = state.v[i]
+        else:
+            v_out[i] = state.v[i] * decay + body_accel * dt
+        if model.inv_inertia[i] > F0:
+            spin_out[i] = state.spin[i] * decay + torque[i] * model.inv_inertia[i] * dt
+        else:
+            spin_out[i] = F0
+    if explicit_bending != 0 and b - a >= 3:
+        EI = model.bend_stiffness[r]
+        for i in range(a + 1, b - 1):
+            cm, c0, cp, wl = bend_coeffs(model.rest_length, i)
+            kap = state.x[i - 1] * cm + state.x[i] * c0 + state.x[i + 1] * cp - btarget[i]
+            f = kap * (EI * wl * dt)
+            v_out[i - 1] = v_out[i - 1] - f * (cm * model.inv_mass[i - 1])
+            v_out[i] = v_out[i] - f * (c0 * model.inv_mass[i])
+            v_out[i + 1] = v_out[i + 1] - f * (cp * model.inv_mass[i + 1])
+
+
+# ----------------------------------------------------------------------------- factors
 
 
 @wp.func
@@ -146,115 +169,51 @@ def pentadiagonal_substitute(
 
 
 @wp.kernel
-def velocity_predictor(
-    rod_start: wp.array(dtype=wp.int32),
-    x: wp.array(dtype=wp.vec3d),
-    v: wp.array(dtype=wp.vec3d),
-    mass: wp.array(dtype=wp.float64),
-    inv_mass: wp.array(dtype=wp.float64),
-    rest_length: wp.array(dtype=wp.float64),
-    bend_stiffness: wp.array(dtype=wp.float64),
-    body_accel: wp.vec3d,
-    damping: wp.float64,
-    dt: wp.float64,
-    explicit_bending: int,
-    btarget: wp.array(dtype=wp.vec3d),
-    v_out: wp.array(dtype=wp.vec3d),
-):
-    """One thread per rod: velocity after damping, body force and (explicit) bending.
-
-    Damping first decays the old velocity, v / (1 + gamma dt), so that static forces, and
-    the constraint forces that balance them, are not scaled by it.  Implicit bending is
-    not applied here but as compliant constraints inside the Gauss-Seidel sweep
-    (``bending_projection``), so that every block of the sweep uses the same mass metric and
-    the fixed point of the step is the true static equilibrium.
-    """
-    r = wp.tid()
-    a = rod_start[r]
-    b = rod_start[r + 1]
-    decay = F1 / (F1 + damping * dt)
-    for i in range(a, b):
-        if inv_mass[i] == F0:
-            v_out[i] = v[i]
-        else:
-            v_out[i] = v[i] * decay + body_accel * dt
-    if explicit_bending != 0 and b - a >= 3:
-        EI = bend_stiffness[r]
-        for i in range(a + 1, b - 1):
-            cm, c0, cp, wl = bend_coeffs(rest_length, i)
-            kap = x[i - 1] * cm + x[i] * c0 + x[i + 1] * cp - btarget[i]
-            f = kap * (EI * wl * dt)
-            v_out[i - 1] = v_out[i - 1] - f * (cm * inv_mass[i - 1])
-            v_out[i] = v_out[i] - f * (c0 * inv_mass[i])
-            v_out[i + 1] = v_out[i + 1] - f * (cp * inv_mass[i + 1])
-
-
-@wp.kernel
-def bending_factor(
-    rod_start: wp.array(dtype=wp.int32),
-    inv_mass: wp.array(dtype=wp.float64),
-    rest_length: wp.array(dtype=wp.float64),
-    bend_stiffness: wp.array(dtype=wp.float64),
-    dt: wp.float64,
-    bcoef: wp.array(dtype=wp.vec4d),
-    bdiag: wp.array(dtype=wp.float64),
-    boff1: wp.array(dtype=wp.float64),
-    boff2: wp.array(dtype=wp.float64),
-):
-    """One thread per rod: factor J W J^T + alpha / dt^2 of the bending constraints.
+def bending_factor(model: RodModel, dt: wp.float64, factors: RodFactors):
+    """One thread per straight rod: LDL^T of J W J^T + alpha / dt^2 of its bending constraints.
 
     Also stores each constraint's stencil and alpha / dt^2 in ``bcoef`` so the iterations
-    need no divisions.
-
-    kappa_i is linear in x, so this matrix depends only on masses, rest lengths, E I and dt:
-    it is factored once per step size and reused by every iteration of every step.
+    need no divisions. kappa_i is linear in x, so this matrix depends only on masses, rest
+    lengths, E I and dt: factored once per step size and reused by every step.
     """
     r = wp.tid()
-    a = rod_start[r]
-    b = rod_start[r + 1]
-    if b - a < 3:
+    a = model.rod_start[r]
+    b = model.rod_start[r + 1]
+    if b - a < 3 or model.curved[r] != 0:
         return
-    EI = bend_stiffness[r]
+    EI = model.bend_stiffness[r]
     inv_dt2 = F1 / (dt * dt)
     for i in range(a + 1, b - 1):
-        cm, c0, cp, wl = bend_coeffs(rest_length, i)
-        w0 = inv_mass[i]
-        wq = inv_mass[i + 1]
+        cm, c0, cp, wl = bend_coeffs(model.rest_length, i)
+        w0 = model.inv_mass[i]
+        wq = model.inv_mass[i + 1]
         at = inv_dt2 / (EI * wl)
-        bcoef[i] = wp.vec4d(cm, c0, cp, at)
-        bdiag[i] = cm * cm * inv_mass[i - 1] + c0 * c0 * w0 + cp * cp * wq + at
-        boff1[i] = F0
-        boff2[i] = F0
+        factors.bcoef[i] = wp.vec4d(cm, c0, cp, at)
+        factors.bdiag[i] = cm * cm * model.inv_mass[i - 1] + c0 * c0 * w0 + cp * cp * wq + at
+        factors.boff1[i] = F0
+        factors.boff2[i] = F0
         if i + 1 < b - 1:
-            dm, d0, dp, wl1 = bend_coeffs(rest_length, i + 1)
-            boff1[i] = c0 * dm * w0 + cp * d0 * wq
+            dm, d0, dp, wl1 = bend_coeffs(model.rest_length, i + 1)
+            factors.boff1[i] = c0 * dm * w0 + cp * d0 * wq
         if i + 2 < b - 1:
-            em, e0, ep, wl2 = bend_coeffs(rest_length, i + 2)
-            boff2[i] = cp * em * wq
-    pentadiagonal_factor(a + 1, b - 1, bdiag, boff1, boff2)
+            em, e0, ep, wl2 = bend_coeffs(model.rest_length, i + 2)
+            factors.boff2[i] = cp * em * wq
+    pentadiagonal_factor(a + 1, b - 1, factors.bdiag, factors.boff1, factors.boff2)
 
 
 @wp.kernel
-def stretch_factor(
-    rod_start: wp.array(dtype=wp.int32),
-    x: wp.array(dtype=wp.vec3d),
-    inv_mass: wp.array(dtype=wp.float64),
-    compliance: wp.array(dtype=wp.float64),
-    dt: wp.float64,
-    sdir: wp.array(dtype=wp.vec3d),
-    sdiag: wp.array(dtype=wp.float64),
-    soff: wp.array(dtype=wp.float64),
-):
+def stretch_twist_factor(model: RodModel, x: wp.array(dtype=wp.vec3d), dt: wp.float64, factors: RodFactors):
     """One thread per rod, once per step: edge directions at the start of the step and the
-    Thomas factors of J W J^T + alpha / dt^2 for the edge-length constraints.
+    Thomas factors of the edge-length constraints and (straight rods) of the twist
+    constraints.
 
-    SHAKE: corrections act along the start-of-step edges (fixed during the step), which keeps
-    the scheme symplectic (no energy drift) where PBD's current-edge choice dissipates, and
-    makes the matrix constant within the step.
+    SHAKE: stretch corrections act along the start-of-step edges (fixed during the step),
+    which keeps the scheme symplectic (no energy drift) and the matrix constant in the step.
+    A single-edge (rigid) rod's consistent mass enters through its cross term.
     """
     r = wp.tid()
-    a = rod_start[r]
-    b = rod_start[r + 1]
+    a = model.rod_start[r]
+    b = model.rod_start[r + 1]
     inv_dt2 = F1 / (dt * dt)
     for j in range(a, b - 1):
         e0 = x[j + 1] - x[j]
@@ -262,169 +221,316 @@ def stretch_factor(
         nj = wp.vec3d(F0, F0, F0)
         if l0 > F0:
             nj = e0 / l0
-        sdir[j] = nj
+        factors.sdir[j] = nj
     for j in range(a, b - 1):
-        d = inv_mass[j] + inv_mass[j + 1] + compliance[j] * inv_dt2
+        d = model.inv_mass[j] + model.inv_mass[j + 1] - wp.float64(2.0) * model.cross_inv_mass[j] + \
+            model.compliance[j] * inv_dt2
         off = F0
         if j + 1 < b - 1:
-            off = -inv_mass[j + 1] * wp.dot(sdir[j], sdir[j + 1])
+            off = -model.inv_mass[j + 1] * wp.dot(factors.sdir[j], factors.sdir[j + 1])
         if d <= wp.float64(1.0e-300):
             # both ends pinned: a row that changes nothing
             d = F1
             off = F0
         if j > a:
-            d = d - soff[j - 1] * soff[j - 1] / sdiag[j - 1]
-        sdiag[j] = d
-        soff[j] = off
+            d = d - factors.soff[j - 1] * factors.soff[j - 1] / factors.sdiag[j - 1]
+        factors.sdiag[j] = d
+        factors.soff[j] = off
+    if model.curved[r] != 0:
+        return
+    for i in range(a + 1, b - 1):
+        d = model.inv_inertia[i - 1] + model.inv_inertia[i] + model.twist_compliance[i] * inv_dt2
+        off = F0
+        if i + 1 < b - 1:
+            off = -model.inv_inertia[i]
+        if i > a + 1:
+            d = d - factors.toff[i - 1] * factors.toff[i - 1] / factors.tdiag[i - 1]
+        factors.tdiag[i] = d
+        factors.toff[i] = off
 
 
 @wp.func
-def project_rod(
-    r: int,
-    rod_start: wp.array(dtype=wp.int32),
-    x: wp.array(dtype=wp.vec3d),
-    inv_mass: wp.array(dtype=wp.float64),
-    rest_length: wp.array(dtype=wp.float64),
-    dt: wp.float64,
-    implicit_bending: int,
-    bcoef: wp.array(dtype=wp.vec4d),
-    btarget: wp.array(dtype=wp.vec3d),
-    bdiag: wp.array(dtype=wp.float64),
-    boff1: wp.array(dtype=wp.float64),
-    boff2: wp.array(dtype=wp.float64),
-    blam: wp.array(dtype=wp.vec3d),
-    brhs: wp.array(dtype=wp.vec3d),
-    bdl: wp.array(dtype=wp.vec3d),
-    compliance: wp.array(dtype=wp.float64),
-    sdir: wp.array(dtype=wp.vec3d),
-    sdiag: wp.array(dtype=wp.float64),
-    soff: wp.array(dtype=wp.float64),
-    slam: wp.array(dtype=wp.float64),
-    srhs: wp.array(dtype=wp.float64),
-    v: wp.array(dtype=wp.vec3d),
-):
+def coupled_block(model: RodModel, factors: RodFactors, inv_dt2: wp.float64, i: int, k: int):
+    """Block (i, k), k in {i, i+1, i+2}, of J W J^T + alpha / dt^2 for the bending (rows 0-2)
+    and twist (row 3) constraints of interior vertices i and k of a curved rod."""
+    A = wp.mat44d()
+    cm, c0, cp, wl = bend_coeffs(model.rest_length, i)
+    g = factors.gcouple[i]
+    if k == i:
+        xs = cm * cm * model.inv_mass[i - 1] + c0 * c0 * model.inv_mass[i] + cp * cp * model.inv_mass[i + 1]
+        wm = model.inv_inertia[i - 1]
+        wq = model.inv_inertia[i]
+        bb = wp.diag(wp.vec3d(xs, xs, xs)) + wp.outer(g, g) * (wm + wq) + \
+            wp.diag(wp.vec3d(F1, F1, F1)) * (inv_dt2 / (model.bend_stiffness[model.vertex_rod[i]] * wl))
+        bt = g * (-(wq - wm))
+        tt = wm + wq + model.twist_compliance[i] * inv_dt2
+        for p in range(3):
+            for q in range(3):
+                A[p, q] = bb[p, q]
+            A[p, 3] = bt[p]
+            A[3, p] = bt[p]
+        A[3, 3] = tt
+    elif k == i + 1:
+        dm, d0, dp, wl1 = bend_coeffs(model.rest_length, k)
+        gk = factors.gcouple[k]
+        wq = model.inv_inertia[i]  # the edge the two vertices share
+        xs = c0 * dm * model.inv_mass[i] + cp * d0 * model.inv_mass[i + 1]
+        bb = wp.diag(wp.vec3d(xs, xs, xs)) + wp.outer(g, gk) * wq
+        bt = g * wq  # bending i with twist k through theta_i (d C_k / d theta_i = -1)
+        tb = gk * (-wq)  # twist i with bending k through theta_i
+        for p in range(3):
+            for q in range(3):
+                A[p, q] = bb[p, q]
+            A[p, 3] = bt[p]
+            A[3, p] = tb[p]
+        A[3, 3] = -wq
+    else:
+        em, e0, ep, wl2 = bend_coeffs(model.rest_length, k)
+        xs = cp * em * model.inv_mass[i + 1]
+        for p in range(3):
+            A[p, p] = xs
+    return A
+
+
+@wp.kernel
+def curved_factor(model: RodModel, dt: wp.float64, factors: RodFactors):
+    """One thread per curved rod, once per step: block LDL^T of the coupled bending-twist
+    system (blocks from :func:`coupled_block`; stores D, D^-1, L[i+1, i], L[i+2, i])."""
+    r = wp.tid()
+    if model.curved[r] == 0:
+        return
+    a = model.rod_start[r] + 1
+    b = model.rod_start[r + 1] - 1
+    inv_dt2 = F1 / (dt * dt)
+    for i in range(a, b):
+        D = coupled_block(model, factors, inv_dt2, i, i)
+        if i - 1 >= a:
+            L1 = factors.cl1[i - 1]
+            D = D - L1 * factors.cd[i - 1] * wp.transpose(L1)
+        if i - 2 >= a:
+            L2 = factors.cl2[i - 2]
+            D = D - L2 * factors.cd[i - 2] * wp.transpose(L2)
+        Dinv = wp.inverse(D)
+        factors.cd[i] = D
+        factors.cinv[i] = Dinv
+        if i + 1 < b:
+            # A[i+1, i] = A[i, i+1]^T
+            T = wp.transpose(coupled_block(model, factors, inv_dt2, i, i + 1))
+            if i - 1 >= a:
+                T = T - factors.cl2[i - 1] * factors.cd[i - 1] * wp.transpose(factors.cl1[i - 1])
+            factors.cl1[i] = T * Dinv
+        if i + 2 < b:
+            factors.cl2[i] = wp.transpose(coupled_block(model, factors, inv_dt2, i, i + 2)) * Dinv
+
+
+# ----------------------------------------------------------------------------- projections
+
+
+@wp.func
+def project_straight_bending(r: int, a: int, b: int, model: RodModel, state: RodState, v: wp.array(dtype=wp.vec3d),
+                             factors: RodFactors, dt: wp.float64, inv_dt: wp.float64):
+    for i in range(a + 1, b - 1):
+        c = factors.bcoef[i]
+        Cb = (state.x[i - 1] + v[i - 1] * dt) * c[0] + (state.x[i] + v[i] * dt) * c[1] + \
+            (state.x[i + 1] + v[i + 1] * dt) * c[2]
+        factors.brhs[i] = -(Cb - factors.btarget[i]) - factors.blam[i] * c[3]
+    pentadiagonal_substitute(a + 1, b - 1, factors.bdiag, factors.boff1, factors.boff2, factors.brhs, factors.bdl)
+    for i in range(a + 1, b - 1):
+        c = factors.bcoef[i]
+        dlb = factors.bdl[i]
+        factors.blam[i] = factors.blam[i] + dlb
+        g = dlb * inv_dt
+        v[i - 1] = v[i - 1] + g * (c[0] * model.inv_mass[i - 1])
+        v[i] = v[i] + g * (c[1] * model.inv_mass[i])
+        v[i + 1] = v[i + 1] + g * (c[2] * model.inv_mass[i + 1])
+    return 0
+
+
+@wp.func
+def twist_residual(model: RodModel, state: RodState, spin: wp.array(dtype=wp.float64), factors: RodFactors,
+                   dt: wp.float64, i: int):
+    """Twist constraint C at interior vertex i at the predicted angles (rad)."""
+    return (state.theta[i] + spin[i] * dt) - (state.theta[i - 1] + spin[i - 1] * dt) + factors.ref_twist[i] - \
+        model.rest_twist[i]
+
+
+@wp.func
+def eliminated(r: wp.float64, diag: wp.array(dtype=wp.float64), off: wp.array(dtype=wp.float64),
+               rhs: wp.array(dtype=wp.float64), i: int, lo: int):
+    """Forward elimination of row i's right-hand side r in a symmetric tridiagonal system whose
+    rows lo..i-1 are factored already (``diag`` holds the pivots)."""
+    if i > lo:
+        return r - off[i - 1] / diag[i - 1] * rhs[i - 1]
+    return r
+
+
+@wp.func
+def back_substitute(diag: wp.array(dtype=wp.float64), off: wp.array(dtype=wp.float64),
+                    rhs: wp.array(dtype=wp.float64), lo: int, hi: int):
+    """Back substitution of the factored tridiagonal rows lo..hi-1: ``rhs`` becomes the solution."""
+    for k in range(hi - lo):
+        i = hi - 1 - k
+        val = rhs[i]
+        if i + 1 < hi:
+            val = val - off[i] * rhs[i + 1]
+        rhs[i] = val / diag[i]
+    return 0
+
+
+@wp.func
+def project_straight_twist(a: int, b: int, model: RodModel, state: RodState, spin: wp.array(dtype=wp.float64),
+                           factors: RodFactors, dt: wp.float64, inv_dt: wp.float64, inv_dt2: wp.float64):
+    for i in range(a + 1, b - 1):
+        rj = -twist_residual(model, state, spin, factors, dt, i) - model.twist_compliance[i] * inv_dt2 * factors.tlam[i]
+        factors.trhs[i] = eliminated(rj, factors.tdiag, factors.toff, factors.trhs, i, a + 1)
+    back_substitute(factors.tdiag, factors.toff, factors.trhs, a + 1, b - 1)
+    for i in range(a + 1, b - 1):
+        dl = factors.trhs[i]
+        factors.tlam[i] = factors.tlam[i] + dl
+        spin[i - 1] = spin[i - 1] - dl * inv_dt * model.inv_inertia[i - 1]
+        spin[i] = spin[i] + dl * inv_dt * model.inv_inertia[i]
+    return 0
+
+
+@wp.func
+def project_curved(a: int, b: int, model: RodModel, state: RodState, v: wp.array(dtype=wp.vec3d),
+                   spin: wp.array(dtype=wp.float64), factors: RodFactors, dt: wp.float64, inv_dt: wp.float64,
+                   inv_dt2: wp.float64):
+    """One exact solve of a curved rod's coupled bending-twist system (block LDL^T factors)."""
+    i0 = a + 1
+    i1 = b - 1
+    EI = model.bend_stiffness[model.vertex_rod[a]]
+    for i in range(i0, i1):
+        cm, c0, cp, wl = bend_coeffs(model.rest_length, i)
+        g = factors.gcouple[i]
+        kap = (state.x[i - 1] + v[i - 1] * dt) * cm + (state.x[i] + v[i] * dt) * c0 + (state.x[i + 1] + v[i + 1] * dt) * cp
+        T = factors.btarget[i] + g * ((spin[i - 1] + spin[i]) * dt)
+        lam = factors.clam[i]
+        ab = inv_dt2 / (EI * wl)
+        cb = -(kap - T) - wp.vec3d(lam[0], lam[1], lam[2]) * ab
+        ct = -twist_residual(model, state, spin, factors, dt, i) - model.twist_compliance[i] * inv_dt2 * lam[3]
+        z = wp.vec4d(cb[0], cb[1], cb[2], ct)
+        if i - 1 >= i0:
+            z = z - factors.cl1[i - 1] * factors.crhs[i - 1]
+        if i - 2 >= i0:
+            z = z - factors.cl2[i - 2] * factors.crhs[i - 2]
+        factors.crhs[i] = z
+    for k in range(i1 - i0):
+        i = i1 - 1 - k
+        y = factors.cinv[i] * factors.crhs[i]
+        if i + 1 < i1:
+            y = y - wp.transpose(factors.cl1[i]) * factors.cdl[i + 1]
+        if i + 2 < i1:
+            y = y - wp.transpose(factors.cl2[i]) * factors.cdl[i + 2]
+        factors.cdl[i] = y
+    for i in range(i0, i1):
+        cm, c0, cp, wl = bend_coeffs(model.rest_length, i)
+        dl = factors.cdl[i]
+        factors.clam[i] = factors.clam[i] + dl
+        db = wp.vec3d(dl[0], dl[1], dl[2]) * inv_dt
+        v[i - 1] = v[i - 1] + db * (cm * model.inv_mass[i - 1])
+        v[i] = v[i] + db * (c0 * model.inv_mass[i])
+        v[i + 1] = v[i + 1] + db * (cp * model.inv_mass[i + 1])
+        # dC_b / dtheta = -g for both edges, dC_t / dtheta_{i-1, i} = -1, +1
+        gb = wp.dot(factors.gcouple[i], db)
+        spin[i - 1] = spin[i - 1] + (-gb - dl[3] * inv_dt) * model.inv_inertia[i - 1]
+        spin[i] = spin[i] + (-gb + dl[3] * inv_dt) * model.inv_inertia[i]
+    return 0
+
+
+@wp.func
+def project_rod(r: int, model: RodModel, state: RodState, v: wp.array(dtype=wp.vec3d),
+                spin: wp.array(dtype=wp.float64), factors: RodFactors, dt: wp.float64):
     """One exact XPBD (Newton) iteration on rod r's own constraints; returns the largest
     edge-length error (m) found before it.
 
-    First all bending constraints (implicit bending only), then all edge-length
-    constraints, each block solved directly with the factors prepared for this step.  Works
-    on the predicted positions x + dt v and changes v only, so contacts, bending and
-    stretching share one velocity state and one mass metric inside the Gauss-Seidel sweep.
+    Bending (implicit bending only) and twist first, then the edge lengths, each block
+    solved directly with the factors prepared for this step.
     """
-    a = rod_start[r]
-    b = rod_start[r + 1]
+    a = model.rod_start[r]
+    b = model.rod_start[r + 1]
     inv_dt = F1 / dt
     inv_dt2 = inv_dt * inv_dt
-    if implicit_bending != 0 and b - a >= 3:
-        for i in range(a + 1, b - 1):
-            c = bcoef[i]
-            Cb = (x[i - 1] + v[i - 1] * dt) * c[0] + (x[i] + v[i] * dt) * c[1] + (x[i + 1] + v[i + 1] * dt) * c[2]
-            brhs[i] = -(Cb - btarget[i]) - blam[i] * c[3]
-        pentadiagonal_substitute(a + 1, b - 1, bdiag, boff1, boff2, brhs, bdl)
-        for i in range(a + 1, b - 1):
-            c = bcoef[i]
-            dlb = bdl[i]
-            blam[i] = blam[i] + dlb
-            g = dlb * inv_dt
-            v[i - 1] = v[i - 1] + g * (c[0] * inv_mass[i - 1])
-            v[i] = v[i] + g * (c[1] * inv_mass[i])
-            v[i + 1] = v[i + 1] + g * (c[2] * inv_mass[i + 1])
+    if b - a >= 3:
+        if model.curved[r] != 0:
+            project_curved(a, b, model, state, v, spin, factors, dt, inv_dt, inv_dt2)
+        else:
+            if factors.implicit_bending != 0:
+                project_straight_bending(r, a, b, model, state, v, factors, dt, inv_dt)
+            project_straight_twist(a, b, model, state, spin, factors, dt, inv_dt, inv_dt2)
 
     worst = F0
     for j in range(a, b - 1):
-        e = (x[j + 1] + v[j + 1] * dt) - (x[j] + v[j] * dt)
-        cval = wp.length(e) - rest_length[j]
+        e = (state.x[j + 1] + v[j + 1] * dt) - (state.x[j] + v[j] * dt)
+        cval = wp.length(e) - model.rest_length[j]
         worst = wp.max(worst, wp.abs(cval))
-        rj = -cval - compliance[j] * inv_dt2 * slam[j]
-        if j > a:
-            rj = rj - soff[j - 1] / sdiag[j - 1] * srhs[j - 1]
-        srhs[j] = rj
-    for k in range(b - a - 1):
-        j = b - 2 - k
-        val = srhs[j]
-        if j + 1 < b - 1:
-            val = val - soff[j] * srhs[j + 1]
-        srhs[j] = val / sdiag[j]
+        rj = -cval - model.compliance[j] * inv_dt2 * factors.slam[j]
+        factors.srhs[j] = eliminated(rj, factors.sdiag, factors.soff, factors.srhs, j, a)
+    back_substitute(factors.sdiag, factors.soff, factors.srhs, a, b - 1)
     for j in range(a, b - 1):
-        dl = srhs[j]
-        slam[j] = slam[j] + dl
-        imp = sdir[j] * (dl * inv_dt)
-        v[j] = v[j] - imp * inv_mass[j]
-        v[j + 1] = v[j + 1] + imp * inv_mass[j + 1]
+        dl = factors.srhs[j]
+        factors.slam[j] = factors.slam[j] + dl
+        imp = factors.sdir[j] * (dl * inv_dt)
+        c = model.cross_inv_mass[j]
+        v[j] = v[j] - imp * (model.inv_mass[j] - c)
+        v[j + 1] = v[j + 1] + imp * (model.inv_mass[j + 1] - c)
     return worst
 
 
 @wp.kernel
-def rod_projection(
-    rod_start: wp.array(dtype=wp.int32),
-    x: wp.array(dtype=wp.vec3d),
-    inv_mass: wp.array(dtype=wp.float64),
-    rest_length: wp.array(dtype=wp.float64),
-    dt: wp.float64,
-    implicit_bending: int,
-    bcoef: wp.array(dtype=wp.vec4d),
-    btarget: wp.array(dtype=wp.vec3d),
-    bdiag: wp.array(dtype=wp.float64),
-    boff1: wp.array(dtype=wp.float64),
-    boff2: wp.array(dtype=wp.float64),
-    blam: wp.array(dtype=wp.vec3d),
-    brhs: wp.array(dtype=wp.vec3d),
-    bdl: wp.array(dtype=wp.vec3d),
-    compliance: wp.array(dtype=wp.float64),
-    sdir: wp.array(dtype=wp.vec3d),
-    sdiag: wp.array(dtype=wp.float64),
-    soff: wp.array(dtype=wp.float64),
-    slam: wp.array(dtype=wp.float64),
-    srhs: wp.array(dtype=wp.float64),
-    v: wp.array(dtype=wp.vec3d),
-    residual: wp.array(dtype=wp.float64),
-):
+def rod_projection(model: RodModel, state: RodState, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64),
+                   factors: RodFactors, dt: wp.float64, residual: wp.array(dtype=wp.float64)):
     """One thread per rod: ``project_rod``. Rods share no vertex, so no races."""
     r = wp.tid()
-    worst = project_rod(r, rod_start, x, inv_mass, rest_length, dt, implicit_bending, bcoef, btarget, bdiag, boff1,
-                        boff2,
-                        blam, brhs, bdl, compliance, sdir, sdiag, soff, slam, srhs, v)
-    wp.atomic_max(residual, 0, worst)
+    wp.atomic_max(residual, 0, project_rod(r, model, state, v, spin, factors, dt))
+
+
+# ----------------------------------------------------------------------------- energy, integration
 
 
 @wp.kernel
 def elastic_energy(
-    rod_start: wp.array(dtype=wp.int32),
-    x: wp.array(dtype=wp.vec3d),
-    v: wp.array(dtype=wp.vec3d),
-    mass: wp.array(dtype=wp.float64),
-    rest_length: wp.array(dtype=wp.float64),
-    compliance: wp.array(dtype=wp.float64),
-    bend_stiffness: wp.array(dtype=wp.float64),
+    model: RodModel,
+    state: RodState,
     btarget: wp.array(dtype=wp.vec3d),
+    ref_twist: wp.array(dtype=wp.float64),
     body_accel: wp.vec3d,
     out: wp.array(dtype=wp.float64),
 ):
-    """Per rod: kinetic, potential (body force), bending and stretching energy (J)."""
+    """Per rod: kinetic (translation and spin), potential (body force), bending, stretching
+    and twist energy (J); ``btarget`` and ``ref_twist`` as computed by ``step_frames``."""
     r = wp.tid()
-    a = rod_start[r]
-    b = rod_start[r + 1]
+    a = model.rod_start[r]
+    b = model.rod_start[r + 1]
     ek = F0
     ep = F0
     eb = F0
     es = F0
-    EI = bend_stiffness[r]
-    half = wp.float64(0.5)
+    et = F0
+    EI = model.bend_stiffness[r]
     for i in range(a, b):
-        ek = ek + half * mass[i] * wp.dot(v[i], v[i])
-        ep = ep - mass[i] * wp.dot(body_accel, x[i])
+        ek = ek + HALF * model.mass[i] * wp.dot(state.v[i], state.v[i])
+        ep = ep - model.mass[i] * wp.dot(body_accel, state.x[i])
     for j in range(a, b - 1):
-        stretch = wp.length(x[j + 1] - x[j]) - rest_length[j]
-        if compliance[j] > F0:
-            es = es + half * stretch * stretch / compliance[j]
+        # consistent-mass cross term (rigid rods) and spin about the axis
+        ek = ek + model.cross_mass[j] * wp.dot(state.v[j], state.v[j + 1])
+        ek = ek + HALF * model.inertia[j] * state.spin[j] * state.spin[j]
+        ep = ep - model.cross_mass[j] * wp.dot(body_accel, state.x[j] + state.x[j + 1])
+        stretch = wp.length(state.x[j + 1] - state.x[j]) - model.rest_length[j]
+        if model.compliance[j] > F0:
+            es = es + HALF * stretch * stretch / model.compliance[j]
     for i in range(a + 1, b - 1):
-        cm, c0, cp, wl = bend_coeffs(rest_length, i)
-        kap = x[i - 1] * cm + x[i] * c0 + x[i + 1] * cp - btarget[i]
-        eb = eb + half * EI * wl * wp.dot(kap, kap)
+        cm, c0, cp, wl = bend_coeffs(model.rest_length, i)
+        kap = state.x[i - 1] * cm + state.x[i] * c0 + state.x[i + 1] * cp - btarget[i]
+        eb = eb + HALF * EI * wl * wp.dot(kap, kap)
+        tw = state.theta[i] - state.theta[i - 1] + ref_twist[i] - model.rest_twist[i]
+        if model.twist_compliance[i] > F0:
+            et = et + HALF * tw * tw / model.twist_compliance[i]
     wp.atomic_add(out, 0, ek)
     wp.atomic_add(out, 1, ep)
     wp.atomic_add(out, 2, eb)
     wp.atomic_add(out, 3, es)
+    wp.atomic_add(out, 4, et)
 
 
 @wp.kernel

@@ -1,263 +1,461 @@
-"""Contact and Coulomb friction by projected Gauss-Seidel on velocities (Moreau-Jean).
+"""Contact and Coulomb friction at the rods' surfaces, by projected Gauss-Seidel on velocities.
 
-Each contact holds an accumulated impulse P (N s).  One visit solves the contact's local
-problem exactly: the velocity-weighted inverse mass of a point on a segment is isotropic
-(w I), so non-penetration decouples from friction and the Coulomb cone |P_t| <= mu P_n is
-met by projecting P_t onto a disc: the exact cone, no pyramid, and true sticking (the
-tangential relative velocity is driven to zero whenever the disc is not reached).
+Each contact holds an accumulated impulse P (N s) acting at the two surface points
+(x_a(s) - r_a n on rod a, x_b(t) + r_b n on rod b; n points from b to a); the local problem
+of one contact is solved exactly, so a sweep is block Gauss-Seidel with exact blocks.
 
-Contacts that share a vertex must not be visited concurrently.  On the CPU a launch runs its
-threads in order, which is plain sequential Gauss-Seidel; on a GPU the contacts are
-coloured first (``color_claim`` / ``color_commit``) and each colour is one launch.
+The velocity of a surface point, and how it responds to an impulse there (the mobility W,
+3 x 3), come from the rod model:
+
+* elastic rods: the centreline velocity interpolated on the edge plus the edge's spin omega
+  about its tangent t acting on the surface offset o (= -r n on rod a): u = v(s) + omega t x o;
+  W = w I + (1 / I_edge) (t x o)(t x o)^T, w the point's entry of the tridiagonal inverse mass;
+* rigid rods: the exact rigid-body mobility of the capsule at the point, lever r from its
+  centre of mass: W = I / m - [r]x I^-1 [r]x with I^-1 = (I - t t^T) / I_perp + t t^T / I_axis,
+  and the impulse applied as a rigid-body velocity change (translation, rotation across the
+  axis on the two vertices, spin about it), so contacts never fight the rod's length
+  constraint (a two-vertex rod with its vertex inverse masses would, and Gauss-Seidel would
+  converge slowly on every axial load: a rod standing on its end, a pile's side walls).
+
+The contact problem with W = W_a + W_b: the normal impulse keeps the normal velocity above
+its target (speculative: close an open gap at most to touching) with P_n >= 0; the
+tangential impulse satisfies the Coulomb cone |P_t| <= mu P_n exactly: it sticks when
+-W_t^-1 u_t lies inside the disc, else it slides on the cone's edge with maximal dissipation,
+P_t = -(W_t + gamma I)^-1 u_t, gamma from Newton's method on 1 / |P_t(gamma)| (concave, so the
+iteration converges monotonically; one step when W_t is isotropic). No pyramid, true
+sticking. When W couples the normal and tangential parts (rigid rods, contacts off the
+segments' interiors) the two are alternated to convergence within the contact.
+
+Contacts that share a vertex (hence an edge) must not be visited concurrently. On the CPU a
+launch runs its threads in order (sequential Gauss-Seidel); on a GPU rod-rod contacts are
+coloured first (``color_claim`` / ``color_commit``) and each colour is one launch, and wall
+contacts run one thread per rod.
 """
 
 import warp as wp
+
+from rodwarp.kernels.narrowphase import any_perpendicular
+from rodwarp.kernels.structs import ContactFrame, ContactSide, RodContacts, RodModel, StepParams, WallContacts, Walls
 
 wp.set_module_options({"enable_backward": False})
 
 F0 = wp.float64(0.0)
 F1 = wp.float64(1.0)
+HALF = wp.float64(0.5)
+FAR = wp.float64(1.0e299)
 
 
 @wp.func
-def approach_target(gap: wp.float64, dt: wp.float64, beta: wp.float64, max_push: wp.float64):
-    """Lowest normal relative velocity allowed this step (m/s)."""
+def approach_target(gap: wp.float64, params: StepParams):
+    """Lowest normal relative velocity allowed this step (m/s): close an open gap at most to
+    touching; an overlap is not pushed apart by velocity (the position projection after the
+    step removes it), so a resting contact's velocity problem repeats from step to step."""
     if gap >= F0:
-        return -gap / dt
-    return wp.min(-beta * gap / dt, max_push)
+        return -gap / params.dt
+    return F0
+
+
+@wp.func
+def coulomb_2d(u1: wp.float64, u2: wp.float64, w11: wp.float64, w12: wp.float64, w22: wp.float64,
+               limit: wp.float64):
+    """Tangential impulse (p1, p2) with u + W p = 0 when |p| <= limit (sticking), else on the
+    disc's edge with u + W p anti-parallel to p (sliding with maximal dissipation)."""
+    if limit <= F0:
+        return wp.vec2d(F0, F0)
+    det0 = w11 * w22 - w12 * w12
+    y1 = (w22 * u1 - w12 * u2) / det0
+    y2 = (w11 * u2 - w12 * u1) / det0
+    ny = wp.sqrt(y1 * y1 + y2 * y2)
+    if ny <= limit:
+        return wp.vec2d(-y1, -y2)  # sticks: the exact impulse
+    gamma = F0
+    for it in range(40):
+        if ny <= limit * (F1 + wp.float64(1.0e-10)):
+            break
+        m11 = w11 + gamma
+        m22 = w22 + gamma
+        det = m11 * m22 - w12 * w12
+        # Newton on phi(gamma) = 1 / |y| - 1 / limit; phi' = y^T (W + gamma I)^-1 y / |y|^3
+        z1 = (m22 * y1 - w12 * y2) / det
+        z2 = (m11 * y2 - w12 * y1) / det
+        gamma = gamma + (ny / limit - F1) * ny * ny / (y1 * z1 + y2 * z2)
+        m11 = w11 + gamma
+        m22 = w22 + gamma
+        det = m11 * m22 - w12 * w12
+        y1 = (m22 * u1 - w12 * u2) / det
+        y2 = (m11 * u2 - w12 * u1) / det
+        ny = wp.sqrt(y1 * y1 + y2 * y2)
+    sc = limit / ny
+    return wp.vec2d(-y1 * sc, -y2 * sc)
+
+
+@wp.func
+def local_frame(W: wp.mat33d, n: wp.vec3d, target: wp.float64):
+    """The parts of a contact's local problem fixed within a step: mobility, tangent basis,
+    the mobility's entries in it, whether normal and tangent couple, the normal target."""
+    f = ContactFrame()
+    f.W = W
+    e1 = any_perpendicular(n)
+    e2 = wp.cross(n, e1)
+    f.e1 = e1
+    Wn = W * n
+    wnn = wp.dot(n, Wn)
+    f.k = wp.vec4d(wnn, wp.dot(e1, W * e1), wp.dot(e1, W * e2), wp.dot(e2, W * e2))
+    # coupling of normal and tangential parts (zero for an elastic contact at the segments' interiors)
+    f.coupled = int(wp.abs(wp.dot(e1, Wn)) + wp.abs(wp.dot(e2, Wn)) > wp.float64(1.0e-12) * wnn)
+    f.target = target
+    return f
+
+
+@wp.func
+def solve_local(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.float64):
+    """The exact impulse of one contact: u the contact velocity with the current impulse P
+    applied, ``f`` its :func:`local_frame`; returns the new impulse."""
+    wnn = f.k[0]
+    if wnn <= F0:
+        return P
+    W = f.W
+    uf = u - W * P  # the velocity this contact's impulse acts on
+    e1 = f.e1
+    e2 = wp.cross(n, e1)
+    pn = wp.dot(P, n)
+    pt = P - n * pn
+    for it in range(2):
+        pn_new = wp.max(F0, (f.target - wp.dot(uf + W * pt, n)) / wnn)
+        c = uf + (W * n) * pn_new
+        q = coulomb_2d(wp.dot(c, e1), wp.dot(c, e2), f.k[1], f.k[2], f.k[3], mu * pn_new)
+        pt_new = e1 * q[0] + e2 * q[1]
+        change = wp.abs(pn_new - pn) + wp.length(pt_new - pt)
+        pn = pn_new
+        pt = pt_new
+        if f.coupled == 0 or change <= wp.float64(1.0e-9) * (pn + wp.length(pt)):
+            break
+    return n * pn + pt
+
+
+@wp.func
+def point_weights(w0: wp.float64, w1: wp.float64, c: wp.float64, s: wp.float64):
+    """Rows of the tridiagonal M^-1 at a point (1 - s, s) of an edge: the velocity change of
+    each end per unit impulse, and the point's own inverse mass."""
+    q0 = (F1 - s) * w0 + s * c
+    q1 = (F1 - s) * c + s * w1
+    return q0, q1, (F1 - s) * q0 + s * q1
+
+
+@wp.func
+def contact_side(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d), i: int,
+                 s: wp.float64, off: wp.vec3d):
+    """The side of a contact at x(s) + off on the edge starting at vertex i."""
+    c = ContactSide()
+    c.i = i
+    c.s = s
+    t = tangent[i]
+    c.t = t
+    r = model.vertex_rod[i]
+    c.ispin = model.inv_inertia[i]
+    c.length = model.rest_length[i]
+    c.rigid = model.rigid[r]
+    if c.rigid != 0:
+        xc = (x[i] + x[i + 1]) * HALF
+        c.arm0 = x[i] - xc
+        c.arm1 = x[i + 1] - xc
+        c.lever = c.arm0 + (x[i + 1] - x[i]) * s + off
+        ip = model.rod_inv_iperp[r]
+        c.iinv = wp.diag(wp.vec3d(ip, ip, ip)) + wp.outer(t, t) * (c.ispin - ip)
+        c.im = model.rod_inv_mass[r]
+        R = wp.skew(c.lever)
+        c.W = wp.diag(wp.vec3d(c.im, c.im, c.im)) - R * c.iinv * R
+    else:
+        q0, q1, w = point_weights(model.inv_mass[i], model.inv_mass[i + 1], model.cross_inv_mass[i], s)
+        c.q0 = q0
+        c.q1 = q1
+        c.g = wp.cross(t, off)
+        c.W = wp.diag(wp.vec3d(w, w, w)) + wp.outer(c.g, c.g) * c.ispin
+    return c
+
+
+@wp.func
+def side_velocity(c: ContactSide, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
+    """Velocity of the side's material point (m/s)."""
+    i = c.i
+    if c.rigid != 0:
+        # rigid body: v_c + omega x lever, omega = rotation across the axis + spin about it
+        w = wp.cross(c.t, v[i + 1] - v[i]) / c.length + c.t * spin[i]
+        return (v[i] + v[i + 1]) * HALF + wp.cross(w, c.lever)
+    return v[i] * (F1 - c.s) + v[i + 1] * c.s + c.g * spin[i]
+
+
+@wp.func
+def side_apply(c: ContactSide, P: wp.vec3d, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
+    """Apply impulse P at the side's point (a rigid-body velocity change for rigid rods)."""
+    i = c.i
+    if c.rigid != 0:
+        dvc = P * c.im
+        dw = c.iinv * wp.cross(c.lever, P)
+        ws = wp.dot(dw, c.t)
+        wperp = dw - c.t * ws
+        v[i] = v[i] + dvc + wp.cross(wperp, c.arm0)
+        v[i + 1] = v[i + 1] + dvc + wp.cross(wperp, c.arm1)
+        spin[i] = spin[i] + ws
+    else:
+        v[i] = v[i] + P * c.q0
+        v[i + 1] = v[i + 1] + P * c.q1
+        spin[i] = spin[i] + wp.dot(P, c.g) * c.ispin
+    return 0
+
+
+@wp.func
+def side_apply_atomic(c: ContactSide, P: wp.vec3d, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
+    """``side_apply`` with atomic adds, for launches whose threads may share a rod."""
+    i = c.i
+    if c.rigid != 0:
+        dvc = P * c.im
+        dw = c.iinv * wp.cross(c.lever, P)
+        ws = wp.dot(dw, c.t)
+        wperp = dw - c.t * ws
+        wp.atomic_add(v, i, dvc + wp.cross(wperp, c.arm0))
+        wp.atomic_add(v, i + 1, dvc + wp.cross(wperp, c.arm1))
+        wp.atomic_add(spin, i, ws)
+    else:
+        wp.atomic_add(v, i, P * c.q0)
+        wp.atomic_add(v, i + 1, P * c.q1)
+        wp.atomic_add(spin, i, wp.dot(P, c.g) * c.ispin)
+    return 0
+
+
+@wp.func
+def rod_contact_sides(k: int, model: RodModel, x: wp.array(dtype=wp.vec3d), contacts: RodContacts,
+                      tangent: wp.array(dtype=wp.vec3d)):
+    sp = contacts.seg[k]
+    ia = model.seg_vertex[sp[0]]
+    ib = model.seg_vertex[sp[1]]
+    n = contacts.normal[k]
+    a = contact_side(model, x, tangent, ia, contacts.st[k][0], n * (-model.radius[model.vertex_rod[ia]]))
+    b = contact_side(model, x, tangent, ib, contacts.st[k][1], n * model.radius[model.vertex_rod[ib]])
+    return a, b
+
+
+@wp.func
+def relaxed(P_new: wp.vec3d, P: wp.vec3d, n: wp.vec3d, mu: wp.float64, relax: wp.float64):
+    """P + relax (P_new - P), projected back onto the friction cone (relax = 1: P_new)."""
+    if relax == F1:
+        return P_new
+    R = P + (P_new - P) * relax
+    pn = wp.max(wp.dot(R, n), F0)
+    pt = R - n * wp.dot(R, n)
+    lt = wp.length(pt)
+    if lt > mu * pn and lt > F0:
+        pt = pt * (mu * pn / lt)
+    return n * pn + pt
+
+
+@wp.kernel
+def prepare_rod_contacts(
+    model: RodModel,
+    x: wp.array(dtype=wp.vec3d),
+    contacts: RodContacts,
+    tangent: wp.array(dtype=wp.vec3d),
+    params: StepParams,
+    frames: wp.array(dtype=ContactFrame),
+):
+    """Per contact, once per step: its two sides, mobility, tangent basis and normal target."""
+    k = wp.tid()
+    if k >= contacts.count:
+        return
+    a, b = rod_contact_sides(k, model, x, contacts, tangent)
+    f = local_frame(a.W + b.W, contacts.normal[k], approach_target(contacts.gap[k], params))
+    f.a = a
+    f.b = b
+    frames[k] = f
 
 
 @wp.func
 def solve_rod_contact(
     k: int,
-    seg: wp.array(dtype=wp.vec2i),
-    seg_vertex: wp.array(dtype=wp.int32),
-    st: wp.array(dtype=wp.vec2d),
-    normal: wp.array(dtype=wp.vec3d),
-    gap: wp.array(dtype=wp.float64),
-    inv_mass: wp.array(dtype=wp.float64),
-    mu: wp.float64,
-    dt: wp.float64,
-    beta: wp.float64,
-    max_push: wp.float64,
+    frames: wp.array(dtype=ContactFrame),
     impulse: wp.array(dtype=wp.vec3d),
+    normal: wp.array(dtype=wp.vec3d),
+    params: StepParams,
     v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
 ):
-    """Exact local solve of rod-rod contact k; returns the velocity change it caused (m/s)."""
-    sp = seg[k]
-    ia = seg_vertex[sp[0]]
-    ib = seg_vertex[sp[1]]
-    s = st[k][0]
-    t = st[k][1]
-    a0 = F1 - s
-    a1 = s
-    b0 = F1 - t
-    b1 = t
-    wa0 = inv_mass[ia] * a0
-    wa1 = inv_mass[ia + 1] * a1
-    wb0 = inv_mass[ib] * b0
-    wb1 = inv_mass[ib + 1] * b1
-    w = wa0 * a0 + wa1 * a1 + wb0 * b0 + wb1 * b1
-    if w <= F0:
-        return F0
-    n = normal[k]
-    u = v[ia] * a0 + v[ia + 1] * a1 - v[ib] * b0 - v[ib + 1] * b1
+    """Exact local solve of rod-rod contact k (its frame, accumulated impulse and normal);
+    returns the velocity change it caused (m/s). Takes the arrays it reads rather than the
+    model and contact bundles: the innermost call of every sweep, so nothing else is copied."""
+    f = frames[k]
+    u = side_velocity(f.a, v, spin) - side_velocity(f.b, v, spin)
     P = impulse[k]
-    pn = wp.dot(P, n)
-    pt = P - n * pn
-    target = approach_target(gap[k], dt, beta, max_push)
-    un = wp.dot(u, n)
-    pn_new = wp.max(F0, pn + (target - un) / w)
-    u = u + n * ((pn_new - pn) * w)
-    ut = u - n * wp.dot(u, n)
-    pt_new = pt - ut / w
-    lim = mu * pn_new
-    ptl = wp.length(pt_new)
-    if ptl > lim:
-        if ptl > F0:
-            pt_new = pt_new * (lim / ptl)
-    dP = n * (pn_new - pn) + (pt_new - pt)
-    v[ia] = v[ia] + dP * wa0
-    v[ia + 1] = v[ia + 1] + dP * wa1
-    v[ib] = v[ib] - dP * wb0
-    v[ib + 1] = v[ib + 1] - dP * wb1
-    impulse[k] = n * pn_new + pt_new
-    return wp.length(dP) * w
+    n = normal[k]
+    P_new = relaxed(solve_local(u, f, n, P, params.mu), P, n, params.mu, params.relax)
+    dP = P_new - P
+    side_apply(f.a, dP, v, spin)
+    side_apply(f.b, -dP, v, spin)
+    impulse[k] = P_new
+    return wp.length(f.W * dP)
 
 
 @wp.kernel
 def solve_rod_contacts(
     ids: wp.array(dtype=wp.int32),
     use_ids: int,
-    seg: wp.array(dtype=wp.vec2i),
-    seg_vertex: wp.array(dtype=wp.int32),
-    st: wp.array(dtype=wp.vec2d),
-    normal: wp.array(dtype=wp.vec3d),
-    gap: wp.array(dtype=wp.float64),
-    inv_mass: wp.array(dtype=wp.float64),
-    mu: wp.float64,
-    dt: wp.float64,
-    beta: wp.float64,
-    max_push: wp.float64,
-    impulse: wp.array(dtype=wp.vec3d),
+    model: RodModel,
+    contacts: RodContacts,
+    frames: wp.array(dtype=ContactFrame),
+    params: StepParams,
     v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
     residual: wp.array(dtype=wp.float64),
 ):
     """One thread per contact of one colour (GPU) or of all contacts in order (CPU)."""
     k = wp.tid()
     if use_ids != 0:
         k = ids[k]
-    du = solve_rod_contact(k, seg, seg_vertex, st, normal, gap, inv_mass, mu, dt, beta, max_push, impulse, v)
-    wp.atomic_max(residual, 0, du)
+    wp.atomic_max(residual, 0, solve_rod_contact(k, frames, contacts.impulse, contacts.normal, params, v, spin))
 
 
 @wp.kernel
 def apply_rod_impulses(
-    count: int,
-    seg: wp.array(dtype=wp.vec2i),
-    seg_vertex: wp.array(dtype=wp.int32),
-    st: wp.array(dtype=wp.vec2d),
-    inv_mass: wp.array(dtype=wp.float64),
-    impulse: wp.array(dtype=wp.vec3d),
+    contacts: RodContacts,
+    frames: wp.array(dtype=ContactFrame),
     v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
 ):
     """Warm start: apply the reused impulses once before iterating (atomics: any order)."""
     k = wp.tid()
-    if k >= count:
+    if k >= contacts.count:
         return
-    sp = seg[k]
-    ia = seg_vertex[sp[0]]
-    ib = seg_vertex[sp[1]]
-    s = st[k][0]
-    t = st[k][1]
-    P = impulse[k]
-    wp.atomic_add(v, ia, P * ((F1 - s) * inv_mass[ia]))
-    wp.atomic_add(v, ia + 1, P * (s * inv_mass[ia + 1]))
-    wp.atomic_sub(v, ib, P * ((F1 - t) * inv_mass[ib]))
-    wp.atomic_sub(v, ib + 1, P * (t * inv_mass[ib + 1]))
+    P = contacts.impulse[k]
+    side_apply_atomic(frames[k].a, P, v, spin)
+    side_apply_atomic(frames[k].b, -P, v, spin)
 
 
-@wp.kernel
-def prepare_plane_contacts(
-    x: wp.array(dtype=wp.vec3d),
-    v: wp.array(dtype=wp.vec3d),
-    vertex_rod: wp.array(dtype=wp.int32),
-    rod_radius: wp.array(dtype=wp.float64),
-    inv_mass: wp.array(dtype=wp.float64),
-    plane_normal: wp.array(dtype=wp.vec3d),
-    plane_offset: wp.array(dtype=wp.float64),
-    plane_vel: wp.array(dtype=wp.vec3d),
-    n_planes: int,
-    base_margin: wp.float64,
-    dt: wp.float64,
-    warm: wp.float64,
-    plane_gap: wp.array(dtype=wp.float64),
-    plane_impulse: wp.array(dtype=wp.vec3d),
-    v_out: wp.array(dtype=wp.vec3d),
-    active: wp.array(dtype=wp.int32),
-    n_active: wp.array(dtype=wp.int32),
-):
-    """Per vertex: gaps to every plane at the start of the step; warm-started impulses;
-    the vertex joins the ``active`` list when any plane is within reach.
-
-    A capsule touches a plane first at a segment endpoint, so vertex spheres suffice.
-    Inactive contacts get gap = +inf and zero impulse.
-    """
-    i = wp.tid()
-    r = rod_radius[vertex_rod[i]]
-    vi = v[i]
-    dv = wp.vec3d(F0, F0, F0)
-    any_active = int(0)
-    for p in range(n_planes):
-        k = i * n_planes + p
-        n = plane_normal[p]
-        g = wp.dot(n, x[i]) - plane_offset[p] - r
-        closing = wp.max(-wp.dot(vi - plane_vel[p], n), F0)
-        if g < base_margin + closing * dt * wp.float64(2.0):
-            plane_gap[k] = g
-            P = plane_impulse[k] * warm
-            pn = wp.max(wp.dot(P, n), F0)
-            P = n * pn + (P - n * wp.dot(P, n))
-            plane_impulse[k] = P
-            dv = dv + P * inv_mass[i]
-            any_active = 1
-        else:
-            plane_gap[k] = wp.float64(1.0e300)
-            plane_impulse[k] = wp.vec3d(F0, F0, F0)
-    v_out[i] = v_out[i] + dv
-    if any_active != 0:
-        active[wp.atomic_add(n_active, 0, 1)] = i
+# ----------------------------------------------------------------------------- walls
 
 
 @wp.func
-def solve_vertex_planes(
-    i: int,
-    inv_mass: wp.array(dtype=wp.float64),
-    plane_normal: wp.array(dtype=wp.vec3d),
-    plane_vel: wp.array(dtype=wp.vec3d),
-    plane_mu: wp.array(dtype=wp.float64),
-    n_planes: int,
-    plane_gap: wp.array(dtype=wp.float64),
-    dt: wp.float64,
-    beta: wp.float64,
-    max_push: wp.float64,
-    plane_impulse: wp.array(dtype=wp.vec3d),
+def vertex_edge(model: RodModel, i: int):
+    """The edge a wall contact at vertex i belongs to, and its parameter there (a rod's last
+    vertex: the end of its last edge)."""
+    r = model.vertex_rod[i]
+    if i >= model.rod_start[r + 1] - 1:
+        return i - 1, F1
+    return i, F0
+
+
+@wp.func
+def wall_offset(walls: Walls, p: int):
+    """n . x of wall p at the start of the step (m)."""
+    return walls.offset[p] + walls.shift[p] * walls.drive_disp
+
+
+@wp.func
+def wall_velocity(walls: Walls, p: int):
+    """Mean velocity of wall p over the step (m/s)."""
+    if walls.moving[p] != 0:
+        return walls.drive_dir * walls.drive_vel
+    return wp.vec3d(F0, F0, F0)
+
+
+@wp.kernel
+def prepare_wall_contacts(
+    model: RodModel,
+    x: wp.array(dtype=wp.vec3d),
+    tangent: wp.array(dtype=wp.vec3d),
+    walls: Walls,
+    params: StepParams,
+    contacts: WallContacts,
     v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
 ):
-    """Every active plane of vertex i in turn (same exact local solve as rod-rod contacts);
+    """One thread per rod: gaps of its vertex spheres to every wall at the start of the step,
+    warm-started impulses (applied), and the rod joins ``active`` when any is within reach.
+
+    A capsule touches a plane first at a segment endpoint, so vertex spheres suffice.
+    Contacts out of reach get gap = +inf and zero impulse.
+    """
+    r = wp.tid()
+    a = model.rod_start[r]
+    b = model.rod_start[r + 1]
+    rr = model.radius[r]
+    any_active = int(0)
+    for i in range(a, b):
+        e, se = vertex_edge(model, i)
+        for p in range(walls.n):
+            k = i * walls.n + p
+            n = walls.normal[p]
+            g = wp.dot(n, x[i]) - wall_offset(walls, p) - rr
+            closing = wp.max(-wp.dot(v[i] - wall_velocity(walls, p), n), F0)
+            if walls.on[p] != 0 and g < params.contact_distance + closing * params.dt * wp.float64(2.0):
+                contacts.gap[k] = g
+                P = contacts.impulse[k] * params.warm
+                pn = wp.max(wp.dot(P, n), F0)
+                P = n * pn + (P - n * wp.dot(P, n))
+                contacts.impulse[k] = P
+                side_apply(contact_side(model, x, tangent, e, se, n * (-rr)), P, v, spin)
+                any_active = 1
+            else:
+                contacts.gap[k] = FAR
+                contacts.impulse[k] = wp.vec3d(F0, F0, F0)
+    if any_active != 0:
+        contacts.active[wp.atomic_add(contacts.n_active, 0, 1)] = r
+
+
+@wp.func
+def solve_rod_walls(
+    r: int,
+    model: RodModel,
+    x: wp.array(dtype=wp.vec3d),
+    tangent: wp.array(dtype=wp.vec3d),
+    walls: Walls,
+    params: StepParams,
+    contacts: WallContacts,
+    v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
+):
+    """Every wall contact of rod r in turn (same exact local solve as rod-rod contacts);
     returns the largest velocity change caused (m/s)."""
-    w = inv_mass[i]
+    a = model.rod_start[r]
+    b = model.rod_start[r + 1]
+    rr = model.radius[r]
     worst = F0
-    if w <= F0:
-        return worst
-    for p in range(n_planes):
-        k = i * n_planes + p
-        g = plane_gap[k]
-        if g > wp.float64(1.0e299):
-            continue
-        n = plane_normal[p]
-        u = v[i] - plane_vel[p]
-        P = plane_impulse[k]
-        pn = wp.dot(P, n)
-        pt = P - n * pn
-        target = approach_target(g, dt, beta, max_push)
-        pn_new = wp.max(F0, pn + (target - wp.dot(u, n)) / w)
-        u = u + n * ((pn_new - pn) * w)
-        ut = u - n * wp.dot(u, n)
-        pt_new = pt - ut / w
-        lim = plane_mu[p] * pn_new
-        ptl = wp.length(pt_new)
-        if ptl > lim:
-            if ptl > F0:
-                pt_new = pt_new * (lim / ptl)
-        dP = n * (pn_new - pn) + (pt_new - pt)
-        v[i] = v[i] + dP * w
-        plane_impulse[k] = n * pn_new + pt_new
-        worst = wp.max(worst, wp.length(dP) * w)
+    for i in range(a, b):
+        e, se = vertex_edge(model, i)
+        for p in range(walls.n):
+            k = i * walls.n + p
+            gap = contacts.gap[k]
+            if gap > FAR:
+                continue
+            n = walls.normal[p]
+            c = contact_side(model, x, tangent, e, se, n * (-rr))
+            u = side_velocity(c, v, spin) - wall_velocity(walls, p)
+            P = contacts.impulse[k]
+            P_new = relaxed(solve_local(u, local_frame(c.W, n, approach_target(gap, params)), n, P, walls.mu[p]), P, n,
+                            walls.mu[p], params.relax)
+            dP = P_new - P
+            side_apply(c, dP, v, spin)
+            contacts.impulse[k] = P_new
+            worst = wp.max(worst, wp.length(c.W * dP))
     return worst
 
 
 @wp.kernel
-def solve_plane_contacts(
-    active: wp.array(dtype=wp.int32),
-    inv_mass: wp.array(dtype=wp.float64),
-    plane_normal: wp.array(dtype=wp.vec3d),
-    plane_vel: wp.array(dtype=wp.vec3d),
-    plane_mu: wp.array(dtype=wp.float64),
-    n_planes: int,
-    plane_gap: wp.array(dtype=wp.float64),
-    dt: wp.float64,
-    beta: wp.float64,
-    max_push: wp.float64,
-    plane_impulse: wp.array(dtype=wp.vec3d),
+def solve_wall_contacts(
+    model: RodModel,
+    x: wp.array(dtype=wp.vec3d),
+    tangent: wp.array(dtype=wp.vec3d),
+    walls: Walls,
+    params: StepParams,
+    contacts: WallContacts,
     v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
     residual: wp.array(dtype=wp.float64),
 ):
-    """One thread per vertex that touches a wall (``active`` lists them)."""
-    i = active[wp.tid()]
-    du = solve_vertex_planes(i, inv_mass, plane_normal, plane_vel, plane_mu, n_planes, plane_gap, dt, beta,
-                             max_push, plane_impulse, v)
-    wp.atomic_max(residual, 0, du)
+    """One thread per rod that touches a wall (``active`` lists them)."""
+    r = contacts.active[wp.tid()]
+    wp.atomic_max(residual, 0, solve_rod_walls(r, model, x, tangent, walls, params, contacts, v, spin))
+
+
+# ----------------------------------------------------------------------------- colouring
 
 
 @wp.kernel
@@ -300,3 +498,42 @@ def color_commit(
         color[k] = round_id
     else:
         wp.atomic_add(remaining, 0, 1)
+
+
+@wp.kernel
+def warm_start_rod_contacts(
+    count: int,
+    key: wp.array(dtype=wp.int64),
+    normal: wp.array(dtype=wp.vec3d),
+    prev_count: int,
+    prev_key: wp.array(dtype=wp.int64),
+    prev_impulse: wp.array(dtype=wp.vec3d),
+    warm: wp.float64,
+    impulse: wp.array(dtype=wp.vec3d),
+):
+    """Reuse last step's impulse of the same contact (keys are sorted: binary search).
+
+    The old impulse is split along the new normal; its tangential part is kept, as friction
+    that held last step should hold from the first iteration of this one.
+    """
+    k = wp.tid()
+    if k >= count:
+        return
+    target = key[k]
+    lo = int(0)
+    hi = prev_count
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if prev_key[mid] < target:
+            lo = mid + 1
+        else:
+            hi = mid
+    p = wp.vec3d(F0, F0, F0)
+    if lo < prev_count:
+        if prev_key[lo] == target:
+            old = prev_impulse[lo]
+            n = normal[k]
+            pn = wp.max(wp.dot(old, n), F0)
+            pt = old - n * wp.dot(old, n)
+            p = (n * pn + pt) * warm
+    impulse[k] = p

@@ -191,6 +191,167 @@ def capsule_gap(pair: SegmentPair, ra: wp.float64, rb: wp.float64) -> wp.float64
     return pair.dist - ra - rb
 
 
+@wp.func
+def segment_reach(v: wp.array(dtype=wp.vec3d), i: int, dt: wp.float64):
+    return wp.max(wp.length(v[i]), wp.length(v[i + 1])) * dt
+
+
+@wp.func
+def point_to_segment(p: wp.vec3d, q0: wp.vec3d, q1: wp.vec3d):
+    """Parameter of the point of segment q0-q1 nearest to p."""
+    d = q1 - q0
+    e = wp.dot(d, d)
+    t = HALF
+    if e > F0:
+        t = wp.clamp(wp.dot(p - q0, d) / e, F0, F1)
+    return t
+
+
+@wp.kernel
+def narrowphase_pairs(
+    pairs: wp.array(dtype=wp.vec2i),
+    n_pairs: int,
+    nseg: int,
+    seg_vertex: wp.array(dtype=wp.int32),
+    vertex_rod: wp.array(dtype=wp.int32),
+    rod_radius: wp.array(dtype=wp.float64),
+    x: wp.array(dtype=wp.vec3d),
+    v: wp.array(dtype=wp.vec3d),
+    base_margin: wp.float64,
+    dt: wp.float64,
+    capacity: int,
+    count: wp.array(dtype=wp.int32),
+    c_seg: wp.array(dtype=wp.vec2i),
+    c_key: wp.array(dtype=wp.int64),
+    c_st: wp.array(dtype=wp.vec2d),
+    c_normal: wp.array(dtype=wp.vec3d),
+    c_gap: wp.array(dtype=wp.float64),
+):
+    """Narrowphase: exact capsule gap of each candidate pair; a contact when it is below the
+    contact distance plus what both segments can close in one step (speculative).
+
+    Side-by-side segments touch along a line, which one point cannot hold (a rigid rod would
+    pivot about it): when both ends of the overlap of Q's projection on P are within reach
+    too, and at least a radius from the closest point, they become contacts of their own.
+    Keys (sa * S + sb) * 3 + (0 closest, 1, 2 line ends) identify contacts across steps.
+    """
+    k = wp.tid()
+    if k >= n_pairs:
+        return
+    sa = pairs[k][0]
+    sb = pairs[k][1]
+    ia = seg_vertex[sa]
+    ib = seg_vertex[sb]
+    ra = rod_radius[vertex_rod[ia]]
+    rb = rod_radius[vertex_rod[ib]]
+    reach = base_margin + segment_reach(v, ia, dt) + segment_reach(v, ib, dt)
+    # the infinite lines' distance bounds the segments' from below: most candidates stop here
+    da = x[ia + 1] - x[ia]
+    db = x[ib + 1] - x[ib]
+    cr = wp.cross(da, db)
+    cc = wp.dot(cr, cr)
+    if cc > wp.float64(1.0e-12) * wp.dot(da, da) * wp.dot(db, db):
+        if wp.abs(wp.dot(x[ib] - x[ia], cr)) / wp.sqrt(cc) - ra - rb >= reach:
+            return
+    pair = closest_points_segments(x[ia], x[ia + 1], x[ib], x[ib + 1])
+    gap = pair.dist - ra - rb
+    if gap >= reach:
+        return
+    key = (wp.int64(sa) * wp.int64(nseg) + wp.int64(sb)) * wp.int64(3)
+    c = wp.atomic_add(count, 0, 1)
+    if c < capacity:
+        c_seg[c] = wp.vec2i(sa, sb)
+        c_key[c] = key
+        c_st[c] = wp.vec2d(pair.s, pair.t)
+        c_normal[c] = pair.normal
+        c_gap[c] = gap
+    # line contact: the two ends of the overlap
+    p0 = x[ia]
+    d1 = x[ia + 1] - p0
+    a = wp.dot(d1, d1)
+    if a <= F0:
+        return
+    sq0 = wp.dot(x[ib] - p0, d1) / a
+    sq1 = wp.dot(x[ib + 1] - p0, d1) / a
+    lo = wp.max(F0, wp.min(sq0, sq1))
+    hi = wp.min(F1, wp.max(sq0, sq1))
+    la = wp.sqrt(a)
+    if (hi - lo) * la < wp.float64(2.0) * (ra + rb):
+        return
+    for end in range(2):
+        s = lo
+        if end == 1:
+            s = hi
+        if wp.abs(s - pair.s) * la < ra + rb:
+            continue
+        pa = p0 + d1 * s
+        t = point_to_segment(pa, x[ib], x[ib + 1])
+        diff = pa - (x[ib] + (x[ib + 1] - x[ib]) * t)
+        dist = wp.length(diff)
+        g = dist - ra - rb
+        if g >= reach or dist <= F0:
+            continue
+        c = wp.atomic_add(count, 0, 1)
+        if c < capacity:
+            c_seg[c] = wp.vec2i(sa, sb)
+            c_key[c] = key + wp.int64(1 + end)
+            c_st[c] = wp.vec2d(s, t)
+            c_normal[c] = diff / dist
+            c_gap[c] = g
+
+
+@wp.kernel
+def iota(out: wp.array(dtype=wp.int32)):
+    i = wp.tid()
+    out[i] = i
+
+
+@wp.kernel
+def gather_contacts(
+    order: wp.array(dtype=wp.int32),
+    count: int,
+    seg_in: wp.array(dtype=wp.vec2i),
+    st_in: wp.array(dtype=wp.vec2d),
+    normal_in: wp.array(dtype=wp.vec3d),
+    gap_in: wp.array(dtype=wp.float64),
+    seg_out: wp.array(dtype=wp.vec2i),
+    st_out: wp.array(dtype=wp.vec2d),
+    normal_out: wp.array(dtype=wp.vec3d),
+    gap_out: wp.array(dtype=wp.float64),
+):
+    k = wp.tid()
+    if k >= count:
+        return
+    j = order[k]
+    seg_out[k] = seg_in[j]
+    st_out[k] = st_in[j]
+    normal_out[k] = normal_in[j]
+    gap_out[k] = gap_in[j]
+
+
+@wp.kernel
+def contact_overlap(
+    count: int,
+    seg: wp.array(dtype=wp.vec2i),
+    seg_vertex: wp.array(dtype=wp.int32),
+    vertex_rod: wp.array(dtype=wp.int32),
+    rod_radius: wp.array(dtype=wp.float64),
+    x: wp.array(dtype=wp.vec3d),
+    gap_out: wp.array(dtype=wp.float64),
+    out: wp.array(dtype=wp.float64),
+):
+    """Capsule gap of every detected pair at positions ``x``; out[0] = deepest overlap (m)."""
+    k = wp.tid()
+    if k >= count:
+        return
+    ia = seg_vertex[seg[k][0]]
+    ib = seg_vertex[seg[k][1]]
+    pair = closest_points_segments(x[ia], x[ia + 1], x[ib], x[ib + 1])
+    g = pair.dist - rod_radius[vertex_rod[ia]] - rod_radius[vertex_rod[ib]]
+    gap_out[k] = g
+    wp.atomic_max(out, 0, -g)
+
+
 @wp.kernel
 def closest_points_kernel(
     p0: wp.array(dtype=wp.vec3d),

@@ -2,7 +2,14 @@
 
 Host-side API (SI units throughout)::
 
-    from rodwarp import RodSet, Model, RodSolver
+    from rodwarp import RodSet, Model, RodSolver, Control, State
+
+Subpackages, each with a flat public face: :mod:`rodwarp.rodset` (the rod set, its formats and
+contacts, files, run folders), :mod:`rodwarp.sim` (the engine), :mod:`rodwarp.analysis`
+(local fields, ACN, statistics, figures), :mod:`rodwarp.ct` (CT volumes, phantoms,
+segmentation), :mod:`rodwarp.experiments` (the paper's protocol, the verdict, sweeps, the
+phase diagram); :mod:`rodwarp.testing` holds test material.  The README's "Layout" section
+draws the layers; docs/physics.md and docs/protocol.md describe the model and the experiment.
 """
 
 from rodwarp.errors import RodwarpError, SimulationBlowUp
@@ -10,18 +17,16 @@ from rodwarp.rodset import Contacts, RodSet, load
 
 __version__ = "0.1.0"
 
-__all__ = ["RodSet", "Contacts", "load", "Model", "State", "Material", "STEEL", "RodSolver", "StepInfo",
+__all__ = ["RodSet", "Contacts", "load", "Model", "State", "Control", "Material", "STEEL", "RodSolver", "StepInfo",
            "RodwarpError", "SimulationBlowUp", "__version__"]
+
+_SIM = ("Model", "State", "Control", "Drive", "Material", "STEEL", "Plane", "RodSolver", "StepInfo", "run")
 
 
 def __getattr__(name):
     # Warp-backed classes load lazily so `rodwarp --help` and pure I/O stay fast.
-    if name in ("Model", "State", "Material", "STEEL", "Plane"):
-        from rodwarp import model
+    if name in _SIM:
+        from rodwarp import sim
 
-        return getattr(model, name)
-    if name in ("RodSolver", "StepInfo"):
-        from rodwarp import solver
-
-        return getattr(solver, name)
+        return getattr(sim, name)
     raise AttributeError(name)

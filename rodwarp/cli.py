@@ -9,13 +9,96 @@ finished with failed points; 1 an internal error or an abort. No raw tracebacks.
 from __future__ import annotations
 
 import functools
+import inspect
 import sys
+import typing
 from pathlib import Path
 from typing import Optional
 
 import typer
 
+from rodwarp._util import version_line
+from rodwarp.analysis import AnalyzeOptions, fields_help
+from rodwarp.ct import SegmentParams, make_phantom
 from rodwarp.errors import RodwarpError, SimulationBlowUp
+from rodwarp.experiments import ProtocolParams, SweepSpec, option_table
+
+# option defaults come from where they are defined (the options' dataclasses, the phantom
+# builder's signature), so each is stated once; simulate and sweep take their help texts from
+# the parameter dataclasses' field metadata too
+_A = AnalyzeOptions()
+_S = SegmentParams()
+_PH = {k: p.default for k, p in inspect.signature(make_phantom).parameters.items()}
+_P = option_table(ProtocolParams)
+_W = option_table(SweepSpec)
+_FROM_TABLE = object()
+
+
+def _option(table: dict, name: str, default=_FROM_TABLE, help: str | None = None):
+    """The typer option of the dataclass field ``name``: its default and help from ``table``
+    (:func:`rodwarp.experiments.option_table`), either replaced where the option's form differs
+    (a comma-separated list for a tuple or list field)."""
+    field_default, field_help = table[name]
+    return typer.Option(field_default if default is _FROM_TABLE else default, help=help or field_help)
+
+
+def _sim(name: str, **kw):
+    """A ``rodwarp simulate`` option from :class:`~rodwarp.experiments.ProtocolParams`."""
+    return _option(_P, name, **kw)
+
+
+def _swp(name: str, **kw):
+    """A ``rodwarp sweep`` option from :class:`~rodwarp.experiments.SweepSpec`."""
+    return _option(_W, name, **kw)
+
+
+def _csv(values) -> str:
+    """A tuple or list default as the comma-separated text its option takes (``1,1,2.5``)."""
+    return ",".join(f"{v:g}" for v in values)
+
+
+def _field_options(cls, table: dict, order: tuple[str, ...]):
+    """Give a command that takes ``**fields`` one option per field of ``cls`` named in ``order``.
+
+    ``order`` is the ``--help`` order of every option of the command. A name that is a
+    parameter of the command keeps that parameter (an option of the command's own, or a field
+    taken in another form, such as a tuple given as 'X,Y,Z'); any other name is a field of
+    ``cls`` whose option takes its type from the dataclass and its default and help from
+    ``table``, so none of them is restated here. typer reads the resulting signature.
+    """
+    hints = typing.get_type_hints(cls)
+    keyword = inspect.Parameter.KEYWORD_ONLY
+    missing = sorted(set(table) - set(order))
+    if missing:  # a new field must be placed in the command's --help order
+        raise TypeError(f"{cls.__name__} fields {', '.join(missing)} have no place in the command's options")
+
+    def option_type(tp):
+        # `int | None` as typing.Optional, which every typer version reads
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        return typing.Optional[args[0]] if len(args) == 1 and len(typing.get_args(tp)) == 2 else tp
+
+    def decorate(fn):
+        sig = inspect.signature(fn)
+        own = {n: p for n, p in sig.parameters.items() if p.kind is not inspect.Parameter.VAR_KEYWORD}
+        params = [p for n, p in own.items() if n not in order]  # the context
+        for name in order:
+            if name in own:
+                params.append(own[name].replace(kind=keyword))
+            else:
+                default, help_text = table[name]
+                params.append(inspect.Parameter(name, keyword, default=typer.Option(default, help=help_text),
+                                                annotation=option_type(hints[name])))
+        fn.__signature__ = sig.replace(parameters=params)
+        return fn
+
+    return decorate
+
+
+#: `rodwarp simulate`'s options in --help order: ProtocolParams fields, and the command's own
+_SIMULATE_OPTIONS = ("alpha", "freq", "amplitude", "gravity", "duration", "entangle_duration", "entangle_freq",
+                     "entangle_amplitude", "static_load", "n_rods", "length", "vertices", "box", "mu", "young",
+                     "density", "dt", "iterations", "step_safety", "rod_model", "rolling", "save_every",
+                     "checkpoint_every", "resume", "overwrite", "entangle", "seed", "device", "out", "initial", "quiet")
 
 app = typer.Typer(add_completion=False, no_args_is_help=False,
                   help="Simulate and analyse packings of elastic rods (NVIDIA Warp).",
@@ -63,18 +146,9 @@ def _friendly(fn):
     return wrapper
 
 
-def _version_text() -> str:
-    import numpy
-    import warp
-
-    from rodwarp import __version__
-
-    return f"rodwarp {__version__}, warp {warp.config.version}, numpy {numpy.__version__}"
-
-
 def _print_version(value: bool):
     if value:
-        typer.echo(_version_text())
+        typer.echo(version_line())
         raise typer.Exit(0)
 
 
@@ -101,66 +175,37 @@ def _given(ctx: typer.Context, *names: str) -> set:
 @app.command(epilog="Example: rodwarp version")
 def version():
     """Print the versions of rodwarp, Warp and NumPy (same as rodwarp --version)."""
-    typer.echo(_version_text())
+    typer.echo(version_line())
 
 
 @app.command(epilog="Example: rodwarp simulate --alpha 100 --freq 10   (the main job, about 3 min on one core; "
                      "writes runs/alpha100_freq10_g0.5_seed0/)")
 @_friendly
+@_field_options(ProtocolParams, _P, _SIMULATE_OPTIONS)
 def simulate(
     ctx: typer.Context,
-    alpha: float = typer.Option(100.0, help="Rod aspect ratio l / d (> 1)."),
-    freq: float = typer.Option(10.0, help="Floor vibration frequency of the stability test (Hz)."),
-    amplitude: float = typer.Option(0.001, help="Floor vibration amplitude of the stability test (m)."),
-    gravity: float = typer.Option(0.5, help="Gravitational acceleration (m/s^2), rescaled as in the paper."),
-    duration: float = typer.Option(5.0, help="Stability-test duration (s)."),
-    entangle_duration: float = typer.Option(5.0, help="Entangling duration (s); 0 skips entangling."),
-    entangle_freq: float = typer.Option(10.0, help="Entangling vibration frequency (Hz)."),
-    entangle_amplitude: float = typer.Option(0.05, help="Entangling vibration amplitude (m)."),
-    static_load: float = typer.Option(0.0, help="Extra downward body load F~ in units of a rod's weight rho g d^2 l."),
-    n_rods: Optional[int] = typer.Option(None, help="Number of rods (default round(5.4 alpha))."),
-    length: float = typer.Option(1.0, help="Rod length l (m)."),
-    vertices: int = typer.Option(10, help="Vertices per rod."),
-    box: str = typer.Option("1,1,2.5", help="Container size in rod lengths, 'X,Y,Z'."),
-    mu: float = typer.Option(0.2, help="Friction coefficient (rod-rod and walls)."),
-    young: float = typer.Option(200e9, help="Young's modulus (Pa)."),
-    density: float = typer.Option(7850.0, help="Density (kg/m^3)."),
-    dt: Optional[float] = typer.Option(None, help="Time step (s); default from the scene's stability bound."),
-    iterations: int = typer.Option(20, help="Most Gauss-Seidel sweeps per step (20: max overlap < 0.1 d in the default run)."),
-    save_every: float = typer.Option(0.1, help="Metrics and frame interval (s of simulated time)."),
-    checkpoint_every: float = typer.Option(1.0, help="Checkpoint interval (s of simulated time)."),
+    box: str = _sim("box", default=_csv(_P["box"][0])),
     resume: bool = typer.Option(False, help="Continue a killed run from its newest checkpoint in --out (only the "
                                             "folder's own run, same parameters)."),
     overwrite: bool = typer.Option(False, help="Replace the run that --out holds (its outputs are removed first)."),
-    entangle: bool = typer.Option(False, help="With --initial: run the entangling stage too."),
-    seed: int = typer.Option(0, help="Random seed of the packing."),
-    device: str = typer.Option("auto", help="auto, cpu or cuda."),
     out: Optional[Path] = typer.Option(None, help="Output directory (default runs/alpha{A}_freq{F}_g{G}_seed{S}, "
                                                   "plus every other parameter that differs from its default)."),
-    initial: Optional[Path] = typer.Option(None, help="Start from this rod set (npz, zarr or CSV) instead of a random packing."),
+    initial: Optional[Path] = _sim("initial"),
     quiet: bool = typer.Option(False, help="No progress bar."),
+    **fields,
 ):
     """Random packing, entangling by vibration, then the vibration stability test."""
-    from rodwarp.protocol import ProtocolParams, run_protocol
+    from rodwarp.experiments import default_run_name, run_protocol
+    from rodwarp.rodset.rundir import mark_failed
 
-    params = ProtocolParams(
-        alpha=alpha, freq=freq, amplitude=amplitude, gravity=gravity, duration=duration,
-        entangle_duration=entangle_duration, entangle_freq=entangle_freq, entangle_amplitude=entangle_amplitude,
-        static_load=static_load, n_rods=n_rods, length=length, vertices=vertices, box=_parse_box(box), mu=mu,
-        young=young, density=density, dt=dt, iterations=iterations, save_every=save_every,
-        checkpoint_every=checkpoint_every, seed=seed, device=device, initial=str(initial) if initial else None,
-        entangle=entangle,
-    )
-    from rodwarp.rundir import default_run_name
-
+    # the options that are ProtocolParams fields, the two taken in another form converted
+    params = ProtocolParams(**fields, box=_parse_box(box), initial=str(initial) if initial else None)
     params._explicit = _given(ctx, "alpha", "length", "n_rods", "vertices", "box", "seed")
     params.validate()
     outdir = out or Path("runs") / default_run_name(params)
     try:
         summary = run_protocol(params, outdir, progress=not quiet, resume=resume, overwrite=overwrite)
     except (RodwarpError, SimulationBlowUp, OSError) as e:
-        from rodwarp.rundir import mark_failed
-
         mark_failed(outdir, e)
         raise
     typer.echo(
@@ -171,7 +216,10 @@ def simulate(
 
 
 @app.command(epilog="Example: rodwarp analyze runs/alpha100_freq10_g0.5_seed0   (writes its analysis/ folder; "
-                     "an earlier analysis there is replaced)")
+                     "an earlier analysis there is replaced)",
+             help="Local fields, their statistics, outliers, tangles and percolation.\n\n"
+                  f"Fields (one array each in fields.zarr; means in summary.json; panels in the figures): "
+                  f"{fields_help()}.")
 @_friendly
 def analyze(
     input: Path = typer.Argument(..., help="simulate/segment output directory, rod-set file (.npz, .zarr, .csv) "
@@ -182,18 +230,18 @@ def analyze(
     diameter: Optional[float] = typer.Option(None, help="Rod diameter d for the default R (required for a CSV without radius)."),
     length: Optional[float] = typer.Option(None, help="Rod length l for the default R (default the mean rod length)."),
     units: Optional[str] = typer.Option(None, help="Length unit of a CSV (m, mm, um, voxel); converts npz/zarr rod sets."),
-    keep_outside: bool = typer.Option(False, help="Keep voxels whose ball leaves the domain (masked as NaN by default)."),
+    keep_outside: bool = typer.Option(_A.keep_outside, help="Keep voxels whose ball leaves the domain (masked as NaN by default)."),
     contact_tolerance: Optional[float] = typer.Option(None, help="Surface gap counted as contact when contacts are detected (default d / 10)."),
-    outlier: str = typer.Option("q3", help="Outlier bound: q3 = Q3 + 1.5 IQR (the paper's) or q1 = Q1 + 1.5 IQR."),
-    connectivity: int = typer.Option(26, help="Tangle connectivity: 26 (default) or 6."),
-    bins: int = typer.Option(40, help="Histogram bins."),
-    device: str = typer.Option("cpu", help="cpu, cuda or auto."),
-    figures: bool = typer.Option(True, help="Write the PNG figures."),
+    outlier: str = typer.Option(_A.outlier, help="Outlier bound: q3 = Q3 + 1.5 IQR (the paper's) or q1 = Q1 + 1.5 IQR."),
+    connectivity: int = typer.Option(_A.connectivity, help="Tangle connectivity: 26 (default) or 6."),
+    bins: int = typer.Option(_A.bins, help="Histogram bins."),
+    device: str = typer.Option(_A.device, help="cpu, cuda or auto."),
+    figures: bool = typer.Option(_A.figures, help="Write the PNG figures."),
     overwrite: bool = typer.Option(False, help="Write into --out even when it holds another kind of run."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ):
-    """Local fields (phi, S, c, e), their statistics, outliers, tangles and percolation."""
-    from rodwarp.analyze import AnalyzeOptions, analyze as run_analyze, default_out
+    from rodwarp.analysis import analyze as run_analyze
+    from rodwarp.analysis import default_out
 
     opts = AnalyzeOptions(radius=radius, spacing=spacing, diameter=diameter, length=length, units=units,
                           keep_outside=keep_outside, contact_tolerance=contact_tolerance, outlier=outlier,
@@ -222,76 +270,35 @@ def phantom(
                                          "(bundles of touching parallel rods), 'arcs' (gently curved rods), "
                                          "'wires' (a nest-like tangle of curved wires)."),
     shape: tuple[int, int, int] = typer.Option(..., help="Volume shape Z Y X (slices, rows, columns)."),
-    voxel_size: float = typer.Option(1.0, help="Voxel edge length in the rods' units (1 for voxel-unit rods)."),
+    voxel_size: float = typer.Option(_PH["voxel_size"],
+                                     help="Voxel edge length in the rods' units (1 for voxel-unit rods)."),
     out: Path = typer.Option(..., help="Output TIFF (ground truth written beside it)."),
-    blur: float = typer.Option(1.0, help="Gaussian point-spread sigma (voxels)."),
-    cnr: float = typer.Option(10.0, help="Contrast-to-noise ratio (foreground - background) / noise sigma."),
-    ring: float = typer.Option(0.0, help="Ring artefact amplitude (fraction of the contrast)."),
-    cupping: float = typer.Option(0.0, help="Cupping: relative intensity drop at the slice edge (negative: a "
-                                            "bright rim, as beam hardening shows)."),
-    streaks: float = typer.Option(0.0, help="Metal streak amplitude (fraction of the contrast)."),
-    fov: Optional[float] = typer.Option(None, help="Field of view: radius (voxels) of the reconstruction circle; "
-                                                   "0 outside it."),
-    dark: bool = typer.Option(False, help="Dark rods on a bright background (grey values swapped)."),
-    z_thickness: int = typer.Option(1, help="Slices this many times thicker than the voxels are wide "
-                                            "(anisotropic voxels; the TIFF records the spacing)."),
-    n_rods: int = typer.Option(100, help="'random', 'arcs', 'wires': number of rods; 'bundles': of bundles."),
-    radius: float = typer.Option(3.0, help="Scenes: rod radius (voxels)."),
-    aspect: float = typer.Option(30.0, help="'random': aspect ratio length / diameter."),
-    touching: float = typer.Option(0.5, help="'random': fraction of rods touching another."),
-    seed: int = typer.Option(0, help="Seed of the noise and of the scenes."),
+    blur: float = typer.Option(_PH["blur"], help="Gaussian point-spread sigma (voxels)."),
+    cnr: float = typer.Option(_PH["cnr"], help="Contrast-to-noise ratio (foreground - background) / noise sigma."),
+    ring: float = typer.Option(_PH["ring"], help="Ring artefact amplitude (fraction of the contrast)."),
+    cupping: float = typer.Option(_PH["cupping"], help="Cupping: relative intensity drop at the slice edge "
+                                                       "(negative: a bright rim, as beam hardening shows)."),
+    streaks: float = typer.Option(_PH["streaks"], help="Metal streak amplitude (fraction of the contrast)."),
+    fov: Optional[float] = typer.Option(_PH["fov"], help="Field of view: radius (voxels) of the reconstruction "
+                                                         "circle; 0 outside it."),
+    dark: bool = typer.Option(_PH["dark"], help="Dark rods on a bright background (grey values swapped)."),
+    z_thickness: int = typer.Option(_PH["z_thickness"], help="Slices this many times thicker than the voxels are "
+                                                             "wide (anisotropic voxels; the TIFF records the spacing)."),
+    n_rods: int = typer.Option(_PH["n_rods"], help="'random', 'arcs', 'wires': number of rods; 'bundles': of bundles."),
+    radius: float = typer.Option(_PH["radius"], help="Scenes: rod radius (voxels)."),
+    aspect: float = typer.Option(_PH["aspect"], help="'random': aspect ratio length / diameter."),
+    touching: float = typer.Option(_PH["touching"], help="'random': fraction of rods touching another."),
+    seed: int = typer.Option(_PH["seed"], help="Seed of the noise and of the scenes."),
 ):
     """Synthetic 16-bit CT of a rod set: partial volume, blur, noise and artefacts, with ground truth."""
-    import numpy as np
+    from rodwarp.ct import check_phantom
 
-    from rodwarp import phantom as ph
-    from rodwarp.rodset import UNITS, load
-
-    from rodwarp import validation as v
-
-    v.check_phantom(rods=rods, shape=shape, voxel_size=voxel_size, out=out, blur=blur, cnr=cnr, ring=ring,
+    check_phantom(rods=rods, shape=shape, voxel_size=voxel_size, out=out, blur=blur, cnr=cnr, ring=ring,
                     cupping=cupping, streaks=streaks, n_rods=n_rods, radius=radius, aspect=aspect,
                     touching=touching, seed=seed, fov=fov, z_thickness=z_thickness)
-    # scenes are built in voxel widths along every axis; thick slices span z_thickness of them
-    full = (shape[0] * z_thickness, shape[1], shape[2])
-    scenes = {
-        "random": lambda: ph.scene_random_packing(full, n_rods=n_rods, radius=radius, aspect=aspect,
-                                                  touching_fraction=touching, seed=seed,
-                                                  fov_radius=None if fov is None else fov - 2.0),
-        "bundles": lambda: ph.scene_bundles(full, n_bundles=n_rods, radius=radius, seed=seed),
-        "arcs": lambda: ph.scene_arcs(full, n_rods=n_rods, radius=radius, seed=seed),
-        "wires": lambda: ph.scene_wire_tangle(full, n_wires=n_rods, radius=radius, seed=seed),
-    }
-    if rods in scenes:
-        rs = scenes[rods]()
-        if z_thickness > 1:  # thick slice k is centred at z = k z_thickness
-            rs.points[:, 2] -= 0.5 * (z_thickness - 1)
-            rs.contacts = ph.phantom_truth(rs)
-        vox = 1.0
-    else:
-        p = Path(rods)
-        if p.is_dir() and (p / "final.npz").exists():
-            p = p / "final.npz"
-        rs = load(p)
-        if rs.units == "voxel":
-            if voxel_size != 1.0:
-                raise RodwarpError("the rods are in voxel units: drop --voxel-size (it is 1)")
-            vox = 1.0
-        else:
-            vox = voxel_size * UNITS[rs.units]  # metres per voxel
-            rs = rs.to_units("voxel", voxel_size=vox)
-        from rodwarp.geometry import detect_contacts
-
-        rs.contacts = detect_contacts(rs, 0.1 * float(np.mean(rs.diameters)))
-    bg, fg = (50000, 20000) if dark else (20000, 50000)
-    vol = ph.render_phantom(rs, tuple(shape), blur_sigma=blur, cnr=cnr, ring=ring, cupping=cupping,
-                            streaks=streaks, seed=seed, fov=fov, z_thickness=z_thickness,
-                            background=bg, foreground=fg)
-    params = {"shape": list(shape), "voxel_size": voxel_size, "blur_sigma": blur, "cnr": cnr, "ring": ring,
-              "cupping": cupping, "streaks": streaks, "fov": fov, "dark": dark, "z_thickness": z_thickness,
-              "seed": seed, "source": rods, "metres_per_voxel": vox if rods not in scenes else None}
-    ph.write_phantom(out, vol, rs, rs.contacts, voxel_size, params,
-                     z_thickness=z_thickness)
+    rs = make_phantom(rods, shape, out, voxel_size=voxel_size, blur=blur, cnr=cnr, ring=ring, cupping=cupping,
+                      streaks=streaks, fov=fov, dark=dark, z_thickness=z_thickness, n_rods=n_rods, radius=radius,
+                      aspect=aspect, touching=touching, seed=seed)
     typer.echo(f"{rs.n_rods} rods, {len(rs.contacts) if rs.contacts is not None else 0} contacts -> {out}")
 
 
@@ -306,25 +313,23 @@ def segment(
                                                    "voxel); default mm, or the metadata's."),
     diameter: Optional[float] = typer.Option(None, help="Rod diameter in --units (estimated when absent)."),
     out: Optional[Path] = typer.Option(None, help="Output directory (default segment/ beside the stack)."),
-    shape: str = typer.Option("auto", help="straight (rods), curved (filaments as polylines) or auto."),
+    shape: str = typer.Option(_S.shape, help="straight (rods), curved (filaments as polylines) or auto."),
     dark_rods: Optional[bool] = typer.Option(None, "--dark-rods/--bright-rods",
                                              help="Rods darker / brighter than the background (default: detected)."),
-    min_fill: float = typer.Option(0.6, help="Reject rods whose axis plateau is below this share of what a rod of "
+    min_fill: float = typer.Option(_S.min_fill, help="Reject rods whose axis plateau is below this share of what a rod of "
                                              "their radius shows under the measured blur."),
     chunk: Optional[int] = typer.Option(None, help="Process in overlapping chunks of this edge (voxels), for big volumes."),
-    contact_tolerance: float = typer.Option(1.0, help="Largest surface gap counted as contact (voxels)."),
+    contact_tolerance: float = typer.Option(_S.contact_tolerance, help="Largest surface gap counted as contact (voxels)."),
     figures: bool = typer.Option(True, help="Write the QA PNGs."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ):
     """CT stack to rod centrelines and contacts (CPU)."""
-    from rodwarp import validation as v
-    from rodwarp.segment import SegmentParams
-    from rodwarp.segment_report import default_out as seg_default_out
-    from rodwarp.segment_report import run_segment
+    from rodwarp.ct import check_segment, run_segment
+    from rodwarp.ct import default_out as seg_default_out
 
     if shape not in ("straight", "curved", "auto"):
         raise RodwarpError(f"--shape must be straight, curved or auto, got '{shape}'")
-    v.check_segment(stack=stack, voxel_size=voxel_size, units=units, diameter=diameter,
+    check_segment(stack=stack, voxel_size=voxel_size, units=units, diameter=diameter,
                     out=out if out is not None else seg_default_out(stack), chunk=chunk,
                     contact_tolerance=contact_tolerance, min_fill=min_fill)
     params = SegmentParams(shape=shape, dark=dark_rods, min_fill=min_fill)
@@ -357,26 +362,25 @@ def _floats(text: str, name: str) -> list[float]:
                      "(exit 4 when any point failed)")
 @_friendly
 def sweep(
-    alpha: str = typer.Option("25,50,100,200,300", help="Aspect ratios, comma-separated."),
-    freq: str = typer.Option("1,10,100", help="Stability-test floor frequencies (Hz), comma-separated."),
-    gravity: str = typer.Option("0.5", help="Gravitational accelerations (m/s^2), comma-separated."),
-    static_load: str = typer.Option("0", help="Static loads F~, comma-separated."),
-    seeds: int = typer.Option(1, help="Seeds per point (0 .. N-1)."),
-    entangle_duration: float = typer.Option(5.0, help="Entangling duration (s)."),
-    duration: float = typer.Option(5.0, help="Stability-test duration (s)."),
-    amplitude: float = typer.Option(0.001, help="Floor vibration amplitude (m)."),
-    save_every: float = typer.Option(0.1, help="Sampling interval of each point's metrics (s of simulated time)."),
+    alpha: str = _swp("alphas", default=_csv(_W["alphas"][0])),
+    freq: str = _swp("freqs", default=_csv(_W["freqs"][0])),
+    gravity: str = _swp("gravities", default=_csv(_W["gravities"][0])),
+    static_load: str = _swp("static_loads", default=_csv(_W["static_loads"][0])),
+    seeds: int = _swp("seeds", default=len(_W["seeds"][0])),
+    entangle_duration: float = _swp("entangle_duration"),
+    duration: float = _swp("duration"),
+    amplitude: float = _swp("amplitude"),
+    save_every: float = _sim("save_every", help="Sampling interval of each point's metrics (s of simulated time)."),
     out: Path = typer.Option(..., help="Sweep directory (results.csv, points/, figures)."),
     scheduler: Optional[str] = typer.Option(None, help="Existing Dask scheduler tcp://HOST:8786 (default: a local cluster on 127.0.0.1)."),
     workers: Optional[int] = typer.Option(None, help="Local worker processes (default: the number of cores)."),
-    device: str = typer.Option("auto", help="Warp device of each point (auto: the worker's GPU if any)."),
+    device: str = _swp("device"),
     figures: bool = typer.Option(True, help="Draw the phase diagram at the end."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ):
     """Parameter sweep: simulate + analyze per point on Dask; results.csv, then the phase diagram."""
-    from rodwarp.sweep import SweepSpec, phase_diagram, run_sweep
-
     from rodwarp import validation as v
+    from rodwarp.experiments import phase_diagram, run_sweep
 
     v.integer("--seeds", seeds, ge=1, le=10_000)
     if workers is not None:
@@ -386,7 +390,7 @@ def sweep(
                      seeds=list(range(seeds)), entangle_duration=entangle_duration, duration=duration,
                      amplitude=amplitude, device=device,
                      # only when changed: rows of sweeps run before this option still match their points
-                     overrides={} if save_every == 0.1 else {"save_every": save_every})
+                     overrides={} if save_every == _P["save_every"][0] else {"save_every": save_every})
     path = run_sweep(spec, out, scheduler=scheduler, workers=workers, progress=not quiet)
     import json
 
@@ -409,7 +413,7 @@ def phase_diagram_cmd(
     sweep_dir: Path = typer.Argument(..., help="A `rodwarp sweep` output directory (with results.csv)."),
 ):
     """Phase diagram of a sweep: cv_e against a/g (Fig. 4L), f against alpha and a/g, alpha*."""
-    from rodwarp.sweep import phase_diagram
+    from rodwarp.experiments import phase_diagram
 
     if not (sweep_dir / "results.csv").exists():
         raise RodwarpError(f"'{sweep_dir}' holds no results.csv; run `rodwarp sweep --out {sweep_dir}` first")

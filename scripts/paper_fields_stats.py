@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import platform
 import re
 import shlex
 import subprocess
@@ -42,14 +41,9 @@ def _git_commit() -> str | None:
 
 
 def _versions() -> dict:
-    import matplotlib
-    import scipy
+    from rodwarp._util import versions
 
-    import rodwarp
-
-    return {"rodwarp": getattr(rodwarp, "__version__", None), "git": _git_commit(), "numpy": np.__version__,
-            "scipy": scipy.__version__, "matplotlib": matplotlib.__version__,
-            "python": platform.python_version()}
+    return {**versions("matplotlib"), "git": _git_commit()}
 
 
 def _sha256(path: Path) -> str:
@@ -57,8 +51,7 @@ def _sha256(path: Path) -> str:
 
 
 def analyse(path: Path, alpha: int, epsilon: float) -> tuple[dict, object, dict]:
-    from rodwarp.fieldset import Fields
-    from rodwarp.stats import field_statistics
+    from rodwarp.analysis import Fields, field_statistics
 
     f = Fields.load(path)
     s = field_statistics(f, method="q3", connectivity=26)
@@ -219,7 +212,7 @@ def _lines_by_strain(ax, rows, key):
 def chart_cv(rows, path: Path) -> Path:
     from matplotlib.figure import Figure
 
-    from rodwarp.fieldplots import _save
+    from rodwarp.rodset.files import save_figure
 
     fig = Figure(figsize=(6, 4.2), layout="constrained")
     ax = fig.subplots()
@@ -230,13 +223,13 @@ def chart_cv(rows, path: Path) -> Path:
     ax.set_xticks(sorted({r["alpha"] for r in rows}))
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def chart_tangles(rows, path: Path) -> Path:
     from matplotlib.figure import Figure
 
-    from rodwarp.fieldplots import _save
+    from rodwarp.rodset.files import save_figure
 
     fig = Figure(figsize=(15, 3.8), layout="constrained")
     axs = fig.subplots(1, 4)
@@ -251,7 +244,7 @@ def chart_tangles(rows, path: Path) -> Path:
         ax.set_xticks(alphas)
         ax.grid(alpha=0.3)
     axs[0].legend(fontsize=8)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -262,9 +255,9 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="folder for the results")
     args = ap.parse_args(argv)
 
-    from rodwarp.atomic import write_json, write_text
+    from rodwarp.analysis import plot_tangles
     from rodwarp.errors import RodwarpError
-    from rodwarp.fieldplots import plot_tangles
+    from rodwarp.rodset.files import write_json, write_text
 
     files = []
     for p in sorted(args.data.glob("*.npz")):

@@ -1,4 +1,4 @@
-"""Run the paper's stability sweep (Fig. 4H/4I/4L) with `rodwarp.sweep` and draw its phase diagram.
+"""Run the paper's stability sweep (Fig. 4H/4I/4L) with `rodwarp.experiments` and draw its phase diagram.
 
 alpha 25..300 x f = 1, 10, 100 Hz at A = 1 mm, g = 0.5 m/s^2 (a/g = 0.079, 7.9, 790), one seed.
 Durations can be cut from the paper's 5 s + 5 s; the ones used are written to OUT/sweep.json
@@ -17,7 +17,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from rodwarp.sweep import SweepSpec, phase_diagram, run_sweep
+from rodwarp.experiments import SweepSpec, phase_diagram, run_sweep
 
 
 def _floats(s):

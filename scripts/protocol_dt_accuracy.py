@@ -21,12 +21,13 @@ def default_dt(alpha: float) -> float:
     """The step ``rodwarp simulate --alpha A`` picks by default (s)."""
     import numpy as np
 
-    from rodwarp.packing import random_packing
-    from rodwarp.protocol import ProtocolParams, _default_dt
+    from rodwarp.experiments import ProtocolParams, random_packing, rod_model_rule
+    from rodwarp.experiments._protocol import _build, _default_dt
 
     p = ProtocolParams(alpha=alpha)
     rods = random_packing(p.rods, p.length, p.diameter, np.asarray(p.box) * p.length, seed=p.seed)
-    return _default_dt(p, rods, "cpu")
+    model, solver, _ = _build(p, rods, "cpu", rod_model_rule(p)["rod_model"])
+    return _default_dt(p, model, solver)
 
 
 def main(argv=None):

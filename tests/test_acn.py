@@ -5,12 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from rodwarp.acn import average_crossing_number, gauss_linking, linking_number
+from rodwarp.analysis import average_crossing_number, gauss_linking, linking_number
 from rodwarp.errors import RodwarpError
 
 
 def test_reference_segment_pairs():
-    # REFERENCE.md section 3
+    # docs/fields.md, "Checks with known answers"
     g = gauss_linking([[-1, 0, 0], [0, 0, 0]], [[1, 0, 0], [1, 0, 0]], [[0, -1, 1], [0, 0, 1]], [[0, 1, 1], [0, 1, 1]])
     assert g[0] == pytest.approx(-1 / 6, abs=1e-15)
     assert abs(g[1]) == pytest.approx(1 / 24, abs=1e-15)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from rodwarp.analysis import Fields
 from rodwarp.cli import app
-from rodwarp.fieldset import Fields
-from rodwarp.packing import random_packing
+from rodwarp.experiments import random_packing
 from rodwarp.rodset import load as load_rods
 
 runner = CliRunner()

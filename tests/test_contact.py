@@ -7,65 +7,41 @@ import numpy as np
 import pytest
 
 from rodwarp.errors import RodwarpError, SimulationBlowUp
-from rodwarp.model import STEEL, Material, Model
 from rodwarp.rodset import RodSet
-from rodwarp.scenes import log_cabin, straight_rod, straightened, tilted_gravity
-from rodwarp.solver import RodSolver, run
+from rodwarp.sim.model import STEEL, Material, Model  # noqa: F401
+from rodwarp.sim.solver import RodSolver, run
+from rodwarp.testing.scenes import log_cabin, straight_rod, straightened, tilted_gravity
 
 G = 9.81
 
 
 
 
-def rod_on_incline(theta_deg, mu=0.4, duration=1.0):
-    r = 0.01
-    rods = RodSet.from_polylines([straight_rod((0, 0, r), (0, 1, 0), 1.0, r)], r)
-    model = Model(rods, STEEL, gravity=tilted_gravity(G, theta_deg), mu=mu, rod_contacts=False)
-    model.add_plane((0, 0, 1), 0.0, mu=mu, name="floor")
-    solver = RodSolver(model, iterations=10)
-    dt = 1e-3
-    ts, xs = [], []
-    run(solver, model.state(), duration, dt, callback=lambda s, i: (ts.append(s.time), xs.append(s.x.numpy()[:, 0].mean())))
-    return np.array(ts), np.array(xs)
-
-
-def test_incline_sticks_below_friction_angle():
-    t, x = rod_on_incline(20.0)
-    assert np.max(np.abs(x - x[0])) < 1e-6
-
-
-def test_incline_slides_with_coulomb_acceleration():
-    t, x = rod_on_incline(30.0)
-    a = 2 * np.polyfit(t, x, 2)[0]
-    th = math.radians(30)
-    exact = G * (math.sin(th) - 0.4 * math.cos(th))
-    assert abs(exact - 1.507) < 1e-3
-    assert abs(a - exact) / exact < 0.02
-
-
-def rod_on_rails(theta_deg, mu=0.3, duration=0.5):
-    """Rod C along y resting across two fixed rails along x; gravity tilted along the rails."""
+def rod_on_rails(theta_deg, mu=0.3, duration=0.5, downhill=(0, 1, 0)):
+    """Rod C along y resting across two fixed rails along x; gravity tilted along ``downhill``:
+    along C's own axis (y) it can only slide over the rails, along the rails (x) it rolls."""
     r = 0.01
     rails = [straight_rod((0, -0.3, 0), (1, 0, 0), 1.0, r), straight_rod((0, 0.3, 0), (1, 0, 0), 1.0, r)]
     top = straight_rod((0, 0, 2 * r), (0, 1, 0), 1.0, r)
     rods = RodSet.from_polylines(rails + [top], r)
-    model = Model(rods, STEEL, gravity=tilted_gravity(G, theta_deg), mu=mu, pinned=np.arange(20))
+    model = Model(rods, STEEL, gravity=tilted_gravity(G, theta_deg, downhill=downhill), mu=mu, pinned=np.arange(20))
     solver = RodSolver(model, iterations=20)
     dt = 1e-3
+    k = int(np.argmax(np.abs(downhill)))
     ts, xs = [], []
-    run(solver, model.state(), duration, dt, callback=lambda s, i: (ts.append(s.time), xs.append(s.x.numpy()[20:, 0].mean())))
+    run(solver, model.state(), duration, dt, callback=lambda s, i: (ts.append(s.time), xs.append(s.x.numpy()[20:, k].mean())))
     return np.array(ts), np.array(xs)
 
 
 @pytest.mark.parametrize("theta", [10.0, 15.0])
-def test_rod_across_tilted_rails_sticks_below_mu(theta):
+def test_rod_sliding_along_its_axis_over_tilted_rails_sticks_below_mu(theta):
     assert math.tan(math.radians(theta)) < 0.3
     t, x = rod_on_rails(theta)
     assert np.max(np.abs(x - x[0])) < 1e-6
 
 
 @pytest.mark.parametrize("theta", [20.0, 30.0])
-def test_rod_across_tilted_rails_slides_above_mu(theta):
+def test_rod_sliding_along_its_axis_over_tilted_rails_slides_above_mu(theta):
     t, x = rod_on_rails(theta)
     th = math.radians(theta)
     exact = G * (math.sin(th) - 0.3 * math.cos(th))
@@ -73,22 +49,72 @@ def test_rod_across_tilted_rails_slides_above_mu(theta):
     assert abs(a - exact) / exact < 0.03
 
 
+@pytest.mark.parametrize("theta", [10.0, 30.0])
+def test_rod_across_rails_tilted_along_them_rolls(theta):
+    """Gravity along the rails, across the rod: it rolls on them, a = (2/3) g sin(theta)
+    (tan(theta) <= 3 mu), whether or not tan(theta) exceeds mu."""
+    th = math.radians(theta)
+    t, x = rod_on_rails(theta, downhill=(1, 0, 0), duration=0.3)
+    a = 2 * np.polyfit(t, x, 2)[0]
+    exact = 2.0 / 3.0 * G * math.sin(th)
+    assert abs(a - exact) / exact < 0.02
+
+
 def cabin_drift(mu, duration=2.0):
     rods = log_cabin(layers=4, rods_per_layer=2)
     model = Model(rods, STEEL, gravity=tilted_gravity(G, 5.0, downhill=(1, 1, 0)), mu=mu)
     model.add_plane((0, 0, 1), 0.0, mu=mu, name="floor")
-    solver = RodSolver(model)  # default iterations: too few make a frictional stack creep
+    solver = RodSolver(model)
     x0 = rods.points.copy()
     state = run(solver, model.state(), duration, solver.default_dt())
     return np.max(np.linalg.norm(state.positions() - x0, axis=1))
 
 
-def test_log_cabin_stands_with_friction():
-    assert cabin_drift(0.2) < 1e-4
+def test_log_cabin_on_a_tilted_floor_rolls_apart_even_with_friction():
+    # round logs on a 5 degree tilt roll (each layer rolls on the one below like a rod on
+    # rails): friction alone does not hold a log cabin of cylinders; real ones are notched
+    assert cabin_drift(0.2, duration=1.0) > 0.05
 
 
 def test_log_cabin_collapses_without_friction():
     assert cabin_drift(0.0, duration=1.0) > 0.1
+
+
+def ladder_slip(phi, mu, rod_model, duration=1.0, iterations=40):
+    """Largest slip (m) of the rod's ends along the floor and the wall over ``duration``."""
+    from rodwarp.testing.scenes import leaning_rod
+
+    model = Model(leaning_rod(phi), STEEL, gravity=(0, 0, -G), mu=mu, rod_contacts=False, rod_model=rod_model)
+    model.add_plane((0, 0, 1), 0.0, name="floor")
+    model.add_plane((1, 0, 0), 0.0, name="wall")
+    solver = RodSolver(model, iterations=iterations)
+    x0 = model.rods.points.copy()
+    state = run(solver, model.state(), duration, solver.default_dt())
+    x = state.positions()
+    return max(abs(x[0, 0] - x0[0, 0]), abs(x[-1, 2] - x0[-1, 2]))
+
+
+def test_ladder_stands_without_creep_when_friction_suffices():
+    from rodwarp.testing.scenes import ladder_min_angle
+
+    assert ladder_min_angle(0.5, 0.5) == pytest.approx(36.87, abs=0.01)
+    assert ladder_slip(60.0, 0.5, "rigid") < 1e-6
+    # the elastic rod holds too once Gauss-Seidel has converged
+    assert ladder_slip(60.0, 0.5, "elastic", iterations=200) < 1e-6
+
+
+@pytest.mark.xfail(strict=True, reason="engine gap: at the default 40 sweeps Gauss-Seidel has not converged on the "
+                                       "elastic ladder (residual 1e-3 m/s) and its foot creeps about 0.3 mm/s")
+def test_elastic_ladder_stands_at_the_default_effort():
+    assert ladder_slip(60.0, 0.5, "elastic") < 1e-6
+
+
+@pytest.mark.parametrize("rod_model", ["elastic", "rigid"])
+def test_ladder_slides_down_when_friction_is_too_small(rod_model):
+    from rodwarp.testing.scenes import ladder_min_angle
+
+    assert ladder_min_angle(0.2, 0.2) > 60.0
+    assert ladder_slip(60.0, 0.2, rod_model, duration=0.3) > 0.05
 
 
 def test_frictionless_collision_conserves_momentum():
@@ -127,7 +153,7 @@ def test_no_tunnelling_of_thin_fast_rod(factor):
                   pinned=np.arange(10))
     solver = RodSolver(model, allow_unstable=True)
     dt = factor * solver.default_dt()
-    from rodwarp.geometry import segment_distance
+    from rodwarp.rodset import segment_distance
 
     gaps, sides = [], []
 

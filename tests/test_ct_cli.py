@@ -37,7 +37,7 @@ def test_phantom_segment_analyze_chain(tmp_path):
     rods = load_rods(out / "rods.npz")
     assert rods.units == "mm" and rods.n_rods == 12
     # physical coordinates: voxel (x = column, y = row, z = slice) times the voxel size
-    from rodwarp.segment import match_rods
+    from rodwarp.ct import match_rods
 
     m = match_rods(rods.to_units("voxel", voxel_size=0.05e-3), truth)
     assert m.f1 == 1.0 and np.max(m.mean_distance) < 1.0

@@ -7,11 +7,11 @@ the contacts are visited in the same order, so results agree to round-off (toler
 import numpy as np
 import pytest
 
-from rodwarp.model import STEEL, Model, State
-from rodwarp.packing import random_packing
-from rodwarp.scenes import TEST_DENSITY, TEST_YOUNG, cantilever
-from rodwarp.model import Material
-from rodwarp.solver import RodSolver, run
+from rodwarp.experiments import random_packing
+from rodwarp.sim import STEEL, Model, State
+from rodwarp.sim.model import Material
+from rodwarp.sim.solver import RodSolver, run
+from rodwarp.testing.scenes import TEST_DENSITY, TEST_YOUNG, cantilever
 
 
 def small_pile(device, coloring, steps=60, seed=3):
@@ -24,7 +24,7 @@ def small_pile(device, coloring, steps=60, seed=3):
     dt = solver.default_dt()
     colors = []
     for _ in range(steps):
-        info = solver.step(a, b, dt)
+        info = solver.step(a, b, None, dt)
         a, b = b, a
         if solver.coloring and info.n_contacts:
             colors.append(solver.colors_used)
@@ -35,14 +35,14 @@ def small_pile(device, coloring, steps=60, seed=3):
 def check_coloring(model, state, solver):
     n = state.contact_count
     seg = state.contact_seg.numpy()[:n]
-    ids = solver._color_ids.numpy()
-    for c0, c1 in solver._color_ranges:
+    ids = solver.contacts.color_ids.numpy()
+    for c0, c1 in solver.contacts.color_ranges:
         members = ids[c0:c1]
         va = model.seg_vertex_np[seg[members, 0]]
         vb = model.seg_vertex_np[seg[members, 1]]
         verts = np.concatenate([va, va + 1, vb, vb + 1])
         assert len(np.unique(verts)) == len(verts), "two contacts of one colour share a vertex"
-    covered = np.sort(np.concatenate([ids[c0:c1] for c0, c1 in solver._color_ranges]))
+    covered = np.sort(np.concatenate([ids[c0:c1] for c0, c1 in solver.contacts.color_ranges]))
     assert np.array_equal(covered, np.arange(n))
 
 
@@ -71,3 +71,27 @@ def test_pile_cpu_and_cuda_agree_with_coloring():
     _, s_cpu, _ = small_pile("cpu", "on")
     _, s_gpu, _ = small_pile("cuda", "on")
     assert np.max(np.abs(s_cpu.positions() - s_gpu.positions())) < 1e-9
+
+
+KERNEL_MODULES = ("frames", "elastics", "friction", "overlap", "narrowphase", "broadphase", "solve", "fields", "acn",
+                  "packing")
+
+
+@pytest.mark.parametrize("name", KERNEL_MODULES)
+def test_kernels_compile_for_cuda_without_a_gpu(name):
+    """Every kernel module also compiles for a GPU (sm_90, through NVRTC): the CUDA code path is
+    checked on machines without one. Skips where Warp ships no NVRTC."""
+    import importlib
+    import os
+
+    import warp as wp
+
+    from rodwarp import _warp
+
+    _warp.init()
+    if 90 not in (wp.get_cuda_supported_archs() or []):
+        pytest.skip("this Warp build cannot compile for sm_90 (no NVRTC)")
+    mod = importlib.import_module(f"rodwarp.kernels.{name}")
+    out = os.path.join(_warp.kernel_cache_dir(), "aot_sm90")
+    wp.compile_aot_module(mod, arch=90, module_dir=out, use_ptx=True)
+    assert any(f.endswith(".ptx") for f in os.listdir(out))

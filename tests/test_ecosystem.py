@@ -14,7 +14,7 @@ from rodwarp.cli import app
 
 xr = pytest.importorskip("xarray")
 
-SHORT = ["simulate", "--alpha", "20", "--n-rods", "12", "--entangle-duration", "0.02", "--duration", "0.02",
+SHORT = ["simulate", "--rod-model", "elastic", "--alpha", "20", "--n-rods", "12", "--entangle-duration", "0.02", "--duration", "0.02",
          "--save-every", "0.01", "--device", "cpu", "--quiet"]
 
 
@@ -54,7 +54,7 @@ def test_trajectory_opens_in_xarray_with_named_dims(run):
 
 
 def test_fields_open_in_xarray_with_coordinates(run):
-    from rodwarp.fieldset import Fields
+    from rodwarp.analysis import Fields
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from rodwarp import fields as F
+from rodwarp.analysis import _fields as F
+from rodwarp.analysis import compute_fields
 from rodwarp.errors import RodwarpError
-from rodwarp.fields import compute_fields
 from rodwarp.rodset import Contacts, RodSet
 
 LONG = 50.0
@@ -27,7 +27,7 @@ def _lines(*segs, radius=0.01):
 
 
 def test_crossing_lines_exact_e():
-    # REFERENCE.md section 3: e = asin(3/7) / pi at (0, 0, 0.5), R = 1; 0 at (0, 0, 2.5)
+    # docs/fields.md, "Checks with known answers": e = asin(3/7) / pi at (0, 0, 0.5), R = 1; 0 at (0, 0, 2.5)
     rods = _lines([[-LONG, 0, 0], [LONG, 0, 0]], [[0, -LONG, 1], [0, LONG, 1]])
     v, _ = _one_ball(rods, [0, 0, 0.5], 1.0)
     assert abs(v["e"] - 0.1409829640286239) < 1e-12
@@ -127,7 +127,7 @@ def test_rigid_motion_and_reversal_invariance():
 
 
 def test_against_numpy_oracle_on_random_rods():
-    from rodwarp.reference import fields_numpy
+    from rodwarp.testing.reference import fields_numpy
 
     rods = _random_rods(60, 5)
     contacts = Contacts(np.zeros(40, int), np.ones(40, int), np.random.default_rng(3).uniform(0, 3, (40, 3)), np.zeros(40))
@@ -193,7 +193,7 @@ def test_batching_gives_identical_results(monkeypatch):
 
 
 def test_detect_contacts_crossing_pair():
-    from rodwarp.geometry import detect_contacts
+    from rodwarp.rodset import detect_contacts
 
     r = 0.05
     touching = _lines([[-1, 0, 0], [1, 0, 0]], [[0, -1, 2 * r], [0, 1, 2 * r]], [[0, -1, 1], [0, 1, 1]], radius=r)

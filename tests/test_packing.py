@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from rodwarp.errors import RodwarpError
-from rodwarp.geometry import segment_distance
-from rodwarp.packing import orientation_statistics, random_packing
+from rodwarp.experiments import orientation_statistics, random_packing
+from rodwarp.rodset import segment_distance
 
 
 def test_random_packing_is_valid_and_reproducible():

@@ -1,12 +1,12 @@
-"""The NumPy reference of the local fields (rodwarp.reference) against known answers."""
+"""The NumPy reference of the local fields (rodwarp.testing.reference) against known answers."""
 
 import math
 
 import numpy as np
 import pytest
 
-from rodwarp import reference
-from rodwarp.reference import clip_segments_to_ball, fields_numpy, gauss_linking_numpy
+from rodwarp.testing import reference
+from rodwarp.testing.reference import clip_segments_to_ball, fields_numpy, gauss_linking_numpy
 
 E_LINES = math.asin(3.0 / 7.0) / math.pi  # 0.1409829640286239
 
@@ -77,7 +77,7 @@ def test_hopf_link_sums_to_one():
 
 
 def test_agrees_with_warp_kernel_on_random_pairs():
-    from rodwarp.acn import gauss_linking
+    from rodwarp.analysis import gauss_linking
 
     rng = np.random.default_rng(11)
     p = rng.uniform(-1, 1, size=(4, 2000, 3))
@@ -228,8 +228,8 @@ def test_same_rod_pairs_excluded():
 
 
 def test_matches_brute_force_with_warp_acn():
-    """Random bent rods: e against a per-centre loop of scalar clipping + rodwarp.acn."""
-    from rodwarp.acn import gauss_linking
+    """Random bent rods: e against a per-centre loop of scalar clipping + rodwarp.analysis."""
+    from rodwarp.analysis import gauss_linking
 
     rng = np.random.default_rng(13)
     rods = [np.cumsum(rng.normal(scale=0.15, size=(10, 3)), 0) + rng.uniform(0, 1, 3) for _ in range(25)]

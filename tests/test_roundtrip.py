@@ -3,17 +3,16 @@
 import numpy as np
 import pytest
 
-from rodwarp import phantom as ph
-from rodwarp.fields import compute_fields
-from rodwarp.segment import segment_volume
-from rodwarp.stats import field_statistics
+from rodwarp import ct
+from rodwarp.analysis import compute_fields, field_statistics
+from rodwarp.ct import segment_volume
 
 
 @pytest.mark.slow
 def test_segment_of_phantom_gives_the_same_entanglement_statistics():
     shape = (224, 224, 224)
-    truth = ph.scene_random_packing(shape, n_rods=100, radius=3.0, aspect=30.0, touching_fraction=0.5, seed=4)
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=4)
+    truth = ct.scene_random_packing(shape, n_rods=100, radius=3.0, aspect=30.0, touching_fraction=0.5, seed=4)
+    vol = ct.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=4)
     found = segment_volume(vol).rods
     found.contacts = None
     truth = truth.copy()

@@ -15,7 +15,8 @@ import pytest
 from typer.testing import CliRunner
 
 from rodwarp.cli import app
-from rodwarp.rundir import MANIFEST, default_run_name
+from rodwarp.experiments import default_run_name
+from rodwarp.rodset.rundir import MANIFEST
 
 runner = CliRunner()
 SHORT = ["simulate", "--alpha", "20", "--n-rods", "12", "--entangle-duration", "0.02", "--duration", "0.02",
@@ -63,7 +64,7 @@ def test_read_only_location_is_refused_before_work(tmp_path, monkeypatch):
 
 
 def test_write_failure_names_the_file(tmp_path):
-    from rodwarp.atomic import atomic_path
+    from rodwarp.rodset.files import atomic_path
 
     target = tmp_path / "summary.json"
     with pytest.raises(OSError) as e:
@@ -77,7 +78,7 @@ def test_write_failure_names_the_file(tmp_path):
 def test_disk_full_during_the_run_names_the_file_and_keeps_earlier_results(tmp_path, monkeypatch):
     # a mocked failure of the 4th VTK frame (a full disk); the CLI prints the path, exit 2, and
     # the frames and metrics written before are readable
-    import rodwarp.outputs as outputs
+    import rodwarp.rodset.trajectory as outputs
 
     real = outputs.write_vtp
     calls = []
@@ -120,7 +121,7 @@ def test_real_small_tmpfs_full_before_and_during_the_run(tmp_path, monkeypatch):
         assert not (mnt / "big").exists()
         # during: the estimate fits, then something else fills the disk after the third frame;
         # the real ENOSPC is reported with the file it hit
-        import rodwarp.outputs as outputs
+        import rodwarp.rodset.trajectory as outputs
 
         real, n = outputs.write_vtp, []
 
@@ -218,7 +219,7 @@ def test_analyze_replaces_its_own_analysis_but_not_another_run(tmp_path):
 
 
 def test_default_folder_names_every_distinguishing_parameter():
-    from rodwarp.protocol import ProtocolParams
+    from rodwarp.experiments import ProtocolParams
 
     base = default_run_name(ProtocolParams())
     assert base == "alpha100_freq10_g0.5_seed0"
@@ -236,7 +237,7 @@ def test_default_folder_names_every_distinguishing_parameter():
 
 def test_manifest_is_written_first(tmp_path, monkeypatch):
     # the folder is taken before the work: a run stopped at its first step already owns it
-    import rodwarp.protocol as protocol
+    from rodwarp.experiments import _protocol as protocol
     from rodwarp.errors import RodwarpError
 
     def stop(*a, **k):

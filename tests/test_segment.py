@@ -1,4 +1,4 @@
-"""Segmentation of synthetic CT (rodwarp.phantom) into rods and contacts: the issue-5 targets."""
+"""Segmentation of synthetic CT (rodwarp.ct) into rods and contacts: the issue-5 targets."""
 
 from __future__ import annotations
 
@@ -7,11 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from rodwarp import phantom as ph
+from rodwarp import ct
+from rodwarp.ct import SegmentParams, SegmentResult, match_rods, score_contacts, segment_volume
 from rodwarp.errors import RodwarpError
 from rodwarp.rodset import Contacts, RodSet
-from rodwarp.segment import (SegmentParams, SegmentResult, match_rods, score_contacts,
-                             segment_volume)
 
 
 def _angle_deg(u, v):
@@ -39,8 +38,8 @@ def _endpoint_error(found: RodSet, i: int, truth: RodSet, j: int) -> float:
 @pytest.mark.parametrize("seed", [0, 1])
 def test_isolated_rod_endpoints_angle_radius(seed):
     shape = (64, 80, 96)
-    truth = ph.scene_isolated(shape, radius=3.0, seed=seed)
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=10.0, seed=seed)
+    truth = ct.scene_isolated(shape, radius=3.0, seed=seed)
+    vol = ct.render_phantom(truth, shape, blur_sigma=1.0, cnr=10.0, seed=seed)
     res = segment_volume(vol)
     assert isinstance(res, SegmentResult)
     assert res.rods.units == "voxel" and res.rods.n_rods == 1
@@ -69,10 +68,10 @@ def test_isolated_rod_endpoints_angle_radius(seed):
 def test_pairs_two_rods_and_their_contact(kind, angle, gap, seed, n_contacts):
     shape = (64, 96, 96)
     if kind == "crossing":
-        truth = ph.scene_crossing_pair(shape, angle, radius=3.0, gap=gap, seed=seed)
+        truth = ct.scene_crossing_pair(shape, angle, radius=3.0, gap=gap, seed=seed)
     else:
-        truth = ph.scene_parallel_pair(shape, radius=3.0, gap=gap, seed=seed)
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=10.0, seed=7)
+        truth = ct.scene_parallel_pair(shape, radius=3.0, gap=gap, seed=seed)
+    vol = ct.render_phantom(truth, shape, blur_sigma=1.0, cnr=10.0, seed=7)
     res = segment_volume(vol)
     assert res.rods.n_rods == 2
     m = match_rods(res.rods, truth)
@@ -92,9 +91,9 @@ def test_pairs_two_rods_and_their_contact(kind, angle, gap, seed, n_contacts):
 @pytest.fixture(scope="module")
 def packing():
     shape = (208, 208, 208)
-    truth = ph.scene_random_packing(shape, n_rods=100, radius=3.0, aspect=30.0, touching_fraction=0.5,
+    truth = ct.scene_random_packing(shape, n_rods=100, radius=3.0, aspect=30.0, touching_fraction=0.5,
                                     seed=0, max_attempts=100000)
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=0)
+    vol = ct.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=0)
     return truth, vol
 
 
@@ -114,8 +113,8 @@ def test_random_packing_meets_targets(packing):
 
 def test_chunked_matches_unchunked_and_is_deterministic():
     shape = (144, 144, 144)
-    truth = ph.scene_random_packing(shape, n_rods=40, radius=3.0, aspect=15.0, seed=5)
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=5)
+    truth = ct.scene_random_packing(shape, n_rods=40, radius=3.0, aspect=15.0, seed=5)
+    vol = ct.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=5)
     whole = segment_volume(vol)
     chunked = segment_volume(vol, SegmentParams(chunk=64))
     assert whole.rods.n_rods == chunked.rods.n_rods == truth.n_rods
@@ -146,8 +145,8 @@ class _LazyVolume:
 
 def test_lazy_array_like_input_gives_the_same_rods():
     shape = (64, 96, 96)
-    truth = ph.scene_crossing_pair(shape, 60.0, radius=3.0, seed=2)
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=8.0, seed=2)
+    truth = ct.scene_crossing_pair(shape, 60.0, radius=3.0, seed=2)
+    vol = ct.render_phantom(truth, shape, blur_sigma=1.0, cnr=8.0, seed=2)
     ref = segment_volume(vol)
     lazy = _LazyVolume(vol)
     res = segment_volume(lazy, SegmentParams(chunk=48))
@@ -158,21 +157,21 @@ def test_lazy_array_like_input_gives_the_same_rods():
 
 
 def test_tiff_via_ctio_lazy(tmp_path):
-    from rodwarp import ctio
+    from rodwarp import ct
 
     shape = (48, 64, 80)
-    truth = ph.scene_isolated(shape, radius=3.0, seed=4)
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=10.0, seed=4)
-    path = ctio.write_tiff(tmp_path / "rod.tif", vol)
-    res = segment_volume(ctio.open_volume_lazy(path), SegmentParams(chunk=32))
+    truth = ct.scene_isolated(shape, radius=3.0, seed=4)
+    vol = ct.render_phantom(truth, shape, blur_sigma=1.0, cnr=10.0, seed=4)
+    path = ct.write_tiff(tmp_path / "rod.tif", vol)
+    res = segment_volume(ct.open_volume_lazy(path), SegmentParams(chunk=32))
     assert res.rods.n_rods == 1
     assert _endpoint_error(res.rods, 0, truth, 0) <= 1.0
 
 
 def test_given_diameter_and_progress():
     shape = (64, 80, 96)
-    truth = ph.scene_isolated(shape, radius=3.0, seed=3)
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=10.0, seed=3)
+    truth = ct.scene_isolated(shape, radius=3.0, seed=3)
+    vol = ct.render_phantom(truth, shape, blur_sigma=1.0, cnr=10.0, seed=3)
     calls = []
     res = segment_volume(vol, SegmentParams(diameter=6.0), progress=lambda s, d, t: calls.append((s, d, t)))
     assert res.diameter == 6.0 and np.all(res.rods.radii == 3.0)
@@ -184,8 +183,8 @@ def test_given_diameter_and_progress():
 
 def test_flat_end_model_puts_ends_further_out():
     shape = (64, 80, 96)
-    truth = ph.scene_isolated(shape, radius=3.0, seed=0)
-    vol = ph.render_phantom(truth, shape, blur_sigma=1.0, cnr=10.0, seed=0)
+    truth = ct.scene_isolated(shape, radius=3.0, seed=0)
+    vol = ct.render_phantom(truth, shape, blur_sigma=1.0, cnr=10.0, seed=0)
     cap = segment_volume(vol)
     flat = segment_volume(vol, SegmentParams(end_model="flat"))
     # a capsule end's half level lies about r - sigma^2 / r beyond the cap centre; a flat face's at the face

@@ -1,4 +1,4 @@
-"""Segmentation of realistic scans (rodwarp.phantom_cases): field-of-view masks, cupping, rings,
+"""Segmentation of realistic scans (rodwarp.ct): field-of-view masks, cupping, rings,
 anisotropic voxels, mixed radii, bundles, thin and faint rods, dark rods, arcs and wire tangles.
 
 Every case is a phantom with ground truth; the targets are those of the realistic-scan work:
@@ -14,15 +14,12 @@ import pytest
 import tifffile
 from typer.testing import CliRunner
 
-from rodwarp import ctio
-from rodwarp import phantom as ph
+from rodwarp import ct
 from rodwarp.cli import app
+from rodwarp.ct import (SegmentParams, make_case, match_polylines, match_rods, parse_voxel_size, prepare_volume,
+                        score_contacts, scored_subset, segment_volume)
 from rodwarp.errors import RodwarpError
-from rodwarp.phantom_cases import make_case, scored_subset
 from rodwarp.rodset import load as load_rods
-from rodwarp.segment import SegmentParams, match_rods, score_contacts, segment_volume
-from rodwarp.segment_prep import parse_voxel_size, prepare_volume
-from rodwarp.segment_score import match_polylines
 
 runner = CliRunner()
 
@@ -116,7 +113,7 @@ def test_straight_mode_on_arcs_gives_chords_auto_gives_curves():
 
 @pytest.mark.slow
 def test_analyze_of_segmented_filaments_gives_the_truths_cv_e(tmp_path):
-    from rodwarp.analyze import AnalyzeOptions, analyze
+    from rodwarp.analysis import AnalyzeOptions, analyze
 
     case, res = _curved("wires")
     seg = res.rods.copy()
@@ -159,16 +156,16 @@ def test_bad_voxel_sizes(text, msg):
 
 def test_voxel_size_from_imagej_ome_and_zarr_metadata(tmp_path):
     v = np.zeros((4, 8, 8), np.uint16)
-    ctio.write_tiff(tmp_path / "a.tif", v, voxel_size=(2e-5, 1e-5, 1e-5))
-    sizes, src = ctio.read_voxel_size(tmp_path / "a.tif")
+    ct.write_tiff(tmp_path / "a.tif", v, voxel_size=(2e-5, 1e-5, 1e-5))
+    sizes, src = ct.read_voxel_size(tmp_path / "a.tif")
     assert np.allclose(sizes, (2e-5, 1e-5, 1e-5)) and "ImageJ" in src
     tifffile.imwrite(tmp_path / "b.ome.tif", v, metadata={
         "axes": "ZYX", "PhysicalSizeX": 0.05, "PhysicalSizeY": 0.05, "PhysicalSizeZ": 0.1,
         "PhysicalSizeXUnit": "mm", "PhysicalSizeYUnit": "mm", "PhysicalSizeZUnit": "mm"})
-    sizes, src = ctio.read_voxel_size(tmp_path / "b.ome.tif")
+    sizes, src = ct.read_voxel_size(tmp_path / "b.ome.tif")
     assert np.allclose(sizes, (1e-4, 5e-5, 5e-5)) and "OME" in src
     tifffile.imwrite(tmp_path / "c.tif", v, photometric="minisblack")
-    assert ctio.read_voxel_size(tmp_path / "c.tif") is None
+    assert ct.read_voxel_size(tmp_path / "c.tif") is None
     import zarr
 
     g = zarr.open_group(str(tmp_path / "o.zarr"), mode="w")
@@ -176,7 +173,7 @@ def test_voxel_size_from_imagej_ome_and_zarr_metadata(tmp_path):
     g.attrs["multiscales"] = [{"axes": [{"name": a, "type": "space", "unit": "micrometer"} for a in "zyx"],
                                "datasets": [{"path": "0", "coordinateTransformations": [
                                    {"type": "scale", "scale": [3.0, 1.5, 1.5]}]}]}]
-    sizes, src = ctio.read_voxel_size(tmp_path / "o.zarr")
+    sizes, src = ct.read_voxel_size(tmp_path / "o.zarr")
     assert np.allclose(sizes, (3e-6, 1.5e-6, 1.5e-6)) and "OME-Zarr" in src
 
 
@@ -228,11 +225,11 @@ def test_segment_cli_bad_voxel_size_and_shape(args, fragment, tmp_path):
 
 
 def test_phantom_options_fov_dark_anisotropic():
-    rods = ph.scene_random_packing((40, 64, 64), n_rods=4, radius=3.0, aspect=5.0, seed=1, fov_radius=28.0)
-    vol = ph.render_phantom(rods, (20, 64, 64), cnr=None, fov=30.0, z_thickness=2, background=50000,
+    rods = ct.scene_random_packing((40, 64, 64), n_rods=4, radius=3.0, aspect=5.0, seed=1, fov_radius=28.0)
+    vol = ct.render_phantom(rods, (20, 64, 64), cnr=None, fov=30.0, z_thickness=2, background=50000,
                             foreground=20000)
     assert vol.shape == (20, 64, 64)
     assert vol[10, 0, 0] == 0 and vol[10, 32, 32] != 0  # outside the field of view: 0
     assert vol[:, 20:44, 20:44].min() < 45000  # dark rods
     with pytest.raises(RodwarpError, match="z_thickness"):
-        ph.render_phantom(rods, (20, 64, 64), z_thickness=0)
+        ct.render_phantom(rods, (20, 64, 64), z_thickness=0)

@@ -12,9 +12,8 @@ import warnings
 import numpy as np
 import pytest
 
+from rodwarp.analysis import Fields, field_statistics, find_tangles, histogram, outlier_bound, z_profiles
 from rodwarp.errors import RodwarpError
-from rodwarp.fieldset import Fields
-from rodwarp.stats import field_statistics, find_tangles, histogram, outlier_bound, z_profiles
 
 PAPER_CASE = [1, 2, 3, 4, 5, 6, 7, 8, 12, 20]
 
@@ -233,7 +232,7 @@ def _check_pngs(tmp_path, paths):
 
 
 def test_plots_write_png(tmp_path):
-    from rodwarp.fieldplots import plot_histograms, plot_slices, plot_tangles, plot_zprofiles
+    from rodwarp.analysis import plot_histograms, plot_slices, plot_tangles, plot_zprofiles
 
     e = two_blobs()
     e[:, :, 0] = np.nan  # some voxels outside the domain
@@ -249,7 +248,7 @@ def test_plots_write_png(tmp_path):
 
 
 def test_plots_with_missing_fields_and_defaults(tmp_path):
-    from rodwarp.fieldplots import plot_histograms, plot_slices, plot_tangles, plot_zprofiles
+    from rodwarp.analysis import plot_histograms, plot_slices, plot_tangles, plot_zprofiles
 
     f = make_fields(two_blobs(), spacing=0.5, nan_other=True)  # only e and n: "not available" panels
     _check_pngs(tmp_path, [

@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("distributed")
 
-from rodwarp.sweep import SweepSpec, alpha_star, phase_diagram, points, read_results, run_point, run_sweep  # noqa: E402
+from rodwarp.experiments import SweepSpec, alpha_star, phase_diagram, points, read_results, run_point, run_sweep  # noqa: E402
 
 TINY = {"n_rods": 12, "save_every": 0.01, "checkpoint_every": 0.01}
 
@@ -181,7 +181,7 @@ def test_local_cluster_serves_no_http(tmp_path):
 
     import psutil
 
-    from rodwarp.sweep import _local_cluster
+    from rodwarp.experiments._sweep import _local_cluster
 
     cluster, client = _local_cluster(1)
     try:

@@ -1,0 +1,168 @@
+"""The protocol's outcome against the solver's effort and the adaptive step.
+
+The main job (alpha = 100, f = 10 Hz, g = 0.5, full durations 5 s + 5 s) with three seeds per
+setting:
+
+* Gauss-Seidel sweeps per step (``--iterations``) 5, 10, 20, 40 at the default step safety;
+* the adaptive step's safety (``--step-safety``: the fraction of a diameter the fastest rod
+  may cross per step) 0.25, 0.5, 1, 2 at the default sweeps;
+* a reference 10x finer than the default step (safety 0.05) with 40 sweeps, seed 0.
+
+Outcome at the end: contacts per rod Z, the largest cluster f, the height kept h and the
+persistence tau; cost: the run's wall time (one core per run, two runs at a time). The
+seed-to-seed spread at a setting is the noise an outcome difference must exceed. Runs go to
+``runs/effort`` and are reused when the command is repeated.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks import common
+
+ROOT = Path(__file__).resolve().parents[1]
+RUNS = ROOT / "runs" / "effort"
+SEEDS = (0, 1, 2)
+ITERATIONS = (5, 10, 20, 40)
+SAFETIES = (0.25, 0.5, 1.0, 2.0)
+KEYS = ("Z", "f", "h", "tau")
+
+
+def _defaults():
+    from rodwarp.experiments import ProtocolParams
+
+    p = ProtocolParams()
+    return p.iterations, p.step_safety
+
+
+def _settings(quick: bool):
+    it0, sf0 = _defaults()
+    out = []
+    for it in ITERATIONS:
+        out.append({"iterations": it, "step_safety": sf0, "sweep": "iterations"})
+    for sf in SAFETIES:
+        if sf != sf0:
+            out.append({"iterations": it0, "step_safety": sf, "sweep": "safety"})
+    seeds = SEEDS[:2] if quick else SEEDS
+    runs = [{**s, "seed": seed} for s in out for seed in seeds]
+    runs.append({"iterations": 40, "step_safety": sf0 / 10, "sweep": "reference", "seed": 0})
+    return sorted(runs, key=lambda r: (r["sweep"] != "reference", -r["iterations"] / r["step_safety"]))
+
+
+def _run(p: dict) -> dict:
+    out = RUNS / f"it{p['iterations']}_safety{p['step_safety']:g}_seed{p['seed']}"
+    if not (out / "summary.json").exists():
+        cmd = [sys.executable, "-m", "rodwarp.cli", "simulate", "--iterations", str(p["iterations"]),
+               "--step-safety", f"{p['step_safety']:g}", "--seed", str(p["seed"]), "--device", "cpu", "--quiet",
+               "--out", str(out)]
+        cmd.append("--resume" if (out / "checkpoints").exists() else "--overwrite")
+        t = time.time()
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        common.log(f"effort: {out.name}: {'ok' if r.returncode == 0 else r.stderr.strip()[-300:]} "
+                   f"({time.time() - t:.0f} s)")
+        if r.returncode != 0:
+            return {**p, "failure": (r.stderr.strip().splitlines() or ["failed"])[-1]}
+    s = json.loads((out / "summary.json").read_text())
+    return {**p, "Z": s["contacts_per_rod"], "f": s["largest_cluster_fraction"], "h": s["height_kept"],
+            "tau": s["persistence"], "stable": s["stable"], "wall_s": s["wall_time_s"], "steps": s["steps"],
+            "max_penetration_over_d": s["max_penetration_over_d"], "failure": None}
+
+
+def _group(rows, key):
+    out = []
+    for v in sorted({r[key] for r in rows}):
+        sel = [r for r in rows if r[key] == v and not r["failure"]]
+        if not sel:
+            continue
+        g = {key: v, "n": len(sel), "wall_s": common.spread([r["wall_s"] for r in sel]),
+             "steps": float(np.median([r["steps"] for r in sel]))}
+        for k in KEYS:
+            vals = [r[k] for r in sel]
+            g[k] = {"mean": float(np.mean(vals)), "min": float(np.min(vals)), "max": float(np.max(vals))}
+        out.append(g)
+    return out
+
+
+def run(quick: bool, device: str) -> dict:
+    RUNS.mkdir(parents=True, exist_ok=True)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        rows = list(pool.map(_run, _settings(quick)))
+    it0, sf0 = _defaults()
+    ref = next((r for r in rows if r["sweep"] == "reference" and not r["failure"]), None)
+    return {"title": "Protocol outcome against Gauss-Seidel sweeps and the adaptive step (main job, 3 seeds)",
+            "rows": rows, "by_iterations": _group([r for r in rows if r["sweep"] == "iterations"], "iterations"),
+            "by_safety": _group([r for r in rows if r["sweep"] in ("safety",) or
+                                 (r["sweep"] == "iterations" and r["iterations"] == it0)], "step_safety"),
+            "reference": ref, "default_iterations": it0, "default_safety": sf0,
+            "problems": [f"{r['iterations']}/{r['step_safety']}/{r['seed']}: {r['failure']}" for r in rows
+                         if r["failure"]]}
+
+
+def summary(rec: dict) -> list[dict]:
+    out = []
+    ref = rec["reference"]
+    for key, label in (("by_iterations", "iterations"), ("by_safety", "step_safety")):
+        for g in rec[key]:
+            out.append({"benchmark": f"main job, {label} = {g[label]:g} ({g['n']} seeds)",
+                        "rodwarp": ", ".join(f"{k} {g[k]['mean']:.3f} [{g[k]['min']:.3f}, {g[k]['max']:.3f}]"
+                                             for k in KEYS) + f"; wall {g['wall_s']['median']:.0f} s, "
+                                                              f"{g['steps']:.0f} steps",
+                        "peer": "reference (safety 0.05, 40 sweeps): " + (
+                            ", ".join(f"{k} {ref[k]:.3f}" for k in KEYS) + f"; {ref['wall_s']:.0f} s"
+                            if ref else "n/a"),
+                        "ratio": (ref["wall_s"] / g["wall_s"]["median"]) if ref else None})
+    return out
+
+
+def plot(rec: dict, outdir) -> list[dict]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(2, 4, figsize=(17, 7))
+    ref = rec["reference"]
+    now = dict(zip(("iterations", "step_safety"), _defaults()))  # the defaults chosen from this chart
+    for row, (key, label, dflt) in enumerate((("by_iterations", "iterations", rec["default_iterations"]),
+                                              ("by_safety", "step_safety", rec["default_safety"]))):
+        groups = rec[key]
+        xs = [g[label] for g in groups]
+        for k, (name, title) in enumerate((("Z", "contacts per rod Z"), ("f", "largest cluster f"),
+                                           ("h", "height kept h"))):
+            a = ax[row, k]
+            a.errorbar(xs, [g[name]["mean"] for g in groups],
+                       yerr=[[g[name]["mean"] - g[name]["min"] for g in groups],
+                             [g[name]["max"] - g[name]["mean"] for g in groups]], fmt="o-", capsize=3,
+                       label="mean, range over seeds")
+            if ref:
+                a.axhline(ref[name], color="k", ls=":", label="reference (10x finer step, 40 sweeps)")
+            a.axvline(dflt, color="tab:red", ls="-.", lw=1, label=f"default during the run {dflt:g}")
+            if now[label] != dflt:
+                a.axvline(now[label], color="tab:green", ls="--", lw=1, label=f"default now {now[label]:g}")
+            a.set_xscale("log")
+            a.set_xlabel(label)
+            a.set_ylabel(title)
+            a.grid(alpha=0.3)
+            a.legend(fontsize=6)
+        a = ax[row, 3]
+        a.plot(xs, [g["wall_s"]["median"] for g in groups], "s-", color="C1")
+        a.axvline(dflt, color="tab:red", ls="-.", lw=1)
+        a.set_xscale("log")
+        a.set_xlabel(label)
+        a.set_ylabel("wall time of the run (s, median)")
+        a.grid(alpha=0.3)
+    fig.suptitle("main job (alpha 100, 10 Hz, g = 0.5, 5 s + 5 s): outcome and cost against the solver's effort",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(Path(outdir) / "effort.png", dpi=110)
+    plt.close(fig)
+    return [{"file": "effort.png", "title": "Outcome and cost against sweeps and step safety",
+             "reading": "Top: Gauss-Seidel sweeps per step; bottom: the adaptive step's safety; error bars span "
+                        "the seeds. Command `python -m benchmarks --full --only effort`."}]

@@ -1,0 +1,141 @@
+"""A settled pile against the paper's first author's current simulator, side by side.
+
+Scene (the same on both sides): 270 rods of aspect ratio 50 (l = 1 m, d = 0.02 m) placed by
+random sequential addition in a closed 1 x 1 x 2.5 m box, g = 0.5 m/s^2, mu = 0.2 (rods and
+walls), dt = 1e-3 s fixed, 6000 steps; thread CPU time of each step, median over steps
+4000-6000 (the pile has landed and settled), with the contact residual and sweeps used.
+
+* rodwarp: rigid rods (the rule's choice for this scene), default solver (40 sweeps at most,
+  tolerance 1e-5 m/s, over-relaxed Gauss-Seidel); and elastic rods (10 vertices) for scale;
+* the peer, rod-dynamics-3d (rigid 6-DOF capsules, projected Gauss-Seidel, 200 sweeps, cfm 0),
+  built in a throwaway folder outside the repository and run by the command in
+  ``$RODWARP_PEER_PILE`` (it prints one JSON object with ``ms_per_step_median_4000_6000``). Its
+  code never enters rodwarp. Without the command the peer is recorded as not run.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import subprocess
+import time
+
+import numpy as np
+
+from benchmarks import common
+
+N_RODS, LENGTH, DIAMETER = 270, 1.0, 0.02
+BOX = (1.0, 1.0, 2.5)
+DT, STEPS = 1e-3, 6000
+WINDOW = (4000, 6000)
+
+
+def _rodwarp(rod_model: str, device: str, steps: int) -> dict:
+    from rodwarp.experiments import random_packing
+    from rodwarp.sim import STEEL, Model, RodSolver, State
+
+    rods = random_packing(N_RODS, LENGTH, DIAMETER, BOX, seed=0, device=device)
+    model = Model(rods, STEEL, gravity=(0, 0, -0.5), mu=0.2, rod_model=rod_model, device=device)
+    model.add_box((0, 0, 0), BOX, walls=("floor", "ceiling", "x-", "x+", "y-", "y+"))
+    solver = RodSolver(model, allow_unstable=True)  # dt fixed at 1e-3 like the peer's protocol
+    control = model.control()
+    a, b = model.state(), State(model)
+    times, res, sweeps, nc = [], [], [], []
+    for _ in range(steps):
+        t0 = time.thread_time()
+        info = solver.step(a, b, control, DT)
+        common.sync(device)
+        times.append(time.thread_time() - t0)
+        a, b = b, a
+        res.append(info.contact_residual)
+        sweeps.append(info.iterations)
+        nc.append(info.n_contacts)
+    lo, hi = int(WINDOW[0] * steps / STEPS), steps
+    w = slice(lo, hi)
+    return {"rod_model": rod_model, "ms_per_step_median": 1e3 * float(np.median(times[w])),
+            "ms_per_step_spread": common.scale_spread(common.spread(times[w]), 1e3),
+            "residual_median": float(np.median(res[w])), "residual_max": float(np.max(res[w])),
+            "sweeps_mean": float(np.mean(sweeps[w])), "contacts_median": float(np.median(nc[w])),
+            "max_speed_end": float(info.max_speed), "iterations_cap": solver.iterations,
+            "tolerance": solver.tolerance, "n_vertices": model.n_vertices}
+
+
+def _peer() -> dict | None:
+    cmd = os.environ.get("RODWARP_PEER_PILE")
+    if not cmd:
+        return None
+    t = time.perf_counter()
+    r = subprocess.run(shlex.split(cmd), capture_output=True, text=True)
+    if r.returncode != 0:
+        return {"failure": (r.stderr.strip().splitlines() or ["failed"])[-1], "command": cmd}
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    out.update({"command": cmd, "wall_s": time.perf_counter() - t})
+    return out
+
+
+def run(quick: bool, device: str) -> dict:
+    steps = STEPS
+    rows = [_rodwarp("rigid", device, steps), _rodwarp("elastic", device, steps)]
+    peer = _peer()
+    problems = []
+    r = rows[0]
+    if r["residual_median"] >= 1e-5:
+        problems.append(f"rigid settled pile: residual median {r['residual_median']:.3g} m/s is not below 1e-5")
+    if peer and not peer.get("failure"):
+        peer_ms = float(peer["ms_per_step_median_4000_6000"])
+        ratio = peer_ms / r["ms_per_step_median"]
+        if ratio < 5:
+            problems.append(f"only {ratio:.2g}x faster than the peer (target 5x)")
+    else:
+        ratio = None
+    try:
+        load = os.getloadavg()
+    except OSError:
+        load = None
+    return {"title": "Settled 270-rod pile: rodwarp against rod-dynamics-3d, time per step and residual",
+            "rows": rows, "peer": peer, "ratio_peer_over_rodwarp_rigid": ratio, "load_average": load,
+            "scene": {"n_rods": N_RODS, "length_m": LENGTH, "diameter_m": DIAMETER, "box_m": BOX, "gravity": 0.5,
+                      "mu": 0.2, "dt_s": DT, "steps": steps, "window": WINDOW},
+            "problems": problems}
+
+
+def summary(rec: dict) -> list[dict]:
+    peer = rec.get("peer")
+    pms = None if not peer or peer.get("failure") else float(peer["ms_per_step_median_4000_6000"])
+    out = []
+    for r in rec["rows"]:
+        out.append({"benchmark": f"settled 270-rod pile, {r['rod_model']} rods (steps 4000-6000)",
+                    "rodwarp": f"{r['ms_per_step_median']:.2f} ms/step, residual median {r['residual_median']:.2g} m/s, "
+                               f"{r['sweeps_mean']:.1f} sweeps (cap {r['iterations_cap']}), "
+                               f"{r['contacts_median']:.0f} contacts",
+                    "peer": (f"rod-dynamics-3d: {pms:.2f} ms/step (200 sweeps, cfm 0, residual "
+                             f"{peer.get('residual_median')})" if pms else "rod-dynamics-3d: not run here"),
+                    "ratio": (pms / r["ms_per_step_median"]) if pms else None})
+    return out
+
+
+def plot(rec: dict, outdir) -> list[dict]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    peer = rec.get("peer")
+    names = [f"rodwarp {r['rod_model']}" for r in rec["rows"]]
+    ms = [r["ms_per_step_median"] for r in rec["rows"]]
+    if peer and not peer.get("failure"):
+        names.append("rod-dynamics-3d\n(200 sweeps)")
+        ms.append(float(peer["ms_per_step_median_4000_6000"]))
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.bar(names, ms, color=["C0", "C2", "C3"][:len(ms)])
+    for k, v in enumerate(ms):
+        ax.annotate(f"{v:.2f} ms", (k, v), ha="center", va="bottom", fontsize=8)
+    ax.set_ylabel("CPU time per step (ms, median of steps 4000-6000)")
+    ax.set_title("settled 270-rod pile (alpha 50, g = 0.5, mu = 0.2, dt = 1e-3)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(outdir / "peer_pile.png", dpi=110)
+    plt.close(fig)
+    return [{"file": "peer_pile.png", "title": "Settled pile against rod-dynamics-3d",
+             "reading": "Thread CPU time per step, same scene, same machine, same run. Command "
+                        "`RODWARP_PEER_PILE='...' python -m benchmarks --only peer_pile`."}]

@@ -1,0 +1,126 @@
+"""Post-stabilisation: the overlaps left at the end of a step, removed from the positions.
+
+After the velocity solve (kernels/friction.py) and the position update, each rod-rod and
+rod-wall overlap deeper than the slop is pushed apart along its normal by a Baumgarte fraction
+of its excess, through the same mobility the contact's impulses use (a rigid capsule moves
+rigidly, an elastic rod at the edge's two vertices). Velocities are untouched, so the
+correction never adds kinetic energy (docs/engine.md, "Post-stabilisation").
+
+Contacts that share a vertex must not be moved concurrently: on the CPU one launch sweeps
+them in order, on a GPU the rod-rod contacts go colour by colour and the wall contacts one
+thread per rod.
+"""
+
+import warp as wp
+
+from rodwarp.kernels.friction import contact_side, vertex_edge
+from rodwarp.kernels.structs import ContactFrame, ContactSide, RodContacts, RodModel, StepParams, WallContacts, Walls
+
+wp.set_module_options({"enable_backward": False})
+
+F0 = wp.float64(0.0)
+F1 = wp.float64(1.0)
+
+
+@wp.func
+def side_point(c: ContactSide, x: wp.array(dtype=wp.vec3d)):
+    """The side's centreline point at the positions ``x`` (m)."""
+    return x[c.i] * (F1 - c.s) + x[c.i + 1] * c.s
+
+
+@wp.func
+def side_shift(c: ContactSide, D: wp.vec3d, x: wp.array(dtype=wp.vec3d)):
+    """Move the side's rod by the 'position impulse' D through its mobility (a rigid rod as a
+    small rigid motion, an elastic one at the edge's two vertices); velocities are untouched."""
+    i = c.i
+    if c.rigid != 0:
+        dxc = D * c.im
+        dw = c.iinv * wp.cross(c.lever, D)
+        wperp = dw - c.t * wp.dot(dw, c.t)
+        x[i] = x[i] + dxc + wp.cross(wperp, c.arm0)
+        x[i + 1] = x[i + 1] + dxc + wp.cross(wperp, c.arm1)
+    else:
+        x[i] = x[i] + D * c.q0
+        x[i + 1] = x[i + 1] + D * c.q1
+    return 0
+
+
+@wp.func
+def project_rod_contact(k: int, model: RodModel, contacts: RodContacts, frames: wp.array(dtype=ContactFrame),
+                        params: StepParams, x: wp.array(dtype=wp.vec3d)):
+    """Remove the part of contact k's overlap beyond the slop at the end-of-step positions
+    (along its normal, with its mobility); returns the overlap it found (m)."""
+    f = frames[k]
+    n = contacts.normal[k]
+    ra = model.radius[model.vertex_rod[f.a.i]]
+    rb = model.radius[model.vertex_rod[f.b.i]]
+    gap = wp.dot(side_point(f.a, x) - side_point(f.b, x), n) - ra - rb
+    excess = -gap - params.slop
+    if excess <= F0 or f.k[0] <= F0:
+        return wp.max(-gap, F0)
+    D = n * (params.beta * excess / f.k[0])
+    side_shift(f.a, D, x)
+    side_shift(f.b, -D, x)
+    return -gap
+
+
+@wp.func
+def project_rod_walls(r: int, model: RodModel, x0: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d),
+                      walls: Walls, params: StepParams, x: wp.array(dtype=wp.vec3d)):
+    """The same for rod r's vertex spheres against the walls in place at the end of the step."""
+    a = model.rod_start[r]
+    b = model.rod_start[r + 1]
+    rr = model.radius[r]
+    worst = F0
+    for i in range(a, b):
+        e, se = vertex_edge(model, i)
+        for p in range(walls.n):
+            if walls.on[p] == 0:
+                continue
+            n = walls.normal[p]
+            off = walls.offset[p] + walls.shift[p] * (walls.drive_disp + walls.drive_vel * params.dt)
+            gap = wp.dot(n, x[i]) - off - rr
+            excess = -gap - params.slop
+            if excess <= F0:
+                continue
+            worst = wp.max(worst, -gap)
+            c = contact_side(model, x0, tangent, e, se, n * (-rr))
+            wnn = wp.dot(n, c.W * n)
+            if wnn > F0:
+                side_shift(c, n * (params.beta * excess / wnn), x)
+    return worst
+
+
+@wp.kernel
+def project_positions_sequential(sweeps: int, model: RodModel, x0: wp.array(dtype=wp.vec3d), contacts: RodContacts,
+                                 frames: wp.array(dtype=ContactFrame), tangent: wp.array(dtype=wp.vec3d),
+                                 walls: Walls, wall_contacts: WallContacts, params: StepParams,
+                                 x: wp.array(dtype=wp.vec3d), out: wp.array(dtype=wp.float64)):
+    """Post-stabilisation on a sequential device (dim = 1): ``sweeps`` Gauss-Seidel passes over
+    the rod-rod contacts and the rods near walls; out[0] = the deepest overlap before the last."""
+    worst = F0
+    na = wall_contacts.n_active[0]
+    for it in range(sweeps):
+        worst = F0
+        for k in range(contacts.count):
+            worst = wp.max(worst, project_rod_contact(k, model, contacts, frames, params, x))
+        for q in range(na):
+            worst = wp.max(worst, project_rod_walls(wall_contacts.active[q], model, x0, tangent, walls, params, x))
+    out[0] = worst
+
+
+@wp.kernel
+def project_rod_contacts(ids: wp.array(dtype=wp.int32), use_ids: int, model: RodModel, contacts: RodContacts,
+                         frames: wp.array(dtype=ContactFrame), params: StepParams, x: wp.array(dtype=wp.vec3d)):
+    """One thread per contact of one colour (GPU)."""
+    k = wp.tid()
+    if use_ids != 0:
+        k = ids[k]
+    project_rod_contact(k, model, contacts, frames, params, x)
+
+
+@wp.kernel
+def project_wall_contacts(model: RodModel, x0: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d),
+                          walls: Walls, wall_contacts: WallContacts, params: StepParams, x: wp.array(dtype=wp.vec3d)):
+    """One thread per rod near a wall (GPU)."""
+    project_rod_walls(wall_contacts.active[wp.tid()], model, x0, tangent, walls, params, x)

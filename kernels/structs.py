@@ -1,0 +1,175 @@
+"""Device-side bundles of the arrays the kernels read and write (``wp.struct``).
+
+Grouped the way the host groups them: the static rod model (:class:`RodModel`), the
+evolving rod state (:class:`RodState`), the walls of this step (:class:`Walls`), the rod-rod
+contacts of this step (:class:`RodContacts`), the per-rod solver factors
+(:class:`RodFactors`) and the scalars of one step (:class:`StepParams`).
+
+Indexing conventions (one rod = vertices ``rod_start[r] .. rod_start[r+1]-1``):
+
+* per vertex ``i``: positions, velocities, masses;
+* per edge, stored at its first vertex ``i`` (edge ``i -> i+1``; the slot of a rod's last
+  vertex is unused): rest length, stretch compliance, axial spin, material angle,
+  reference director, axial moment of inertia, the cross term of the inverse mass;
+* per interior vertex ``i`` (between edges ``i-1`` and ``i``): bending and twist data.
+
+The inverse mass matrix is tridiagonal: ``inv_mass`` on the diagonal and
+``cross_inv_mass[i]`` at (i, i+1). Elastic rods have lumped masses (cross terms 0); a rigid
+rod is two vertices with the consistent mass of a rigid bar, which has non-zero cross terms
+(:mod:`rodwarp.sim.model`).
+"""
+
+import warp as wp
+
+
+@wp.struct
+class RodModel:
+    n_rods: int
+    n_vertices: int
+    rod_start: wp.array(dtype=wp.int32)
+    vertex_rod: wp.array(dtype=wp.int32)
+    seg_vertex: wp.array(dtype=wp.int32)
+    mass: wp.array(dtype=wp.float64)  # diagonal of M (kg)
+    cross_mass: wp.array(dtype=wp.float64)  # M[i, i+1] at edge i (kg)
+    inv_mass: wp.array(dtype=wp.float64)  # diagonal of M^-1 (1/kg); 0 for pinned vertices
+    cross_inv_mass: wp.array(dtype=wp.float64)  # M^-1[i, i+1] at edge i (1/kg)
+    rest_length: wp.array(dtype=wp.float64)  # edge (m)
+    compliance: wp.array(dtype=wp.float64)  # edge stretch compliance h / (E A) (m/N)
+    bend_stiffness: wp.array(dtype=wp.float64)  # rod E I (N m^2)
+    radius: wp.array(dtype=wp.float64)  # rod (m)
+    inertia: wp.array(dtype=wp.float64)  # edge axial moment of inertia (kg m^2)
+    inv_inertia: wp.array(dtype=wp.float64)  # edge; 0 where the twist is clamped
+    twist_compliance: wp.array(dtype=wp.float64)  # interior vertex: l_i / (G J) (1/(N m))
+    rest_twist: wp.array(dtype=wp.float64)  # interior vertex (rad)
+    rest_kappa: wp.array(dtype=wp.vec2d)  # interior vertex: rest curvature in the material frame
+    curved: wp.array(dtype=wp.int32)  # rod: 1 when its rest shape is curved
+    rigid: wp.array(dtype=wp.int32)  # rod: 1 for a rigid (two-vertex) rod
+    rod_inv_mass: wp.array(dtype=wp.float64)  # rod: 1 / m (0 when fixed)
+    rod_inv_iperp: wp.array(dtype=wp.float64)  # rod: 1 / I_perp of a rigid rod (0 when fixed)
+
+
+@wp.struct
+class RodState:
+    x: wp.array(dtype=wp.vec3d)  # vertex position (m)
+    v: wp.array(dtype=wp.vec3d)  # vertex velocity (m/s)
+    spin: wp.array(dtype=wp.float64)  # edge: angular velocity of the material about its tangent (rad/s)
+    theta: wp.array(dtype=wp.float64)  # edge: material angle from the reference director (rad)
+    director: wp.array(dtype=wp.vec3d)  # edge: reference director u (unit, normal to the edge)
+
+
+@wp.struct
+class Walls:
+    """The walls of a step: static arrays per wall, the drive as scalars (no per-step copies)."""
+
+    n: int
+    normal: wp.array(dtype=wp.vec3d)  # unit, into the allowed half-space
+    offset: wp.array(dtype=wp.float64)  # n . x >= offset at rest (m)
+    moving: wp.array(dtype=wp.int32)  # 1: the wall follows the drive
+    shift: wp.array(dtype=wp.float64)  # n . drive direction of a moving wall (its offset's change per metre)
+    mu: wp.array(dtype=wp.float64)
+    on: wp.array(dtype=wp.int32)  # 0: removed (no contact)
+    drive_dir: wp.vec3d  # unit direction of the drive
+    drive_disp: wp.float64  # drive displacement at the start of the step (m)
+    drive_vel: wp.float64  # mean drive speed over the step along drive_dir (m/s)
+
+
+@wp.struct
+class RodContacts:
+    count: int
+    seg: wp.array(dtype=wp.vec2i)  # segment pair (sa < sb)
+    st: wp.array(dtype=wp.vec2d)  # parameters of the contact points on sa and sb
+    normal: wp.array(dtype=wp.vec3d)  # unit, from sb toward sa
+    gap: wp.array(dtype=wp.float64)  # surface gap at the start of the step (m)
+    impulse: wp.array(dtype=wp.vec3d)  # accumulated impulse on sa (N s); -impulse on sb
+
+
+@wp.struct
+class ContactSide:
+    """One rod's side of a contact: where the impulse acts and how the rod responds."""
+
+    i: int  # first vertex of the edge
+    rigid: int
+    s: wp.float64  # parameter on the edge
+    q0: wp.float64  # elastic: velocity change of the edge's ends per unit impulse
+    q1: wp.float64
+    t: wp.vec3d  # edge tangent at the start of the step
+    g: wp.vec3d  # elastic: t x (surface offset), the spin's lever
+    lever: wp.vec3d  # rigid: from the centre of mass to the point
+    arm0: wp.vec3d  # rigid: from the centre of mass to the two vertices
+    arm1: wp.vec3d
+    iinv: wp.mat33d  # rigid: inverse inertia tensor
+    im: wp.float64  # rigid: 1 / m
+    ispin: wp.float64  # inverse axial inertia of the edge
+    length: wp.float64  # rest length of the edge (m)
+    W: wp.mat33d  # mobility of the point (m / (N s))
+
+
+@wp.struct
+class ContactFrame:
+    """What a rod-rod contact's local problem needs that does not change within a step."""
+
+    a: ContactSide
+    b: ContactSide
+    W: wp.mat33d  # mobility of the contact (both sides)
+    e1: wp.vec3d  # tangent basis (e2 = n x e1)
+    k: wp.vec4d  # (n W n, e1 W e1, e1 W e2, e2 W e2)
+    coupled: int  # W couples the normal and tangential parts
+    target: wp.float64  # lowest normal relative velocity (m/s)
+
+
+@wp.struct
+class WallContacts:
+    gap: wp.array(dtype=wp.float64)  # vertex x wall; > 1e299 when out of reach
+    impulse: wp.array(dtype=wp.vec3d)  # vertex x wall (N s)
+    active: wp.array(dtype=wp.int32)  # rods with a vertex within reach of a wall
+    n_active: wp.array(dtype=wp.int32)
+
+
+@wp.struct
+class RodFactors:
+    """Per-step factors and multipliers of every rod's internal constraints."""
+
+    implicit_bending: int
+    # straight rods: bending (scalar pentadiagonal, three right-hand sides)
+    bcoef: wp.array(dtype=wp.vec4d)  # stencil (c-, c0, c+) and compliance / dt^2
+    btarget: wp.array(dtype=wp.vec3d)  # rest curvature vector in the current frame
+    bdiag: wp.array(dtype=wp.float64)
+    boff1: wp.array(dtype=wp.float64)
+    boff2: wp.array(dtype=wp.float64)
+    blam: wp.array(dtype=wp.vec3d)
+    brhs: wp.array(dtype=wp.vec3d)
+    bdl: wp.array(dtype=wp.vec3d)
+    # stretching (tridiagonal per rod)
+    sdir: wp.array(dtype=wp.vec3d)
+    sdiag: wp.array(dtype=wp.float64)
+    soff: wp.array(dtype=wp.float64)
+    slam: wp.array(dtype=wp.float64)
+    srhs: wp.array(dtype=wp.float64)
+    # twist (tridiagonal per rod, straight rods)
+    tangent: wp.array(dtype=wp.vec3d)  # edge tangent at the start of the step
+    ref_twist: wp.array(dtype=wp.float64)  # interior vertex: reference twist at the start of the step
+    tdiag: wp.array(dtype=wp.float64)
+    toff: wp.array(dtype=wp.float64)
+    tlam: wp.array(dtype=wp.float64)
+    trhs: wp.array(dtype=wp.float64)
+    # curved rods: bending and twist as one block-pentadiagonal system of 4 x 4 blocks
+    gcouple: wp.array(dtype=wp.vec3d)  # d(target) / d(theta) of each adjacent edge
+    cd: wp.array(dtype=wp.mat44d)  # D_i
+    cinv: wp.array(dtype=wp.mat44d)  # D_i^-1
+    cl1: wp.array(dtype=wp.mat44d)  # L[i+1, i]
+    cl2: wp.array(dtype=wp.mat44d)  # L[i+2, i]
+    clam: wp.array(dtype=wp.vec4d)  # multipliers (bending xyz, twist)
+    crhs: wp.array(dtype=wp.vec4d)
+    cdl: wp.array(dtype=wp.vec4d)
+
+
+@wp.struct
+class StepParams:
+    dt: wp.float64
+    mu: wp.float64  # rod-rod friction coefficient
+    beta: wp.float64  # Baumgarte fraction of an overlap (beyond the slop) removed per step
+    slop: wp.float64  # overlap left alone (m): no push, so a resting contact's problem repeats
+    max_push: wp.float64  # largest separation speed an overlap may cause (m/s)
+    contact_distance: wp.float64  # base speculative margin (m)
+    warm: wp.float64  # fraction of last step's impulses reused
+    relax: wp.float64  # over-relaxation of each contact's impulse update (1: plain Gauss-Seidel)

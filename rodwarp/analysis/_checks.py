@@ -1,0 +1,35 @@
+"""Checks of ``rodwarp analyze`` before any work (the generic ones: :mod:`rodwarp.validation`)."""
+
+from __future__ import annotations
+
+from rodwarp.validation import BASE_BYTES, device_name, fail, integer, memory_fits, number
+
+#: bytes per voxel of `rodwarp analyze` (seven float64 fields, the valid mask, labels and the
+#: batch scratch of the kernels), rounded up
+ANALYZE_BYTES_PER_VOXEL = 200
+
+
+def check_analyze(o) -> None:
+    """Checks of :class:`rodwarp.analysis.AnalyzeOptions` (lengths in the input's units)."""
+    from rodwarp.rodset import UNITS
+
+    for name in ("radius", "spacing", "diameter", "length"):
+        val = getattr(o, name)
+        if val is not None:
+            number(f"--{name}", val, gt=0, hint="lengths are in the input's units")
+    if o.contact_tolerance is not None:
+        number("--contact-tolerance", o.contact_tolerance, ge=0, hint="a surface gap in the input's units")
+    if o.units is not None and o.units not in UNITS:
+        fail(f"--units must be one of {', '.join(UNITS)}, got '{o.units}'")
+    if o.outlier not in ("q3", "q1"):
+        fail(f"--outlier must be q3 (Q3 + 1.5 IQR, the paper's) or q1, got '{o.outlier}'")
+    if o.connectivity not in (6, 26):
+        fail(f"--connectivity must be 6 or 26, got {o.connectivity}")
+    integer("--bins", o.bins, ge=2, le=100_000)
+    device_name("--device", o.device)
+
+
+def check_grid_memory(n_voxels: float) -> None:
+    """Refuse an analysis grid whose memory estimate exceeds what is available."""
+    memory_fits(f"the analysis grid ({n_voxels:.3g} voxels)", BASE_BYTES + ANALYZE_BYTES_PER_VOXEL * n_voxels,
+                "raise --spacing or --radius")

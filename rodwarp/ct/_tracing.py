@@ -1,0 +1,335 @@
+"""Stage 2b of segmentation, cylinder fits and marching: every seed traced into a rod axis.
+
+A seed is fitted by iterative intensity-weighted centroid/line fits inside a cylinder of one
+radius around the current axis, then *marched*: the axis grows block by block while a small
+disc on it stays filled, refitting as it grows.  An elongated cross-section is two rods side
+by side (split in two); a cross-section much shallower than it is wide is a bundle (split by
+:mod:`rodwarp.ct._bundles`).  Foreground that no traced rod explains seeds a second round.
+This module must not import warp.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import ndimage
+
+from rodwarp.ct._levels import _Levels
+from rodwarp.ct._params import SegmentParams
+from rodwarp.ct._seeds import _skeleton_seeds
+from rodwarp.ct._voxels import _BlockSampler, _basis, _canonical, _disc_offsets, _point_segment_distance, _unit, _window_voxels
+
+
+class _Tracer:
+    """Coarse fits and marching on one block's smoothed, normalised image."""
+
+    def __init__(self, g, origin_zyx, r0, P: SegmentParams):
+        self.S = _BlockSampler(g, origin_zyx)
+        self.r0 = r0
+        self.P = P
+        self.fit_offs = _disc_offsets(max(r0, 1.0))
+        self.probe_offs = _disc_offsets(max(0.5 * r0, 0.75))
+        self.mom_offs = _disc_offsets(1.6 * r0 + 1.0)
+
+    mixed = False
+
+    def _slices(self, c, u, ts, offs):
+        e1, e2 = _basis(u)
+        return (c + ts[:, None, None] * u + offs[None, :, 0, None] * e1 + offs[None, :, 1, None] * e2)
+
+    def fit(self, c, u, t0, t1, n_iter, avoid=None):
+        """Centroid/line fit on [t0, t1]; returns (c, u, t0, t1, fill) or None.
+
+        ``avoid``: segments [(p0, p1)] of neighbours; samples nearer to one of them than to
+        this axis are ignored (keeps two rods side by side apart).
+        """
+        offs = self.fit_offs
+        rad = np.hypot(offs[:, 0], offs[:, 1])
+        for _ in range(n_iter):
+            if t1 - t0 < 1.0:
+                mid = 0.5 * (t0 + t1)
+                t0, t1 = mid - 0.5, mid + 0.5
+            ts = np.arange(t0, t1 + 1e-9, 1.0)
+            e1, e2 = _basis(u)
+            pts = c + ts[:, None, None] * u + offs[None, :, 0, None] * e1 + offs[None, :, 1, None] * e2
+            w = self.S(pts)
+            w = np.where(np.isfinite(w), np.clip(w, 0.0, 1.0), 0.0)
+            for q0, q1 in (avoid or ()):
+                d = _point_segment_distance(pts.reshape(-1, 3), q0, q1).reshape(w.shape)
+                w = np.where(d < rad[None, :], 0.0, w)
+            m = w.sum(1)
+            ok = m > 0.25 * len(offs)
+            if ok.sum() < 2:
+                return None
+            a = (w[ok] * offs[:, 0]).sum(1) / m[ok]
+            b = (w[ok] * offs[:, 1]).sum(1) / m[ok]
+            tt = ts[ok]
+            ww = m[ok]
+            tm = (ww * tt).sum() / ww.sum()
+            dt = tt - tm
+            den = (ww * dt * dt).sum()
+            am, bm = (ww * a).sum() / ww.sum(), (ww * b).sum() / ww.sum()
+            sa = (ww * dt * (a - am)).sum() / den if den > 0 else 0.0
+            sb = (ww * dt * (b - bm)).sum() / den if den > 0 else 0.0
+            p0, p1 = c + t0 * u, c + t1 * u
+            c_new = c + tm * u + am * e1 + bm * e2
+            u_new = _unit(u + sa * e1 + sb * e2)
+            t0, t1 = (p0 - c_new) @ u_new, (p1 - c_new) @ u_new
+            c, u = c_new, u_new
+        fill = float(m.sum() / (len(ts) * len(offs)))
+        return c, u, float(t0), float(t1), fill
+
+    def march(self, c, u, t0, t1, max_len, avoid=None):
+        P = self.P
+        B = int(P.march_block)
+        for side in (1.0, -1.0):
+            while True:
+                tend = t1 if side > 0 else t0
+                ts = tend + side * np.arange(1, B + 1, dtype=np.float64)
+                pts = self._slices(c, u, ts, self.probe_offs)
+                v = self.S(pts)
+                fill = np.where(np.all(np.isfinite(v), axis=1), v.mean(1), -1.0)
+                bad = np.nonzero(fill < P.march_fill)[0]
+                k = int(bad[0]) if len(bad) else B
+                if side > 0:
+                    t1 += k
+                else:
+                    t0 -= k
+                if k < B or (t1 - t0) > max_len:
+                    break
+                res = self.fit(c, u, t0, t1, 1, avoid)
+                if res is None:
+                    break
+                c, u, t0, t1, _ = res
+        return c, u, t0, t1
+
+    def moments(self, c, u, t0, t1):
+        """Median over slices of the cross-section second moments (2x2) about the axis."""
+        ts = np.arange(t0, t1 + 1e-9, 1.0)
+        pts = self._slices(c, u, ts, self.mom_offs)
+        w = self.S(pts)
+        w = np.where(np.isfinite(w), np.clip(w, 0.0, 1.0), 0.0)
+        m = w.sum(1)
+        ok = m > 0.25 * len(self.fit_offs)
+        if ok.sum() < 1:
+            return None
+        w, m = w[ok], m[ok]
+        o = self.mom_offs
+        mx = (w * o[:, 0]).sum(1) / m
+        my = (w * o[:, 1]).sum(1) / m
+        sxx = (w * o[:, 0] ** 2).sum(1) / m
+        syy = (w * o[:, 1] ** 2).sum(1) / m
+        sxy = (w * o[:, 0] * o[:, 1]).sum(1) / m
+        return np.array([[np.median(sxx), np.median(sxy)], [np.median(sxy), np.median(syy)]]), \
+            np.array([np.median(mx), np.median(my)])
+
+    def trace(self, c, u, t0, t1, max_len, avoid=None):
+        P = self.P
+        res = self.fit(c, u, t0, t1, P.fit_iterations, avoid)
+        if res is None:
+            return None
+        c, u, t0, t1, fill = res
+        # a thinner rod fills less of the fitting disc: with mixed radii accept down to a
+        # quarter (a rod of half the coarse radius)
+        if fill < (0.25 if self.mixed else 0.4):
+            return None
+        c, u, t0, t1 = self.march(c, u, t0, t1, max_len, avoid)
+        res = self.fit(c, u, t0, t1, P.fit_iterations, avoid)
+        if res is None:
+            return None
+        return res
+
+
+def _lines_cover(lines, pt, radius):
+    """True if pt lies within ``radius`` of one of the segments in lines [(p0, p1), ...]."""
+    if not lines:
+        return False
+    A = np.array([l[0] for l in lines])
+    Bp = np.array([l[1] for l in lines])
+    d = Bp - A
+    L2 = np.maximum((d * d).sum(1), 1e-300)
+    t = np.clip(((pt - A) * d).sum(1) / L2, 0.0, 1.0)
+    dist = np.linalg.norm(pt - A - t[:, None] * d, axis=1)
+    return bool(np.any(dist < radius))
+
+
+def _rasterize(lines, shape_zyx, origin_zyx, radius):
+    """Boolean block mask of voxels within ``radius`` (one value, or one per segment) of any segment."""
+    cov = np.zeros(shape_zyx, bool)
+    o = np.asarray(origin_zyx)
+    rad = np.broadcast_to(np.asarray(radius, float), (len(lines),))
+    for (p0, p1), R in zip(lines, rad):
+        zyx, _, _, _ = _window_voxels(p0[::-1] - o, p1[::-1] - o, float(R), shape_zyx)
+        if len(zyx):
+            cov[zyx[:, 0], zyx[:, 1], zyx[:, 2]] = True
+    return cov
+
+
+def _detect_block(raw: np.ndarray, origin_zyx, st: _Levels, P: SegmentParams, quality: dict,
+                  volume_shape=None):
+    """Trace rods in one block; returns a list of (p0, p1) in global xyz."""
+    g = ndimage.gaussian_filter(raw, P.smooth_sigma) if P.smooth_sigma > 0 else raw
+    scale = 1.0 / (st.fg_smooth - st.bg)  # the smoothed rod plateau is 1
+    g = (g - np.float32(st.bg)) * np.float32(scale)
+    level = (st.threshold - st.bg) * scale
+    mask = g > level
+    r0 = st.r0
+    tr = _Tracer(g, origin_zyx, r0, P)
+    tr.mixed = st.mixed
+    max_len = float(np.linalg.norm(raw.shape)) + 2.0
+    lines: list[tuple[np.ndarray, np.ndarray]] = []
+    cut = None
+    if volume_shape is not None:
+        cut = [(origin_zyx[a] > 0, origin_zyx[a] + raw.shape[a] < volume_shape[a]) for a in range(3)]
+    seeds, n_sk, n_j = _skeleton_seeds(mask, r0, P, cut, quality)
+    quality["skeleton_voxels"] = quality.get("skeleton_voxels", 0) + n_sk
+    quality["skeleton_junctions"] = quality.get("skeleton_junctions", 0) + n_j
+    quality["seeds"] = quality.get("seeds", 0) + len(seeds)
+    o_xyz = np.asarray(origin_zyx, float)[::-1]
+    raw_s = []
+    r_kid = r0
+    kid_r: dict[int, float] = {}  # lines traced as rods of a bundle: their own radius
+
+    def cover_radius():
+        # a bundle's rods cover only themselves, so that one the fit missed is seeded again
+        return np.array([kid_r.get(i, r0) + 1.5 for i in range(len(lines))])
+
+    def _bundle_offsets(c, u, t0, t1):
+        """Offsets (k >= 3, 2) of the rods of a bundle around axis c, u, or None."""
+        nonlocal r_kid
+        from rodwarp.ct._bundles import cross_section, fit_discs, looks_bundled
+
+        if not raw_s:  # the raw block, normalised, sampled only once a bundle is suspected
+            raw_s.append(_BlockSampler((raw - np.float32(st.bg)) * np.float32(1.0 / (st.fg - st.bg)), origin_zyx))
+        e1, e2 = _basis(u)
+        img, g1 = cross_section(raw_s[0], c, u, e1, e2, t0, t1, 2.5 * r0 + 2.0, h=1.0)
+        if img is None or not looks_bundled(img, 1.0):
+            return None
+        fit = fit_discs(img, g1)
+        if fit is None or len(fit[0]) < 3:
+            return None
+        # the kids' own radius (a bundle's binarised outline inflates the coarse one)
+        r_kid = min(r0, max(0.75, fit[1]))
+        return fit[0]
+
+    def run(seed_list):
+        for c, u, t0, t1, _ in seed_list:
+            if _lines_cover(lines, c, 0.75 * r0):
+                continue
+            res = tr.trace(c, u, t0, t1, max_len)
+            if res is None:
+                continue
+            c2, u2, a, b, fill = res
+            if b - a < 3.0 * r0:  # a rod crossed sideways is about 2 r long
+                continue
+            kids_xy = _bundle_offsets(c2, u2, a, b)
+            if kids_xy is not None:
+                # a bundle: one child per rod, fitted alternately, each ignoring its siblings
+                e1, e2 = _basis(u2)
+                kids = [(c2 + x * e1 + y * e2, u2, a, b) for x, y in kids_xy]
+
+                def kseg(kd):
+                    return (kd[0] + kd[2] * kd[1], kd[0] + kd[3] * kd[1])
+
+                def sibs(i_k):
+                    return [kseg(kd) for j, kd in enumerate(kids) if j != i_k and kd is not None]
+
+                # the children are traced with discs of their own radius
+                tk = _Tracer(g, origin_zyx, r_kid, P)
+                for rnd in range(2):
+                    for i_k in range(len(kids)):
+                        if kids[i_k] is not None:
+                            fk = tk.fit(*kids[i_k], P.fit_iterations, sibs(i_k))
+                            kids[i_k] = None if fk is None else fk[:4]
+                got = covered = 0
+                for i_k in range(len(kids)):
+                    if kids[i_k] is None:
+                        continue
+                    if _lines_cover(lines, kids[i_k][0], 0.75 * r_kid):
+                        covered += 1
+                        continue
+                    ch = tk.trace(*kids[i_k], max_len, sibs(i_k))
+                    if ch is None or ch[3] - ch[2] < 3.0 * r_kid or _lines_cover(lines, ch[0], 0.75 * r_kid):
+                        continue
+                    kids[i_k] = ch[:4]
+                    lines.append(kseg(kids[i_k]))
+                    kid_r[len(lines) - 1] = r_kid
+                    got += 1
+                if got:
+                    quality["bundles_split"] = quality.get("bundles_split", 0) + 1
+                    quality["bundle_rods"] = quality.get("bundle_rods", 0) + got
+                    continue
+                if covered:  # a bundle traced before, seen again: its middle is no rod
+                    continue
+            mom = tr.moments(c2, u2, a, b)
+            if mom is not None:
+                ev, evec = np.linalg.eigh(mom[0])
+                if ev[1] - ev[0] > P.split_anisotropy * r0 * r0:
+                    # two rods side by side: trace a child on each side (children are not split)
+                    e1, e2 = _basis(u2)
+                    d2 = evec[0, 1] * e1 + evec[1, 1] * e2
+                    off = max(math.sqrt(ev[1] - ev[0]), r0)
+                    # the two children are fitted alternately, each ignoring the voxels
+                    # nearer to its sibling
+                    kids = [(c2 + off * d2, u2, a, b), (c2 - off * d2, u2, a, b)]
+
+                    def seg(kd):
+                        return (kd[0] + kd[2] * kd[1], kd[0] + kd[3] * kd[1])
+
+                    for rnd in range(2):
+                        for i_k in (0, 1):
+                            if kids[i_k] is None or kids[1 - i_k] is None:
+                                continue
+                            fk = tr.fit(*kids[i_k], P.fit_iterations, [seg(kids[1 - i_k])])
+                            kids[i_k] = None if fk is None else fk[:4]
+                    got = 0
+                    for i_k in (0, 1):
+                        if kids[i_k] is None:
+                            continue
+                        sib = [seg(kids[1 - i_k])] if kids[1 - i_k] is not None else None
+                        if _lines_cover(lines, kids[i_k][0], 0.75 * r0):
+                            continue
+                        ch = tr.trace(*kids[i_k], max_len, sib)
+                        if ch is None or ch[3] - ch[2] < 3.0 * r0 or _lines_cover(lines, ch[0], 0.75 * r0):
+                            continue
+                        kids[i_k] = ch[:4]
+                        lines.append(seg(kids[i_k]))
+                        got += 1
+                    if got:
+                        quality["split"] = quality.get("split", 0) + 1
+                        continue
+            lines.append((c2 + a * u2, c2 + b * u2))
+
+    run([(s[0] + o_xyz, s[1], s[2], s[3], s[4]) for s in seeds])
+    for _ in range(P.residual_passes):
+        cov = _rasterize(lines, mask.shape, origin_zyx, cover_radius())
+        resid = mask & ~cov
+        resid = ndimage.binary_erosion(resid, iterations=1)
+        lab, nlab = ndimage.label(resid, structure=np.ones((3, 3, 3)))
+        if nlab == 0:
+            break
+        sizes = np.bincount(lab.ravel())
+        min_vox = max(10, int(0.5 * math.pi * max(r0 - 1, 0.5) ** 2 * 4 * r0))
+        new = []
+        objs = ndimage.find_objects(lab)
+        for k in range(1, nlab + 1):
+            if sizes[k] < min_vox:
+                continue
+            sl = objs[k - 1]
+            q = np.argwhere(lab[sl] == k) + np.array([s.start for s in sl])
+            q = q[:, ::-1].astype(np.float64) + o_xyz
+            c = q.mean(0)
+            _, _, vt = np.linalg.svd(q - c, full_matrices=False)
+            u = _canonical(vt[0])
+            t = (q - c) @ u
+            new.append((c, u, float(t.min()), float(t.max()), len(q)))
+        if not new:
+            break
+        new.sort(key=lambda s: (-(s[3] - s[2]), -s[4], tuple(np.round(s[0], 6))))
+        quality["residual_seeds"] = quality.get("residual_seeds", 0) + len(new)
+        run(new)
+    cov = _rasterize(lines, mask.shape, origin_zyx, cover_radius())
+    quality["_fg"] = quality.get("_fg", 0) + int(mask.sum())
+    quality["_fg_explained"] = quality.get("_fg_explained", 0) + int((mask & cov).sum())
+    return lines

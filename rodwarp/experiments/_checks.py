@@ -1,0 +1,258 @@
+"""Checks of ``rodwarp simulate`` and ``rodwarp sweep`` before any work.
+
+:func:`check_protocol` is :meth:`ProtocolParams.validate`: every option finite, in range and
+consistent (a run has at least one step, ``--save-every`` fits in the test, ``--dt`` in every
+stage), the run's memory, disk and box estimates checked, and an ``--initial`` rod set loaded
+and checked. The generic checks come from :mod:`rodwarp.validation`.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from rodwarp.validation import BASE_BYTES, device_name, fail, integer, memory_fits, number
+
+#: bytes of memory per simulated vertex (model, two states, contact lists, solver scratch and
+#: the per-frame host copies): peak RSS of ``simulate`` went from 304 MB at 1k vertices to
+#: 416 MB at 80k (1.4 kB per vertex); three times that covers contact-rich piles
+BYTES_PER_VERTEX = 4_000
+#: bytes on disk per vertex per frame: trajectory.zarr (24 B, float64 xyz) plus the compressed
+#: binary VTK frame (measured about 30 B per vertex on the main job, rounded up)
+DISK_BYTES_PER_VERTEX_FRAME = 60
+#: most steps a run may ask for (1e9 steps of the smallest scene take weeks on a CPU core)
+MAX_STEPS = 1e9
+#: densest random packing of long rods: phi * alpha ~ 5.4 (random contact equation); random
+#: sequential addition stalls well below it, so more than this cannot be placed
+MAX_PHI_ALPHA = 5.4
+#: deepest overlap of two input rods that the contact solver pushes apart without a blow-up
+#: (the engine stops a run at a quarter diameter; the main job's own packings stay below 0.1 d)
+MAX_INPUT_OVERLAP = 0.1
+#: options that mean nothing with --initial (the input decides them)
+NOT_WITH_INITIAL = ("n_rods", "vertices", "box", "seed")
+
+
+def stage_steps(duration: float, dt: float) -> int:
+    """Steps of a stage of ``duration`` s at step ``dt`` s, as the protocol counts them."""
+    return int(round(duration / dt))
+
+
+def check_protocol(p) -> None:
+    """Every check of :class:`rodwarp.experiments.ProtocolParams`, in the order the options are
+    listed by ``rodwarp simulate --help``; the input rod set (``initial``) is loaded and
+    checked too (see :func:`check_input_rods`).
+
+    Parameters
+    ----------
+    p : rodwarp.experiments.ProtocolParams
+        The parameters; ``p._explicit`` (a set of field names, optional) lists the options the
+        user typed, so that options --initial decides can be refused when given.
+    """
+    explicit = set(getattr(p, "_explicit", ()) or ())
+    number("--alpha", p.alpha, gt=1, hint="alpha is rod length over diameter")
+    for name in ("freq", "entangle_freq"):
+        number(f"--{name.replace('_', '-')}", getattr(p, name), ge=0, unit="Hz")
+    for name in ("amplitude", "entangle_amplitude"):
+        number(f"--{name.replace('_', '-')}", getattr(p, name), ge=0, unit="m")
+    number("--gravity", p.gravity, gt=0, unit="m/s^2")
+    number("--duration", p.duration, gt=0, unit="s", hint="the stability test needs at least one step")
+    number("--entangle-duration", p.entangle_duration, ge=0, unit="s", hint="0 skips entangling")
+    number("--static-load", p.static_load, ge=0, hint="in units of a rod's weight")
+    if p.n_rods is not None:
+        integer("--n-rods", p.n_rods, ge=1)
+    number("--length", p.length, gt=0, unit="m")
+    integer("--vertices", p.vertices, ge=2, le=10_000)
+    box = tuple(p.box)
+    if len(box) != 3:
+        fail(f"--box must be three positive numbers 'X,Y,Z' in rod lengths, got {box}")
+    for axis, v in zip("XYZ", box):
+        number(f"--box {axis}", v, gt=0, hint="the box is 'X,Y,Z' in rod lengths")
+    number("--mu", p.mu, ge=0)
+    number("--young", p.young, gt=0, unit="Pa")
+    number("--density", p.density, gt=0, unit="kg/m^3")
+    if p.dt is not None:
+        number("--dt", p.dt, gt=0, unit="s", hint="leave it out for the default step")
+    integer("--iterations", p.iterations, ge=1, le=100_000)
+    number("--step-safety", p.step_safety, gt=0, le=4, hint="the fraction of a diameter the fastest rod may cross per step")
+    if p.rod_model not in ("auto", "rigid", "elastic"):
+        fail(f"--rod-model must be auto, rigid or elastic, got '{p.rod_model}'")
+    number("--save-every", p.save_every, gt=0, unit="s")
+    number("--checkpoint-every", p.checkpoint_every, gt=0, unit="s")
+    integer("--seed", p.seed, ge=0, le=2**63 - 1)
+    device_name("--device", p.device)
+    if p.entangle and not p.initial:
+        fail("--entangle only applies with --initial (a random packing is always entangled first); drop it")
+    if p.initial:
+        given = sorted(k for k in NOT_WITH_INITIAL if k in explicit or (k == "n_rods" and p.n_rods is not None))
+        if given:
+            opts = ", ".join(f"--{k.replace('_', '-')}" for k in given)
+            fail(f"{opts} do{'es' if len(given) == 1 else ''} not apply with --initial (the input rod set "
+                 f"decides {'it' if len(given) == 1 else 'them'}); drop {opts}")
+
+    # consistency of durations, intervals and the step
+    stages = [("stability test", "--duration", p.duration)]
+    if p.entangle_duration > 0 and (not p.initial or p.entangle):
+        stages.insert(0, ("entangling", "--entangle-duration", p.entangle_duration))
+    if p.save_every > p.duration:
+        fail(f"--save-every {p.save_every:g} s is longer than the stability test (--duration {p.duration:g} s): "
+             f"the verdict needs samples inside the test; lower --save-every")
+    if p.dt is not None:
+        for title, opt, dur in stages:
+            if p.dt > dur or stage_steps(dur, p.dt) < 1:
+                fail(f"--dt {p.dt:g} s is longer than the {title} ({opt} {dur:g} s): not a single full step fits; "
+                     f"lower --dt below {dur:g} s or leave it out for the default step")
+        check_step_count(p, p.dt, "--dt")
+    # the step can never exceed 1/40 of a drive period (solver default): a lower bound on the work
+    for title, opt, dur in stages:
+        f = p.entangle_freq if title == "entangling" else p.freq
+        if f > 0 and 40.0 * f * dur > MAX_STEPS:
+            fq = "--entangle-freq" if title == "entangling" else "--freq"
+            fail(f"{fq} {f:g} Hz over {opt} {dur:g} s needs at least {40.0 * f * dur:.3g} steps (40 per period), "
+                 f"more than {MAX_STEPS:.0e}; lower the frequency or the duration")
+    height = box[2] * p.length
+    if 2 * p.entangle_amplitude >= 0.5 * height or 2 * p.amplitude >= 0.5 * height:
+        fail(f"vibration amplitude does not fit the box (height {height:g} m); lower --amplitude")
+
+    if p.initial:
+        rods = check_input_rods(p, explicit)
+        n_vertices = rods.n_vertices
+    else:
+        n = p.rods
+        d = p.length / p.alpha
+        diag = math.sqrt(sum(v * v for v in box))
+        if diag < 1.0 + 1.0 / p.alpha:
+            fail(f"--box {','.join(f'{v:g}' for v in box)} (rod lengths) is too small to hold one rod "
+                 f"(diagonal {diag:.3g} < 1 + d/l); enlarge --box")
+        n_vertices = n * int(p.vertices)
+        memory_fits(f"{n} rods x {p.vertices} vertices", BASE_BYTES + BYTES_PER_VERTEX * n_vertices,
+                    "lower --n-rods (default round(5.4 alpha)), --alpha or --vertices")
+        vol = float(box[0] * box[1] * box[2]) * p.length**3
+        phi = n * math.pi * d * d * p.length / 4.0 / vol
+        if phi * p.alpha > MAX_PHI_ALPHA:
+            fail(f"{n} rods of aspect ratio {p.alpha:g} would fill {phi:.3g} of the box (phi * alpha = "
+                 f"{phi * p.alpha:.3g}); random packing places at most phi * alpha ~ {MAX_PHI_ALPHA:g}: "
+                 f"lower --n-rods or enlarge --box")
+    p._n_vertices = n_vertices
+    frames = 1 + sum(int(math.ceil(dur / p.save_every)) + 1 for _, _, dur in stages)
+    p._frames = frames
+
+
+def check_step_count(p, dt: float, source: str) -> None:
+    """Refuse a run of more than :data:`MAX_STEPS` steps at step ``dt`` (s)."""
+    stages = [p.duration]
+    if p.entangle_duration > 0 and (not p.initial or p.entangle):
+        stages.append(p.entangle_duration)
+    steps = sum(stage_steps(d, dt) for d in stages)
+    if steps > MAX_STEPS:
+        fail(f"the run needs {steps:.3g} steps at dt = {dt:.3g} s ({source}), more than {MAX_STEPS:.0e} "
+             f"(weeks of computing); shorten --duration/--entangle-duration or lower --alpha")
+
+
+#: bytes per vertex of the two checkpoints kept (state, warm-start impulses; the main job's
+#: are 170 B per vertex each) and of initial.npz + final.npz, rounded up
+DISK_BYTES_PER_VERTEX_FIXED = 2 * 400 + 2 * 100
+#: the three PNG figures and the small files of a run
+DISK_BYTES_FIXED = 1.0e6
+
+
+def output_bytes(p) -> float:
+    """Disk space a run needs (bytes): its frames (trajectory plus VTK, every --save-every),
+    checkpoints, rod sets and figures."""
+    V = float(getattr(p, "_n_vertices", 0))
+    return float(getattr(p, "_frames", 0)) * V * DISK_BYTES_PER_VERTEX_FRAME + V * DISK_BYTES_PER_VERTEX_FIXED \
+        + DISK_BYTES_FIXED
+
+
+def check_input_rods(p, explicit=()):
+    """Load and check the --initial rod set; set ``p.alpha`` and ``p.length`` from it.
+
+    Refuses an empty set, non-metric units, rods overlapping deeper than
+    :data:`MAX_INPUT_OVERLAP` diameters (naming the deepest pair), an --alpha or --length
+    that contradicts the input, and a set too large for memory. The rods (in metres) are kept
+    on ``p`` for the run.
+
+    Returns
+    -------
+    RodSet
+        The input rods in metres.
+    """
+    import numpy as np
+
+    from rodwarp.rodset import UNITS, detect_contacts, load
+
+    path = Path(p.initial)
+    if not path.exists():
+        fail(f"initial rod set not found: {path}; check the --initial path")
+    cached = getattr(p, "_input_rods", None)
+    if cached is not None and getattr(p, "_input_key", None) == (str(path), p.alpha, p.length):
+        return cached
+    rods = load(path, diameter=p.length / p.alpha)
+    if rods.n_rods == 0:
+        fail(f"--initial {path} holds no rods; nothing to simulate")
+    if rods.units not in UNITS or rods.units == "voxel":
+        fail(f"--initial {path} is in '{rods.units}' units; convert it to metres first "
+             f"(RodSet.to_units('m', voxel_size=...))")
+    if rods.units != "m":
+        rods = rods.to_units("m")
+    memory_fits(f"--initial {path} ({rods.n_rods} rods, {rods.n_vertices} vertices)",
+                BASE_BYTES + BYTES_PER_VERTEX * rods.n_vertices, "simulate a smaller rod set")
+    d = float(np.mean(rods.diameters))
+    lengths = rods.rod_lengths()
+    if not np.all(lengths > 0):
+        k = int(np.flatnonzero(~(lengths > 0))[0])
+        fail(f"--initial {path}: rod {k} has zero length; remove it")
+    length = float(np.mean(lengths))
+    alpha = length / d
+    if "alpha" in explicit and not math.isclose(p.alpha, alpha, rel_tol=0.01):
+        fail(f"--alpha {p.alpha:g} contradicts the input rods (l / d = {length:.4g} / {d:.4g} = {alpha:.4g} "
+             f"from {path}); drop --alpha")
+    if "length" in explicit and not math.isclose(p.length, length, rel_tol=0.01):
+        fail(f"--length {p.length:g} m contradicts the input rods (mean length {length:.4g} m in {path}); "
+             f"drop --length")
+    c = detect_contacts(rods, tolerance=-MAX_INPUT_OVERLAP * d)
+    if len(c):
+        k = int(np.argmin(c.gap))
+        i, j = int(c.rod_i[k]), int(c.rod_j[k])
+        depth = -float(c.gap[k]) / d
+        more = f" ({len(c)} pairs overlap by more than {MAX_INPUT_OVERLAP:g} d)" if len(c) > 1 else ""
+        fail(f"--initial {path}: rods {i} and {j} overlap by {depth:.2g} d{more}; separate them "
+             f"(the contact solver pushes apart at most {MAX_INPUT_OVERLAP:g} d without blowing up)")
+    p.alpha = alpha
+    p.length = length
+    p._input_rods = rods
+    p._input_key = (str(path), p.alpha, p.length)
+    return rods
+
+
+def check_scheduler(address: str, timeout: float = 3.0) -> str:
+    """A Dask scheduler address that is well formed and answers a TCP connection, else a
+    one-line error within ``timeout`` seconds.
+
+    Returns
+    -------
+    str
+        The address with a ``tcp://`` scheme added when it had none.
+    """
+    import re
+    import socket
+
+    a = address.strip()
+    if "://" not in a:
+        a = "tcp://" + a
+    m = re.fullmatch(r"(tcp|tls)://(\[[0-9a-fA-F:]+\]|[A-Za-z0-9_.\-]+):(\d{1,5})", a)
+    if not m:
+        fail(f"--scheduler '{address}' is not a Dask scheduler address; use tcp://HOST:PORT "
+             f"(e.g. tcp://head-node:8786), or leave it out for a local cluster")
+    host, port = m.group(2).strip("[]"), int(m.group(3))
+    if not 0 < port < 65536:
+        fail(f"--scheduler '{address}': port {port} is out of range 1-65535")
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            pass
+    except socket.gaierror:
+        fail(f"--scheduler '{address}': unknown host '{host}'; check the address")
+    except OSError as e:
+        why = "timed out" if isinstance(e, TimeoutError) or "timed out" in str(e) else (e.strerror or str(e))
+        fail(f"--scheduler '{address}' does not answer ({why.lower()}; waited at most {timeout:g} s); "
+             f"start it with `dask scheduler` on that host or check the address")
+    return a

@@ -1,0 +1,339 @@
+"""The entanglement phase diagram of a sweep: the alpha* estimate and the figures.
+
+Reads a sweep directory's ``results.csv`` (written by :func:`rodwarp.experiments.run_sweep`)
+and draws the seed paper's phase-diagram figures from its ``ok`` rows: Fig. 4L (cv_e against
+a/g, coloured by the verdict), Fig. 4H (f against alpha), Fig. 4I (f against a/g), the
+verdict's measures against alpha, and the critical aspect ratio alpha* per a/g with its
+uncertainty (``alpha_star.csv``; docs/protocol.md, "The verdict").
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from pathlib import Path
+
+from rodwarp.errors import RodwarpError
+from rodwarp.experiments._sweep import _cell, read_results
+from rodwarp.rodset.files import save_figure, write_text
+
+#: colours of stable and unstable points
+BLUE, RED = "#1f5fbf", "#c62828"
+#: resolution of the phase-diagram PNGs (dots per inch)
+DPI = 120
+
+
+def _num(s):
+    if s is None or s == "":
+        return None
+    try:
+        v = float(s)
+    except ValueError:
+        return None
+    return v if math.isfinite(v) else None
+
+
+def _ok_rows(out) -> list[dict]:
+    rows = []
+    for r in read_results(Path(out) / "results.csv"):
+        if r.get("status") != "ok":
+            continue
+        d = {k: _num(r.get(k)) for k in ("alpha", "freq", "gravity", "static_load", "seed", "amplitude",
+                                           "a_over_g", "largest_cluster_fraction", "height_kept", "persistence",
+                                           "rods_left", "contacts_per_rod", "cv_e")}
+        if d["a_over_g"] is None and None not in (d["freq"], d["amplitude"], d["gravity"]):
+            d["a_over_g"] = 4 * math.pi**2 * d["freq"] ** 2 * d["amplitude"] / d["gravity"]
+        if d["alpha"] is None or d["a_over_g"] is None or d["largest_cluster_fraction"] is None:
+            continue
+        d["static_load"] = d["static_load"] or 0.0
+        d["stable"] = str(r.get("stable")).strip().lower() in ("true", "1", "yes")
+        d["ag"] = float(f"{d['a_over_g']:.4g}")
+        rows.append(d)
+    return rows
+
+
+def _crossing(xs, ys, level=0.5):
+    """First upward crossing of ``level`` by ys(xs), interpolated in log x.
+
+    Returns (x*, err, lo, hi, note): err = half the bracketing interval; when no crossing,
+    x* is None and the note says on which side of the range it lies.
+    """
+    pairs = sorted(zip(xs, ys))
+    xs = [p[0] for p in pairs]
+    ys = [p[1] for p in pairs]
+    if all(y >= level for y in ys):
+        return None, None, None, xs[0], f"below {xs[0]:g} (all points at or above {level:g})"
+    if all(y < level for y in ys):
+        return None, None, xs[-1], None, f"above {xs[-1]:g} (all points below {level:g})"
+    # the last crossing from below (beyond it every point is at or above the level)
+    i = max(j for j in range(len(ys)) if ys[j] < level)
+    if i == len(ys) - 1:
+        return None, None, xs[-1], None, f"above {xs[-1]:g} (largest alpha below {level:g})"
+    x0, x1, y0, y1 = xs[i], xs[i + 1], ys[i], ys[i + 1]
+    t = (level - y0) / (y1 - y0) if y1 != y0 else 0.5
+    x = math.exp(math.log(x0) + t * (math.log(x1) - math.log(x0)))
+    note = "interpolated" if all(y >= level for y in ys[i + 1:]) and all(y < level for y in ys[:i + 1]) \
+        else "interpolated (non-monotonic: last crossing)"
+    return x, 0.5 * (x1 - x0), x0, x1, note
+
+
+def _bracketed(alphas, by_alpha, value, rng, n_boot):
+    """Crossing of 0.5 by the seed mean of ``value(row)`` against alpha, with a bootstrap over seeds."""
+    mean = [sum(value(r) for r in by_alpha[a]) / len(by_alpha[a]) for a in alphas]
+    x, err, lo, hi, note = _crossing(alphas, mean)
+    boot = None
+    if max(len(v) for v in by_alpha.values()) > 1 and x is not None:
+        vals = []
+        for _ in range(n_boot):
+            bm = [sum(value(rng.choice(by_alpha[a])) for _ in by_alpha[a]) / len(by_alpha[a]) for a in alphas]
+            bx = _crossing(alphas, bm)[0]
+            if bx is not None:
+                vals.append(math.log(bx))
+        if len(vals) > 1:
+            m = sum(vals) / len(vals)
+            boot = x * (sum((v - m) ** 2 for v in vals) / (len(vals) - 1)) ** 0.5  # log spread in alpha units
+    return x, err, lo, hi, boot, note
+
+
+def alpha_star(rows: list[dict], n_boot: int = 200, seed: int = 0) -> list[dict]:
+    """Critical aspect ratio for each (a/g, gravity, static load) from ok rows (see :func:`_ok_rows`).
+
+    ``alpha_star``: where the fraction of seeds judged ``stable`` (the verdict of
+    :mod:`rodwarp.verdict`: height kept, persistence and the contact cluster) crosses 1/2,
+    interpolated in log alpha; ``err`` is half the bracketing interval, ``boot_std`` the
+    bootstrap spread over seeds (when a point has several). ``alpha_star_f``: the same on
+    the seed-mean largest-cluster fraction f crossing 0.5 (the paper's Fig. 4H measure).
+    """
+    import random
+
+    rng = random.Random(seed)
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault((r["ag"], r["gravity"], r["static_load"]), []).append(r)
+    out = []
+    for (ag, g, s), rs in sorted(groups.items(), key=lambda kv: (kv[0][2], kv[0][1], kv[0][0])):
+        by_alpha: dict = {}
+        for r in rs:
+            by_alpha.setdefault(r["alpha"], []).append(r)
+        alphas = sorted(by_alpha)
+        nseeds = max(len(v) for v in by_alpha.values())
+        x, err, lo, hi, boot, note = _bracketed(alphas, by_alpha, lambda r: float(r["stable"]), rng, n_boot)
+        xf, errf, lof, hif, bootf, notef = _bracketed(alphas, by_alpha, lambda r: r["largest_cluster_fraction"],
+                                                     rng, n_boot)
+        out.append({"a_over_g": ag, "gravity": g, "static_load": s, "n_alphas": len(alphas), "seeds": nseeds,
+                    "alpha_star": x, "err": err, "bracket_lo": lo, "bracket_hi": hi, "boot_std": boot, "note": note,
+                    "alpha_star_f": xf, "err_f": errf, "bracket_lo_f": lof, "bracket_hi_f": hif,
+                    "boot_std_f": bootf, "note_f": notef})
+    return out
+
+
+def phase_diagram(out) -> list[Path]:
+    """Figures and the alpha* table of a sweep directory (reads ``out/results.csv``).
+
+    Writes ``phase_cv_e.png`` (Fig. 4L: sigma_e/mu_e against a/g, coloured by stability, with
+    shaded stable/unstable regions), ``phase_f_alpha.png`` (Fig. 4H: f against alpha for each
+    a/g), ``phase_verdict_alpha.png`` (height kept and persistence against alpha, the verdict's
+    thresholds drawn), ``phase_f_ag.png`` (Fig. 4I: f against a/g for each alpha and static load),
+    ``alpha_star.csv`` and ``phase_alpha_star.png`` (alpha* against a/g with its uncertainty).
+    Returns the paths written.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+
+    out = Path(out)
+    rows = _ok_rows(out)
+    if not rows:
+        raise RodwarpError(f"{out / 'results.csv'} has no 'ok' rows with results: nothing to plot")
+    written = [_cv_e_figure(rows, out / "phase_cv_e.png"), _f_alpha_figure(rows, out / "phase_f_alpha.png")]
+    if any(r["height_kept"] is not None for r in rows):
+        written.append(_verdict_figure(rows, out / "phase_verdict_alpha.png"))
+    written.append(_f_ag_figure(rows, out / "phase_f_ag.png"))
+    table = alpha_star(rows)
+    written.append(_write_table(table, out / "alpha_star.csv"))
+    written.append(_alpha_star_figure(rows, table, out / "phase_alpha_star.png"))
+    return written
+
+
+def _finish(fig, ax, path: Path, *, xlabel: str, ylabel: str, title: str, legend: int | None = 7, ncol: int = 1,
+            ylim=None, title_size: int = 9) -> Path:
+    """Label one phase-diagram axis (log x), save the figure as ``path`` and close it."""
+    import matplotlib.pyplot as plt
+
+    ax.set_xscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if ylim is not None:
+        ax.set_ylim(*ylim)
+    ax.set_title(title, fontsize=title_size)
+    if legend:
+        ax.legend(fontsize=legend, ncol=ncol)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=DPI)
+    plt.close(fig)
+    return path
+
+
+def _mean_by(rs, key, value="largest_cluster_fraction"):
+    """Sorted values of ``key``, the mean of ``value`` at each, and half its range (seed spread)."""
+    d: dict = {}
+    for r in rs:
+        if r[value] is not None:
+            d.setdefault(r[key], []).append(r[value])
+    ks = sorted(d)
+    return ks, [sum(d[k]) / len(d[k]) for k in ks], [(max(d[k]) - min(d[k])) / 2 for k in ks]
+
+
+def _cv_e_figure(rows, path: Path) -> Path:
+    """Fig. 4L: cv_e against a/g, coloured by the verdict, the best separating level shaded."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    cv = [r for r in rows if r["cv_e"] is not None]
+    if cv:
+        st = [r["cv_e"] for r in cv if r["stable"]]
+        un = [r["cv_e"] for r in cv if not r["stable"]]
+        ymax = max(r["cv_e"] for r in cv) * 1.15 + 1e-9
+        ymin = min(0.0, min(r["cv_e"] for r in cv))
+        # one horizontal boundary that best separates the classes; shaded on each side
+        if st and un:
+            cands = sorted({r["cv_e"] for r in cv})
+            cuts = [0.5 * (a + b) for a, b in zip(cands, cands[1:])] or cands
+            hi_stable = (sum(st) / len(st)) >= (sum(un) / len(un))
+
+            def acc(c):
+                return sum((r["cv_e"] >= c) == (r["stable"] == hi_stable) for r in cv)
+
+            cut = max(cuts, key=acc)
+            top, bottom = (BLUE, RED) if hi_stable else (RED, BLUE)
+            ax.axhspan(cut, ymax, color=top, alpha=0.12, lw=0)
+            ax.axhspan(ymin, cut, color=bottom, alpha=0.12, lw=0)
+            ax.axhline(cut, color="0.4", ls=":", lw=0.8)
+        else:
+            ax.axhspan(ymin, ymax, color=BLUE if st else RED, alpha=0.12, lw=0)
+        for flag, col, lab in ((True, BLUE, "stable"), (False, RED, "unstable")):
+            sel = [r for r in cv if r["stable"] == flag]
+            if sel:
+                ax.scatter([r["a_over_g"] for r in sel], [r["cv_e"] for r in sel], c=col, label=lab, s=28,
+                           edgecolors="k", linewidths=0.4, zorder=3)
+        ax.set_ylim(ymin, ymax)
+    return _finish(fig, ax, path, xlabel="a/g", ylabel="sigma_e / mu_e", legend=8 if cv else None,
+                   title="entanglement phase diagram (cf. Fig. 4L)")
+
+
+def _f_alpha_figure(rows, path: Path) -> Path:
+    """Fig. 4H: f against alpha for each a/g (and static load when several)."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    loads = sorted({r["static_load"] for r in rows})
+    for s in loads:
+        for ag in sorted({r["ag"] for r in rows}):
+            sel = [r for r in rows if r["ag"] == ag and r["static_load"] == s]
+            if not sel:
+                continue
+            xs, ys, es = _mean_by(sel, "alpha")
+            lab = f"a/g = {ag:.3g}" + (f", F~ = {s:g}" if len(loads) > 1 else "")
+            ax.errorbar(xs, ys, yerr=es if any(es) else None, fmt="o-", ms=4, capsize=2, label=lab)
+    ax.axhline(0.5, ls=":", color="0.5", lw=0.8)
+    return _finish(fig, ax, path, xlabel="aspect ratio alpha", ylabel="largest contact cluster fraction f",
+                   ylim=(0, 1.05), title="f against alpha (cf. Fig. 4H)")
+
+
+def _verdict_figure(rows, path: Path) -> Path:
+    """The verdict's measures against alpha: height kept and persistence, with their thresholds."""
+    import matplotlib.pyplot as plt
+
+    from rodwarp.experiments._verdict import DEFAULT_THRESHOLDS as thr
+
+    loads = sorted({r["static_load"] for r in rows})
+    ags = sorted({r["ag"] for r in rows})
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for ax, value, label, level in ((axes[0], "height_kept", "height kept h at the end", thr.height_kept),
+                                    (axes[1], "persistence", "persistence tau", thr.persistence)):
+        for j, s in enumerate(loads):
+            for k, ag in enumerate(ags):
+                sel = [r for r in rows if r["ag"] == ag and r["static_load"] == s and r[value] is not None]
+                if not sel:
+                    continue
+                col = f"C{(j * len(ags) + k) % 10}"
+                xs, ys, _ = _mean_by(sel, "alpha", value)
+                ax.plot(xs, ys, "-", color=col, lw=1,
+                        label=f"a/g = {ag:.3g}" + (f", F~ = {s:g}" if len(loads) > 1 else ""))
+                for flag, face in ((True, col), (False, "white")):
+                    pts_ = [r for r in sel if r["stable"] == flag]
+                    ax.scatter([r["alpha"] for r in pts_], [r[value] for r in pts_], s=26, facecolors=face,
+                               edgecolors=col, zorder=3)
+        ax.axhline(level, ls=":", color="tab:red", lw=1, label=f"threshold {level:g}")
+        ax.set_xscale("log")
+        ax.set_xlabel("aspect ratio alpha")
+        ax.set_ylabel(label)
+        ax.set_ylim(0, 1.05)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle("stability verdict against alpha (height kept, persistence)", fontsize=9)
+    return _finish(fig, axes[1], path, xlabel="aspect ratio alpha", ylabel="persistence tau", ylim=(0, 1.05),
+                   legend=None, title="filled: stable, open: unstable", title_size=8)
+
+
+def _f_ag_figure(rows, path: Path) -> Path:
+    """Fig. 4I: f against a/g for each alpha and static load."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    markers = "osD^v<>ph*"
+    for j, s in enumerate(sorted({r["static_load"] for r in rows})):
+        for a in sorted({r["alpha"] for r in rows}):
+            sel = [r for r in rows if r["alpha"] == a and r["static_load"] == s]
+            if not sel:
+                continue
+            xs, ys, es = _mean_by(sel, "ag")
+            ax.errorbar(xs, ys, yerr=es if any(es) else None, fmt=markers[j % len(markers)] + "-", ms=4,
+                        capsize=2, label=f"alpha = {a:g}, F~ = {s:g}")
+    ax.axhline(0.5, ls=":", color="0.5", lw=0.8)
+    return _finish(fig, ax, path, xlabel="a/g", ylabel="largest contact cluster fraction f", ylim=(0, 1.05),
+                   legend=6, ncol=2, title="f against a/g (cf. Fig. 4I)")
+
+
+def _write_table(table: list[dict], path: Path) -> Path:
+    """``alpha_star.csv``: one row per (a/g, gravity, static load) of :func:`alpha_star`."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(table[0]), lineterminator="\n")
+    w.writeheader()
+    for t in table:
+        w.writerow({k: _cell(v) for k, v in t.items()})
+    write_text(path, buf.getvalue())
+    return path
+
+
+def _alpha_star_figure(rows, table: list[dict], path: Path) -> Path:
+    """alpha* against a/g with its uncertainty, and where it lies outside the alphas swept."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    amin = min(r["alpha"] for r in rows)
+    amax = max(r["alpha"] for r in rows)
+    for j, s in enumerate(sorted({r["static_load"] for r in rows})):
+        sel = [t for t in table if t["static_load"] == s]
+        col = f"C{j}"
+        lab = f"F~ = {s:g}"
+        pts_ = [t for t in sel if t["alpha_star"] is not None]
+        if pts_:
+            yerr = [max(t["err"] or 0, t["boot_std"] or 0) for t in pts_]
+            ax.errorbar([t["a_over_g"] for t in pts_], [t["alpha_star"] for t in pts_], yerr=yerr, fmt="o-",
+                        color=col, capsize=3, label=lab)
+            lab = None
+        below = [t for t in sel if t["alpha_star"] is None and t["bracket_hi"] is not None]
+        above = [t for t in sel if t["alpha_star"] is None and t["bracket_lo"] is not None]
+        if below:
+            ax.scatter([t["a_over_g"] for t in below], [t["bracket_hi"] for t in below], marker="v", color=col,
+                       label=(lab + ": " if lab else "") + "alpha* below the smallest alpha")
+        if above:
+            ax.scatter([t["a_over_g"] for t in above], [t["bracket_lo"] for t in above], marker="^", color=col,
+                       label=(lab + ": " if lab else "") + "alpha* above the largest alpha")
+    ax.axhline(100, ls="--", color="0.5", lw=0.8, label="paper: alpha* ~ 100 at a/g ~ 1")
+    ax.axvline(1, ls=":", color="0.7", lw=0.8)
+    ax.set_yscale("log")
+    return _finish(fig, ax, path, xlabel="a/g", ylabel="critical aspect ratio alpha* (half the seeds stable)",
+                   ylim=(amin / 1.5, amax * 1.5), title="critical aspect ratio")

@@ -1,0 +1,560 @@
+"""The paper's numerical experiment: random packing, entangling, vibration stability test.
+
+Stages (the seed paper's "Numerical simulations of rod packings"; docs/protocol.md):
+
+1. random packing of N = round(5.4 alpha) straight steel rods in a 1 x 1 x 2.5 l box;
+2. entangling: the closed container vibrated vertically (10 Hz, 0.05 m) for 5 s;
+3. stability: side walls and lid removed, the floor vibrated at ``freq`` with ``amplitude``
+   for ``duration``; f = largest contact cluster / all rods measured over time.
+
+The stages run on one stepping loop (:func:`run_protocol`): each stage is a drive and a set of
+walls (:func:`stage_control`) on the same model and states; the loop takes adaptive steps that
+land exactly on the sample times, and a :class:`~rodwarp.experiments._recorder.Recorder` takes
+the samples (metrics row, trajectory and VTK frames) and the checkpoints, which also hold the
+loop's own position (:class:`LoopPosition`), so a resumed run is bit-identical.
+
+Stability verdict (:mod:`rodwarp.experiments._verdict`, docs/verdict.md): every
+``save_every`` of the test, the height kept h(t) (mass centroid above the floor over its
+value at the test start), the largest contact cluster f(t) and the rods that left the pile
+are recorded; ``stable`` when the packing is still entangled (h and f above their thresholds)
+at the end and was entangled for at least the threshold fraction of the test (the
+persistence tau).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import MISSING, asdict, dataclass, field, fields
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from rodwarp.errors import RodwarpError
+
+#: rods per unit aspect ratio: the paper's packings hold N = round(5.4 alpha) rods (its
+#: "Materials and Methods"; docs/protocol.md). A number of rods, not a contact number.
+RODS_PER_ALPHA = 5.4
+#: rigid rods when the self-weight sag of a simply supported rod, 5 q l^4 / (384 E I), is below
+#: this fraction of a diameter (the knee of benchmarks/bench_rigid.py; docs/physics.md)
+RIGID_SAG = 0.01
+
+
+def _param(default, help: str, short: str | None = None):
+    """A :class:`ProtocolParams` field: its default, its ``rodwarp simulate --help`` line, and
+    its abbreviation in default folder names (:func:`default_run_name`; the name when None)."""
+    return field(default=default, metadata={"help": help, "short": short})
+
+
+@dataclass
+class ProtocolParams:
+    """Parameters of :func:`run_protocol` (SI units; box in rod lengths).
+
+    Every field's default and help text are stated here once; ``rodwarp simulate`` takes its
+    options from them (:func:`option_table`).
+    """
+
+    alpha: float = _param(100.0, "Rod aspect ratio l / d (> 1).")
+    freq: float = _param(10.0, "Floor vibration frequency of the stability test (Hz).")
+    amplitude: float = _param(0.001, "Floor vibration amplitude of the stability test (m).", "amp")
+    # the paper's rescaled gravity (docs/protocol.md, "Parameters and their rodwarp simulate options")
+    gravity: float = _param(0.5, "Gravitational acceleration (m/s^2), rescaled as in the paper.")
+    duration: float = _param(5.0, "Stability-test duration (s).", "dur")
+    entangle_duration: float = _param(5.0, "Entangling duration (s); 0 skips entangling.", "edur")
+    entangle_freq: float = _param(10.0, "Entangling vibration frequency (Hz).", "efreq")
+    entangle_amplitude: float = _param(0.05, "Entangling vibration amplitude (m).", "eamp")
+    static_load: float = _param(0.0, "Extra downward body load F~ in units of a rod's weight rho g d^2 l.", "F")
+    n_rods: int | None = _param(None, f"Number of rods (default round({RODS_PER_ALPHA:g} alpha)).", "n")
+    length: float = _param(1.0, "Rod length l (m).", "l")
+    vertices: int = _param(10, "Vertices per rod.", "v")
+    box: tuple = _param((1.0, 1.0, 2.5), "Container size in rod lengths, 'X,Y,Z'.")
+    mu: float = _param(0.2, "Friction coefficient (rod-rod and walls).")
+    young: float = _param(200e9, "Young's modulus (Pa).", "E")
+    density: float = _param(7850.0, "Density (kg/m^3).", "rho")
+    dt: float | None = _param(None, "Time step (s); default from the scene's step bound.")
+    iterations: int = _param(10, "Most Gauss-Seidel sweeps per step (10: the knee of the effort benchmark).",
+                                 "it")
+    rod_model: str = _param("auto", f"auto (rigid when the rods' self-weight sag is below {RIGID_SAG:g} d), rigid "
+                                    "or elastic.")
+    step_safety: float = _param(1.0, "Adaptive step: the fastest rod crosses at most this many diameters per step "
+                                     "(ignored with --dt).")
+    rolling: bool = _param(True, "Rods spin about their axes; --no-rolling locks the spin (friction on the "
+                                 "centreline only).")
+    save_every: float = _param(0.1, "Metrics and frame interval (s of simulated time).", "save")
+    checkpoint_every: float = _param(1.0, "Checkpoint interval (s of simulated time).", "ckpt")
+    seed: int = _param(0, "Random seed of the packing.")
+    device: str = _param("auto", "auto, cpu or cuda.")
+    initial: str | None = _param(None, "Start from this rod set (npz, zarr or CSV) instead of a random packing.")
+    entangle: bool = _param(False, "With --initial: run the entangling stage too.")
+
+    def validate(self) -> None:
+        """Raise :class:`RodwarpError` (one line) for any impossible, inconsistent or oversized
+        parameter, before any work (:func:`rodwarp.experiments.check_protocol`); with
+        ``initial`` the input rods are loaded and checked, and ``alpha`` and ``length`` are
+        set from them."""
+        from rodwarp.experiments._checks import check_protocol
+
+        check_protocol(self)
+
+    @property
+    def diameter(self) -> float:
+        """Rod diameter d = l / alpha (m)."""
+        return self.length / self.alpha
+
+    @property
+    def rods(self) -> int:
+        """Number of rods: ``n_rods``, else round(5.4 alpha)."""
+        return self.n_rods if self.n_rods is not None else int(round(RODS_PER_ALPHA * self.alpha))
+
+    @property
+    def a_over_g(self) -> float:
+        """Peak floor acceleration over gravity, a/g = 4 pi^2 f^2 A / g (dimensionless)."""
+        return 4 * math.pi**2 * self.freq**2 * self.amplitude / self.gravity
+
+    @property
+    def effective_gravity(self) -> float:
+        """Gravity with the static load as an extra body load, g (1 + 4 F~ / pi) (m/s^2;
+        docs/protocol.md, "The experiment")."""
+        return self.gravity * (1.0 + 4.0 * self.static_load / math.pi)
+
+
+def option_table(cls) -> dict:
+    """``{field: (default, help)}`` of a parameter dataclass whose fields carry ``help`` metadata
+    (:class:`ProtocolParams`, :class:`~rodwarp.experiments.SweepSpec`): where the CLI's options
+    take their defaults and help text from. A default factory is called (lists)."""
+    out = {}
+    for f in fields(cls):
+        if "help" in f.metadata:
+            default = f.default_factory() if f.default_factory is not MISSING else f.default
+            out[f.name] = (default, f.metadata["help"])
+    return out
+
+
+def _straight(rods, tol: float = 1e-3) -> bool:
+    """Every rod's vertices (and rest vertices) lie within ``tol`` radii of its chord."""
+    for pts in (rods.points, rods.rest_points):
+        if pts is None:
+            continue
+        off = rods.offsets
+        rid = np.repeat(np.arange(rods.n_rods), np.diff(off))
+        p0, p1 = pts[off[:-1]], pts[off[1:] - 1]
+        chord = p1 - p0
+        dev = np.linalg.norm(np.cross(pts - p0[rid], chord[rid]), axis=1) / np.linalg.norm(chord, axis=1)[rid]
+        if np.any(dev > tol * rods.radii[rid]):
+            return False
+    return True
+
+
+def rod_model_rule(params: ProtocolParams) -> dict:
+    """Which rod model the experiment uses and why.
+
+    ``auto`` picks rigid rods when their bending under the scene's largest static load, the
+    self-weight sag 5 q l^4 / (384 E I) of a simply supported rod with q = rho A g_eff
+    (static load included), is below ``RIGID_SAG`` diameters; elastic otherwise, and always
+    for an input with curved rods (rigid rods must be straight).
+
+    Returns
+    -------
+    dict
+        ``rod_model`` (the choice), ``requested``, ``sag_over_d``, ``threshold`` and ``rule``.
+    """
+    d = params.diameter
+    r = d / 2
+    g_eff = params.effective_gravity
+    q = params.density * math.pi * r**2 * g_eff
+    EI = params.young * math.pi * r**4 / 4
+    sag = 5 * q * params.length**4 / (384 * EI) / d
+    choice = params.rod_model
+    if choice == "auto":
+        choice = "rigid" if sag < RIGID_SAG else "elastic"
+    return {"rod_model": choice, "requested": params.rod_model, "sag_over_d": sag, "threshold": RIGID_SAG,
+            "rule": f"rigid when the self-weight sag 5 q l^4 / (384 E I) < {RIGID_SAG:g} d, else elastic"}
+
+
+def _build(params: ProtocolParams, rods, device, rod_model: str):
+    """Model and solver of the experiment (deterministic given the parameters and rods)."""
+    from rodwarp.sim import Material, Model, RodSolver
+
+    g_eff = params.effective_gravity
+    model = Model(rods, Material(params.young, params.density), gravity=(0.0, 0.0, -g_eff), mu=params.mu,
+                  rod_model=rod_model, rolling=params.rolling, device=device)
+    bb = rods.bounding_box()
+    if rods.box is not None:
+        # the input's container, widened to its rods: rods lying on (or sunk into) the box's
+        # floor get the floor under their lowest point, never a floor above it
+        lo = np.minimum(np.asarray(rods.box[0], float), bb[0])
+        hi = np.maximum(np.asarray(rods.box[1], float), bb[1])
+    else:  # an input without a container: the floor under its lowest point, walls around it
+        lo, hi = bb[0], bb[1]
+    model.add_box(lo, hi + np.array([0, 0, 0.5 * params.length]), walls=("floor", *SIDE_WALLS), moving=True)
+    return model, RodSolver(model, iterations=params.iterations), (lo, hi)
+
+
+#: walls removed for the stability test (the floor stays and vibrates; docs/protocol.md)
+SIDE_WALLS = ("ceiling", "x-", "x+", "y-", "y+")
+
+
+def stage_control(model, name: str, amp: float, freq: float, t0: float):
+    """Control of a stage: entangling in the closed container, the stability test on the floor alone."""
+    control = model.control()
+    if name == "stability":
+        control.remove_walls(SIDE_WALLS)
+    control.set_drive(amp, freq, phase_time=t0)
+    return control
+
+
+def _default_dt(params: ProtocolParams, model, solver) -> float:
+    """The worst-case step of the run (s): the smaller of the solver's default steps under the
+    entangling and the stability-test drives, at the scene's characteristic speed.
+
+    A run takes adaptive steps (:meth:`RodSolver.adaptive_dt`); this step only sizes the run
+    before it starts (:func:`~rodwarp.experiments._checks.check_step_count` refuses a run of
+    too many steps). It was the fixed step of the run before the adaptive one: the stability
+    test alone would allow a step set by its drive (1/(40 f)), but a pile resting under
+    gravity needs the finer step of the entangling stage to keep Gauss-Seidel converged (at
+    alpha = 100, f = 10 Hz, 2.5e-3 s let rods overlap by 0.25 d where 1e-3 s kept the largest
+    overlap at 0.015 d).
+    """
+    return min(solver.default_dt(stage_control(model, "entangle", params.entangle_amplitude, params.entangle_freq,
+                                               0.0)),
+               solver.default_dt(stage_control(model, "stability", params.amplitude, params.freq, 0.0)))
+
+
+class Stage(NamedTuple):
+    """One stage of the protocol: its name, duration (s) and the drive of its moving walls."""
+
+    name: str
+    duration: float
+    amplitude: float
+    freq: float
+
+
+def _stages(params: ProtocolParams) -> list[Stage]:
+    """The stages a run steps through: entangling (unless skipped) then the stability test."""
+    stages = []
+    if params.entangle_duration > 0 and (not params.initial or params.entangle):
+        stages.append(Stage("entangle", params.entangle_duration, params.entangle_amplitude, params.entangle_freq))
+    stages.append(Stage("stability", params.duration, params.amplitude, params.freq))
+    return stages
+
+
+@dataclass
+class LoopPosition:
+    """Where the stepping loop stands: what a checkpoint restores besides the engine state and
+    the samples (those are the :class:`~rodwarp.experiments._recorder.Recorder`'s).
+
+    Attributes
+    ----------
+    start_stage, start_j, mid_stage
+        Where the loop starts: the stage index, the samples of that stage already taken, and
+        whether that stage is under way (a resumed run) or starts afresh.
+    steps : int
+        Steps taken so far.
+    y0 : float
+        Mass centroid height above the floor at t = 0 (m), the reference of y_c(t)/y_c(0).
+    pile_ref : PileReference or None
+        The pile when the stability test started (the verdict's reference).
+    stage_t0 : dict
+        Start time of each stage begun (s).
+    stepper : dict
+        The adaptive step's memory: the last step ``dt`` (s) and the fastest vertex speed
+        ``vmax`` (m/s) after it; checkpointed, so a resumed run picks the same steps.
+    dts : dict
+        Per stage: step count, min, max, mean and sum of the steps (s), for summary.json.
+    next_ck : float
+        Simulated time of the next checkpoint (s).
+    """
+
+    y0: float
+    stepper: dict
+    next_ck: float
+    steps: int = 0
+    pile_ref: object = None
+    stage_t0: dict = field(default_factory=dict)
+    dts: dict = field(default_factory=dict)
+    start_stage: int = 0
+    start_j: int = 0
+    mid_stage: bool = False
+
+    @classmethod
+    def from_checkpoint(cls, meta: dict) -> "LoopPosition":
+        from rodwarp.experiments._verdict import PileReference
+
+        return cls(y0=meta["y0"], stepper=dict(meta["stepper"]), next_ck=float(meta["next_ck"]), steps=meta["steps"],
+                   pile_ref=PileReference.from_dict(meta["pile_ref"]) if meta.get("pile_ref") else None,
+                   stage_t0={k: float(v) for k, v in meta["stage_t0"].items()}, dts=meta["dts"],
+                   start_stage=meta["stage"], start_j=meta["j"], mid_stage=meta["mid_stage"])
+
+
+def _resume_point(params: ProtocolParams, ckdir: Path):
+    """The newest checkpoint ``(arrays, meta)`` of this run, refused when it has other parameters."""
+    from rodwarp.rodset.trajectory import latest_checkpoint
+
+    ck = latest_checkpoint(ckdir)
+    if ck is None:
+        raise RodwarpError(f"nothing to resume: no checkpoint in {ckdir}; run without --resume")
+    saved = ck[1]["parameters"]
+    mine = {k: v for k, v in asdict(params).items() if k != "device"}
+    theirs = {k: v for k, v in saved.items() if k != "device"}
+    if json.loads(json.dumps(mine)) != theirs:
+        diff = sorted(k for k in mine if json.loads(json.dumps(mine[k])) != theirs.get(k))
+        raise RodwarpError(f"--resume with different parameters than the checkpoint ({', '.join(diff)}); "
+                           f"repeat the original command with --resume")
+    return ck
+
+
+def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resume: bool = False,
+                 overwrite: bool = False, thresholds=None) -> dict:
+    """Run the whole experiment and write its outputs to ``outdir``.
+
+    Writes ``summary.json`` (every parameter, seed, versions, device, dt, steps, wall time and
+    the results), ``metrics.csv`` (time series), ``trajectory.zarr`` (frames every
+    ``save_every`` s), ``trajectory.pvd`` with ``vtk/`` (ParaView), ``initial.npz`` and
+    ``final.npz`` (rod sets, the final one with contacts), ``metrics.png`` and
+    ``snapshots.png``; checkpoints every ``checkpoint_every`` s of simulated time in
+    ``checkpoints/``. With ``resume`` the run continues from the newest checkpoint and ends in
+    the same final state, bit for bit on the CPU, as an uninterrupted run.
+
+    The run owns ``outdir`` through ``rodwarp-run.json`` (:mod:`rodwarp.rodset.rundir`): a
+    folder holding another run is refused unless ``overwrite`` (which removes the old outputs
+    first).
+
+    ``thresholds`` (:class:`rodwarp.experiments.Thresholds`, default the measured ones) set the
+    stability verdict; summary.json records them with the rule.
+
+    Returns
+    -------
+    dict
+        The summary.
+    """
+    from rodwarp import _warp
+    from rodwarp.experiments import _verdict as vd
+    from rodwarp.experiments._checks import check_step_count, output_bytes
+    from rodwarp.experiments._packing import orientation_statistics, random_packing
+    from rodwarp.experiments._recorder import Recorder, plot_metrics
+    from rodwarp.rodset import load, rundir
+    from rodwarp.rodset.files import write_json
+    from rodwarp.rodset.trajectory import plot_snapshots
+    from rodwarp.sim import State, centroid_height, rod_contacts
+
+    params.validate()
+    thresholds = thresholds or vd.DEFAULT_THRESHOLDS
+    outdir = Path(outdir)
+    run = rundir.claim(outdir, "simulate", asdict(params), rundir.SIMULATE_OUTPUTS, resume=resume,
+                       overwrite=overwrite, resumable=any((outdir / "checkpoints").glob("ckpt_*.npz")),
+                       need_bytes=output_bytes(params))
+    device = _warp.resolve_device(params.device)
+    t_wall = time.perf_counter()
+    ckdir = outdir / "checkpoints"
+    ck = None
+    if resume:
+        ck = _resume_point(params, ckdir)
+        rods = load(outdir / "initial.npz")
+    elif params.initial:
+        rods = params._input_rods  # loaded, in metres, and checked by validate()
+    else:
+        rods = random_packing(params.rods, params.length, params.diameter, np.asarray(params.box) * params.length,
+                              n_vertices=params.vertices, seed=params.seed, device=device)
+    if not resume:
+        for old in ckdir.glob("ckpt_*.npz"):
+            old.unlink()
+        rods.save(outdir / "initial.npz")
+    orient = orientation_statistics(rods)
+    rule = rod_model_rule(params)
+    if rule["rod_model"] == "rigid" and params.rod_model == "auto" and not _straight(rods):
+        rule.update(rod_model="elastic", rule=rule["rule"] + " (the input has curved rods: elastic)")
+    model, solver, (box_lo, box_hi) = _build(params, rods, device, rule["rod_model"])
+    sim_rods = model.rods  # the simulated rods (two vertices per rod for rigid rods)
+    stages = _stages(params)
+    protocol_dt = _default_dt(params, model, solver)
+    check_step_count(params, params.dt or protocol_dt, "--dt" if params.dt else "the default step")
+
+    state = model.state()
+    other = State(model)
+    control = None
+    if ck is None:
+        floor0 = model.control().floor_height(0.0)
+        loop = LoopPosition(y0=centroid_height(model, state, 0.0 if floor0 is None else floor0),
+                            stepper={"dt": None, "vmax": float(np.linalg.norm(state.velocities(), axis=1)
+                                                               .max(initial=0.0))},
+                            next_ck=params.checkpoint_every)
+    else:
+        arrays, meta = ck
+        loop = LoopPosition.from_checkpoint(meta)
+        if loop.mid_stage:
+            stage = stages[loop.start_stage]
+            control = stage_control(model, stage.name, stage.amplitude, stage.freq, loop.stage_t0[stage.name])
+        state.load_numpy({k[6:]: v for k, v in arrays.items() if k.startswith("state_")})
+    n_frames = 1 + sum(int(math.ceil(s.duration / params.save_every)) + 1 for s in stages)
+    rec = Recorder(outdir, model, solver, sim_rods, n_frames, checkpoint=ck,
+                   done=[s.name for s in stages[:loop.start_stage]])
+
+    # the verdict's pile reference measures the input rods (a rigid rod's two-vertex chord may
+    # differ from its polyline's length in the last bits)
+    longest = float(np.max(rods.rod_lengths()))
+    state, control = _step_stages(params, model, solver, stages, state, other, control, loop, rec, longest, progress)
+
+    wall = time.perf_counter() - t_wall
+    c = rod_contacts(model, state)
+    final = sim_rods.with_points(state.positions(), velocities=state.velocities())
+    final.contacts = c
+    final.attrs.update({"time": state.time})
+    final.save(outdir / "final.npz")
+    rec.snapshot("end", state.positions())
+    plot_snapshots(outdir / "snapshots.png", rec.snapshots, sim_rods.offsets, box=(box_lo, box_hi))
+    floor = control.floor_height(state.time)
+    summary = _summary(params, model, rec.rows, loop, vd.judge_rows(rec.rows, loop.pile_ref.time, thresholds),
+                       c, centroid_height(model, state, 0.0 if floor is None else floor), rule,
+                       {"device": device, "wall_time_s": wall, "resumed": bool(resume), "initial_orientation": orient})
+    rec.write_metrics()
+    write_json(outdir / "summary.json", summary)
+    plot_metrics(outdir / "metrics.png", rec.rows, summary)
+    rec.finish()
+    run.complete()
+    return summary
+
+
+def _step_stages(params, model, solver, stages, state, other, control, loop, rec, longest: float, progress: bool):
+    """Step through ``stages`` from ``loop``'s position, sampling and checkpointing on the way.
+
+    Every step is the adaptive step (:meth:`RodSolver.adaptive_dt`, or ``params.dt``),
+    shortened so that equal steps land exactly on the next sample time; a sample is taken on
+    landing and a checkpoint whenever ``checkpoint_every`` of simulated time has passed.
+    ``longest`` is the longest rod (m), for the pile reference at the start of the test.
+
+    Returns
+    -------
+    (State, Control)
+        The final state and the last stage's control.
+    """
+    from rodwarp._util import progress_bar
+    from rodwarp.experiments import _verdict as vd
+    from rodwarp.experiments._recorder import AFTER_ENTANGLING
+
+    parameters = asdict(params)
+    with progress_bar(progress, seconds=True, remaining=True, note=True) as update:
+        for si, (name, dur, amp, freq) in enumerate(stages):
+            if si < loop.start_stage:
+                continue
+            resuming = si == loop.start_stage and loop.mid_stage
+            j0 = loop.start_j if si == loop.start_stage else 0  # samples of this stage already taken
+            if not resuming:
+                loop.stage_t0[name] = state.time
+                control = stage_control(model, name, amp, freq, state.time)
+                loop.dts[name] = {"steps": 0, "min": None, "max": None, "mean": None, "sum": 0.0}
+                loop.next_ck = state.time + params.checkpoint_every
+                if name == "stability":
+                    state.wall_impulse.zero_()
+                    floor = control.floor_height(state.time)
+                    loop.pile_ref = vd.pile_reference(state.time, state.positions(), model.vertex_rod_np,
+                                                      model.mass_np, model.n_rods, 0.0 if floor is None else floor,
+                                                      longest, model.min_diameter)
+            t_s0 = loop.stage_t0[name]
+            t_end = t_s0 + dur
+            n_samples = max(1, int(math.ceil(dur / params.save_every - 1e-9)))
+            update(name, state.time - t_s0, dur)
+            if si == 0 and j0 == 0 and not loop.mid_stage:
+                rec.sample(name, state, None, control, loop)
+            t0 = time.perf_counter()
+            steps0 = loop.steps
+            j = j0 + 1
+            while j <= n_samples:
+                target = t_end if j == n_samples else t_s0 + j * params.save_every
+                dt = params.dt or solver.adaptive_dt(control, loop.stepper["vmax"], loop.stepper["dt"],
+                                                     safety=params.step_safety)
+                left = target - state.time
+                # reach the sample time exactly, in equal steps no longer than dt
+                n_left = max(1, int(math.ceil(left / dt - 1e-6)))
+                landing = n_left == 1
+                dt = left / n_left
+                info = solver.step(state, other, control, dt)
+                state, other = other, state
+                if landing:
+                    state.time = target
+                loop.steps += 1
+                st = loop.dts[name]
+                st["steps"] += 1
+                st["sum"] += dt
+                st["min"] = dt if st["min"] is None else min(st["min"], dt)
+                st["max"] = dt if st["max"] is None else max(st["max"], dt)
+                loop.stepper["vmax"] = info.max_speed
+                loop.stepper["dt"] = dt
+                if landing:
+                    rec.sample(name, state, info, control, loop)
+                    j += 1
+                    rate = (loop.steps - steps0) / max(time.perf_counter() - t0, 1e-9)
+                    update(name, state.time - t_s0, dur, note=f"{rate:.0f} steps/s")
+                if state.time >= loop.next_ck - 1e-12 and j <= n_samples:
+                    loop.next_ck += params.checkpoint_every
+                    rec.checkpoint(state, loop, si, j - 1, True, parameters)
+            loop.dts[name]["mean"] = loop.dts[name]["sum"] / max(loop.dts[name]["steps"], 1)
+            if name == "entangle":
+                rec.snapshot(AFTER_ENTANGLING, state.positions())
+            if si + 1 < len(stages):
+                loop.next_ck = state.time + params.checkpoint_every
+                rec.checkpoint(state, loop, si + 1, 0, False, parameters)
+    return state, control
+
+
+def _summary(params, model, rows, loop, verdict, contacts, centroid_height, rule, run: dict) -> dict:
+    """summary.json of a finished run: parameters, results, the verdict and provenance."""
+    from rodwarp._util import versions
+    from rodwarp.rodset import contacts_per_rod
+
+    v = verdict.to_dict()
+    return {
+        "alpha": params.alpha, "diameter": params.diameter, "length": params.length,  # measured for --initial
+        "n_rods": model.n_rods, "freq": params.freq, "amplitude": params.amplitude,
+        "gravity": params.gravity, "a_over_g": params.a_over_g, "static_load": params.static_load,
+        "contacts_per_rod": contacts_per_rod(model.n_rods, contacts),
+        "largest_cluster_fraction": v["largest_cluster_fraction"],
+        "height_kept": v["height_kept"], "persistence": v["persistence"],
+        "rods_left": v["rods_left"], "stable": v["stable"], "thresholds": v["thresholds"],
+        "stable_rule": v["rule"], "test_start": loop.pile_ref.to_dict(),
+        "centroid_height_ratio": centroid_height / loop.y0,
+        "max_penetration_over_d": max(r["max_penetration_over_d"] for r in rows),
+        "rod_model": rule["rod_model"], "rod_model_rule": rule,
+        "seed": params.seed, "device": run["device"], "dt": loop.dts, "steps": loop.steps,
+        "wall_time_s": run["wall_time_s"], "resumed": run["resumed"], "initial_orientation": run["initial_orientation"],
+        "parameters": asdict(params), "versions": versions(),
+    }
+
+
+def default_run_name(params: ProtocolParams) -> str:
+    """Default simulate folder name: alpha, freq, gravity and seed always, then every other
+    parameter that differs from its default (``key<value>``, the key abbreviated as the
+    field's ``short`` metadata says), so that runs differing in any parameter never share a
+    folder; a short hash stands in for a list that would be too long."""
+    import hashlib
+
+    d = asdict(params)
+    defaults = {f.name: f.default for f in fields(ProtocolParams)}
+    short = {f.name: f.metadata.get("short") or f.name for f in fields(ProtocolParams)}
+
+    def fmt(v):
+        if isinstance(v, float):
+            return f"{v:g}"
+        if isinstance(v, (tuple, list)):
+            return "x".join(fmt(x) for x in v)
+        return str(v)
+
+    if params.initial:
+        head = f"{Path(params.initial).stem}_freq{fmt(params.freq)}_g{fmt(params.gravity)}"
+        skip = {"freq", "gravity", "initial", "device", "alpha", "length", "seed"}
+    else:
+        head = f"alpha{fmt(params.alpha)}_freq{fmt(params.freq)}_g{fmt(params.gravity)}_seed{params.seed}"
+        skip = {"alpha", "freq", "gravity", "seed", "device", "initial"}
+
+    def differs(k, v):
+        dv = defaults.get(k)
+        if isinstance(v, (tuple, list)) and isinstance(dv, (tuple, list)):
+            return list(v) != list(dv)
+        return v != dv
+
+    extra = [f"{short[k]}{fmt(v)}" for k, v in d.items() if k not in skip and differs(k, v)]
+    name = "_".join([head, *extra])
+    if len(name) > 120:
+        name = head + "_" + hashlib.sha1("_".join(extra).encode()).hexdigest()[:10]
+    return name.replace("/", "-")

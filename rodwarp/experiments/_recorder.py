@@ -1,0 +1,213 @@
+"""What a run of the protocol writes while it steps: samples and checkpoints.
+
+At every sample time the :class:`Recorder` takes one *sample*: a row of ``metrics.csv`` (the
+packing's contacts, its largest contact cluster, the verdict's height kept and rods left, the
+kinetic energy, the largest overlap and the step's diagnostics), a frame of
+``trajectory.zarr`` and a VTK frame listed in ``trajectory.pvd``.  A *checkpoint* holds the
+engine state, the samples so far and where the stepping loop stands
+(:class:`~rodwarp.experiments._protocol.LoopPosition`), so that a resumed run continues bit for
+bit.  :func:`plot_metrics` draws ``metrics.png`` from the rows at the end.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+from rodwarp.experiments import _verdict as vd
+from rodwarp.rodset import contacts_per_rod, largest_cluster
+from rodwarp.rodset.files import atomic_path, save_figure
+
+#: title of the snapshot taken when entangling ends (kept in checkpoints as ``after_entangle``)
+AFTER_ENTANGLING = "after entangling"
+
+
+class Recorder:
+    """The samples of one run, the snapshots for ``snapshots.png``, and its checkpoints.
+
+    Parameters
+    ----------
+    outdir : Path
+        The run folder.
+    model, solver : Model, RodSolver
+        The engine (contacts and energies of a sample are measured with them).
+    rods : RodSet
+        The simulated rods (``model.rods``): the layout of every frame.
+    n_frames : int
+        Frames the trajectory holds at most (every sample of every stage, plus the start).
+    checkpoint : (dict, dict), optional
+        ``(arrays, meta)`` of the checkpoint a resumed run continues from.
+    done : sequence of str
+        With ``checkpoint``: the stages it had finished (their snapshots come back).
+    """
+
+    def __init__(self, outdir: Path, model, solver, rods, n_frames: int, checkpoint=None, done=()):
+        from rodwarp.rodset.trajectory import Trajectory
+
+        self.outdir = Path(outdir)
+        self.model, self.solver, self.rods = model, solver, rods
+        self.rows: list = []
+        self.vtk: list = []  # (time, file) of every VTK frame, for trajectory.pvd
+        self.snapshots = [("start", rods.points.copy())]
+        self.frame = 0
+        if checkpoint is not None:
+            arrays, meta = checkpoint
+            self.rows = meta["rows"]
+            self.vtk = [tuple(e) for e in meta["vtk"]]
+            self.frame = meta["frame"]
+            if "entangle" in done and "after_entangle" in arrays:
+                self.snapshots.append((AFTER_ENTANGLING, arrays["after_entangle"]))
+        self.trajectory = Trajectory(self.outdir / "trajectory.zarr", n_frames, rods.offsets, rods.radii,
+                                     resume=checkpoint is not None)
+        (self.outdir / "vtk").mkdir(exist_ok=True)
+
+    def sample(self, stage: str, state, info, control, loop) -> None:
+        """Take the sample of ``state`` (the state just reached, at a sample time).
+
+        Parameters
+        ----------
+        stage : str
+            ``entangle`` or ``stability``.
+        info : StepInfo or None
+            The step that reached ``state`` (None for the initial state).
+        control : Control
+            The stage's control (its floor is the reference of heights).
+        loop : LoopPosition
+            The run's position: the step count, y_c(0) and the pile at the test start.
+        """
+        from rodwarp.rodset.trajectory import write_pvd, write_vtp
+        from rodwarp.sim import rod_contacts
+
+        model = self.model
+        pile_ref = loop.pile_ref
+        c = rod_contacts(model, state)
+        x = state.positions()
+        floor = control.floor_height(state.time)
+        floor = 0.0 if floor is None else floor
+        in_big = largest_cluster(model.n_rods, c)
+        h = vd.centroid_height_above(x, model.mass_np, floor)
+        test = stage == "stability" and pile_ref is not None
+        self.rows.append({
+            "time": state.time, "stage": stage,
+            "contacts_per_rod": contacts_per_rod(model.n_rods, c),
+            "largest_cluster_fraction": float(np.count_nonzero(in_big) / max(model.n_rods, 1)),
+            "centroid_height": h,
+            "centroid_height_ratio": h / loop.y0,
+            "height_kept": h / pile_ref.height if test else "",
+            "rods_left": vd.rods_left(x, model.vertex_rod_np, model.mass_np, model.n_rods, floor, in_big, pile_ref)
+            if test else "",
+            "kinetic_energy": self.solver.energy(state)["kinetic"],
+            "max_penetration_over_d": max(0.0, -float(c.gap.min()) if len(c) else 0.0) / model.min_diameter,
+            "friction_residual": info.contact_residual if info else 0.0,
+            "iterations": info.iterations if info else 0,
+            "dt": info.dt if info else "",
+            "steps": loop.steps,
+            # contact points the step solved (speculative ones included), not touching rod pairs
+            "n_contact_pairs": info.n_contacts if info else 0,
+        })
+        self.trajectory.write(self.frame, state.time, x)
+        fname = f"vtk/frame_{self.frame:05d}.vtp"
+        write_vtp(self.outdir / fname, x, self.rods.offsets, self.rods.radii, state.time)
+        self.vtk.append((state.time, fname))
+        write_pvd(self.outdir / "trajectory.pvd", self.vtk)
+        self.frame += 1
+
+    def snapshot(self, title: str, x: np.ndarray) -> None:
+        """Keep the positions ``x`` (V, 3) m for ``snapshots.png`` under ``title``."""
+        self.snapshots.append((title, x))
+
+    def checkpoint(self, state, loop, stage: int, j: int, mid_stage: bool, parameters: dict) -> None:
+        """Write a checkpoint: the engine state, the samples so far and the loop's position.
+
+        Parameters
+        ----------
+        stage, j, mid_stage
+            Where a resumed run starts: stage index, samples of that stage already taken, and
+            whether the stage is under way (else it starts afresh).
+        parameters : dict
+            Every parameter of the run (a resume must repeat them).
+        """
+        from rodwarp.rodset.trajectory import save_checkpoint
+
+        arrays = {f"state_{key}": val for key, val in state.to_numpy().items()}
+        for title, x in self.snapshots:
+            if title == AFTER_ENTANGLING:
+                arrays["after_entangle"] = x
+        meta = {"stage": stage, "j": j, "mid_stage": mid_stage, "steps": loop.steps, "y0": loop.y0, "rows": self.rows,
+                "pile_ref": loop.pile_ref.to_dict() if loop.pile_ref is not None else None,
+                "stage_t0": loop.stage_t0, "frame": self.frame, "vtk": self.vtk,
+                "parameters": json.loads(json.dumps(parameters)), "stepper": loop.stepper, "dts": loop.dts,
+                "next_ck": loop.next_ck}
+        save_checkpoint(self.outdir / "checkpoints", loop.steps, arrays, meta)
+        self.write_metrics()
+
+    def write_metrics(self) -> None:
+        """``metrics.csv``: one row per sample so far (written whole, atomically)."""
+        with atomic_path(self.outdir / "metrics.csv") as tmp:
+            with open(tmp, "w", newline="") as fh:
+                w = csv.DictWriter(fh, fieldnames=list(self.rows[0].keys()))
+                w.writeheader()
+                w.writerows(self.rows)
+
+    def finish(self) -> None:
+        """Close the trajectory (consolidated metadata) once the last sample is written."""
+        self.trajectory.finish()
+
+
+def plot_metrics(path, rows, summary) -> None:
+    """metrics.png: Z, f, height kept, rods left, y_c(t)/y_c(0) and kinetic energy against time,
+    the verdict's thresholds drawn on f and h, the entangled part of the test shaded."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    def col(key, sel=rows):
+        return np.array([float(r[key]) if r[key] != "" else np.nan for r in sel])
+
+    t = col("time")
+    thr = summary["thresholds"]
+    test = [r for r in rows if r["stage"] == "stability" and r["height_kept"] != ""]
+    t0 = summary["test_start"]["time"]
+    tt = np.concatenate([[t0], col("time", test)])
+    fig, ax = plt.subplots(3, 2, figsize=(10, 8.5), sharex=True)
+    panels = ((ax[0, 0], t, col("contacts_per_rod"), "Z (contacts per rod)", None),
+              (ax[0, 1], t, col("largest_cluster_fraction"), "f (largest cluster)", thr["cluster"]),
+              (ax[1, 0], tt, np.concatenate([[1.0], col("height_kept", test)]), "height kept h = y_c(t) / y_c(t0)",
+               thr["height_kept"]),
+              (ax[1, 1], tt, np.concatenate([[0.0], col("rods_left", test)]), "rods left the pile (fraction)", None),
+              (ax[2, 0], t, col("centroid_height_ratio"), "y_c(t) / y_c(0) (whole run)", None),
+              (ax[2, 1], t, col("kinetic_energy"), "kinetic energy (J)", None))
+    for a, x, y, label, level in panels:
+        a.plot(x, y, lw=1)
+        a.set_ylabel(label, fontsize=9)
+        a.grid(alpha=0.3)
+        if level is not None:
+            a.axhline(level, color="tab:red", ls=":", lw=1, label=f"threshold {level:g}")
+            a.legend(fontsize=7, loc="lower left")
+    for a in (ax[0, 1], ax[1, 0], ax[1, 1]):
+        a.set_ylim(bottom=0)
+    ax[2, 1].set_yscale("symlog", linthresh=1e-6)
+    ax[2, 1].set_ylim(bottom=0)
+    if test:
+        ent = (col("height_kept", test) >= thr["height_kept"]) & (col("largest_cluster_fraction", test) >= thr["cluster"])
+        for k in np.flatnonzero(ent):  # sample k covers the interval since the previous sample
+            for a in (ax[0, 1], ax[1, 0]):
+                a.axvspan(tt[k], tt[k + 1], color="tab:green", alpha=0.12, lw=0)
+    t_stab = [r["time"] for r in rows if r["stage"] == "stability"]
+    if t_stab and any(r["stage"] == "entangle" for r in rows):
+        for a in ax.ravel():
+            a.axvline(t0, ls="--", lw=0.8, color="0.5")
+        ax[0, 0].annotate("stability test", (t_stab[0], 0.02), xycoords=("data", "axes fraction"), fontsize=8,
+                          color="0.4", xytext=(3, 0), textcoords="offset points")
+    for a in ax[2]:
+        a.set_xlabel("t (s)")
+    fig.suptitle(f"alpha = {summary['alpha']:g}, a/g = {summary['a_over_g']:.3g}: stable = {summary['stable']} "
+                 f"(h = {summary['height_kept']:.2f}, f = {summary['largest_cluster_fraction']:.2f}, "
+                 f"tau = {summary['persistence']:.2f}; shaded: entangled)", fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)

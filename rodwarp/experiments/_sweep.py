@@ -1,0 +1,472 @@
+"""Parameter sweeps of the rod-packing experiment on Dask.
+
+One point of a sweep is one ``simulate`` run (:func:`rodwarp.experiments.run_protocol`) followed
+by ``analyze`` of its final packing, executed as a single task on a ``dask.distributed``
+cluster: a :class:`distributed.LocalCluster` of worker processes on this machine (loopback
+only, no dashboard) by default, or an existing cluster when a scheduler address is given.
+
+Layout of a sweep directory ``OUT``::
+
+    OUT/sweep.json        the spec, the command, versions, counts
+    OUT/results.csv       one row per point (rewritten atomically after every point)
+    OUT/points/<id>/      each point's full simulate output, with analyze output in analysis/
+    OUT/phase_*.png       figures of :func:`~rodwarp.experiments.phase_diagram` (drawn from
+                          results.csv by ``_phase``), OUT/alpha_star.csv
+
+Running the same sweep again skips points whose row has ``status`` ``ok``; a failed point is
+recorded with its one-line error and the others go on. Results are plain CSV/JSON files.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import socket
+import sys
+import time
+import traceback
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+
+from rodwarp.errors import RodwarpError
+from rodwarp.experiments._protocol import ProtocolParams
+from rodwarp.rodset.files import write_json, write_text
+
+#: parameters that define a point (besides the ProtocolParams overrides)
+GRID_KEYS = ("alpha", "freq", "gravity", "static_load", "seed")
+FIXED_KEYS = ("amplitude", "entangle_duration", "duration")
+#: result columns, after the parameter columns
+RESULT_KEYS = ("a_over_g", "F_tilde", "n_rods", "largest_cluster_fraction", "height_kept", "persistence",
+               "rods_left", "contacts_per_rod", "cv_e", "mean_e", "std_e", "stable", "max_penetration_over_d",
+               "device", "wall_s", "worker", "status")
+#: ProtocolParams fields a sweep sets itself (not allowed in ``overrides``)
+_OWN = set(GRID_KEYS) | set(FIXED_KEYS) | {"device", "initial"}
+
+
+def _grid(*values: float, help: str):
+    """A :class:`SweepSpec` list field: its default values and its ``rodwarp sweep --help`` line."""
+    return field(default_factory=lambda: list(values), metadata={"help": help})
+
+
+def _as_protocol(name: str, help: str):
+    """A :class:`SweepSpec` field whose default is the :class:`ProtocolParams` one (stated once)."""
+    return field(default=ProtocolParams.__dataclass_fields__[name].default, metadata={"help": help})
+
+
+@dataclass
+class SweepSpec:
+    """A grid of experiments: every combination of alphas x freqs x gravities x static loads x seeds.
+
+    ``overrides`` sets any other :class:`~rodwarp.experiments.ProtocolParams` field (for example
+    ``n_rods``, ``save_every``, ``dt``) for every point; ``analyze`` sets
+    :class:`~rodwarp.analysis.AnalyzeOptions` fields (figures are always off in a sweep).
+    ``device`` is ``auto`` (a worker with a GPU uses it, the others the CPU), ``cpu`` or ``cuda``.
+    The fields' defaults and help texts are those of ``rodwarp sweep``.
+    """
+
+    alphas: list = _grid(25.0, 50.0, 100.0, 200.0, 300.0, help="Aspect ratios, comma-separated.")
+    freqs: list = _grid(1.0, 10.0, 100.0, help="Stability-test floor frequencies (Hz), comma-separated.")
+    gravities: list = _grid(0.5, help="Gravitational accelerations (m/s^2), comma-separated.")
+    static_loads: list = _grid(0.0, help="Static loads F~, comma-separated.")
+    seeds: list = _grid(0, help="Seeds per point (0 .. N-1).")
+    entangle_duration: float = _as_protocol("entangle_duration", "Entangling duration (s).")
+    duration: float = _as_protocol("duration", "Stability-test duration (s).")
+    amplitude: float = _as_protocol("amplitude", "Floor vibration amplitude (m).")
+    overrides: dict = field(default_factory=dict)
+    analyze: dict = field(default_factory=dict)
+    device: str = field(default="auto", metadata={"help": "Warp device of each point (auto: the worker's GPU if any)."})
+
+    def validate(self) -> None:
+        """Refuse (one line) an empty grid, unknown or sweep-owned overrides, unknown analyze options."""
+        from rodwarp.analysis import AnalyzeOptions
+
+        for name in ("alphas", "freqs", "gravities", "static_loads", "seeds"):
+            v = getattr(self, name)
+            if isinstance(v, (int, float)):
+                setattr(self, name, [v])
+            if not getattr(self, name):
+                raise RodwarpError(f"sweep: '{name}' is empty; give at least one value")
+        self.seeds = [int(s) for s in self.seeds]
+        known = {f.name for f in fields(ProtocolParams)}
+        bad = sorted(set(self.overrides) - known)
+        if bad:
+            raise RodwarpError(f"sweep: unknown simulate parameter(s) {', '.join(bad)}")
+        own = sorted(set(self.overrides) & _OWN)
+        if own:
+            raise RodwarpError(f"sweep: {', '.join(own)} is set by the sweep itself, not by overrides")
+        aknown = {f.name for f in fields(AnalyzeOptions)}
+        bad = sorted(set(self.analyze) - aknown)
+        if bad:
+            raise RodwarpError(f"sweep: unknown analyze option(s) {', '.join(bad)}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _fmt(v) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def point_id(point: dict) -> str:
+    """Directory name of a point, from its grid parameters (stable across runs)."""
+    return (f"alpha{_fmt(float(point['alpha']))}_freq{_fmt(float(point['freq']))}"
+            f"_g{_fmt(float(point['gravity']))}_F{_fmt(float(point['static_load']))}_seed{int(point['seed'])}")
+
+
+def points(spec: SweepSpec) -> list[dict]:
+    """Every point of the grid (largest alpha first: the longest runs start first).
+
+    Each point is a flat dict of its parameters (grid values, amplitude, durations, the
+    overrides, ``device``) plus ``id`` and the analyze options under ``_analyze``.
+    """
+    spec.validate()
+    out = []
+    for a in sorted({float(x) for x in spec.alphas}, reverse=True):
+        for f in sorted({float(x) for x in spec.freqs}):
+            for g in sorted({float(x) for x in spec.gravities}):
+                for s in sorted({float(x) for x in spec.static_loads}):
+                    for seed in sorted(set(spec.seeds)):
+                        p = {"alpha": a, "freq": f, "gravity": g, "static_load": s, "seed": int(seed),
+                             "amplitude": float(spec.amplitude),
+                             "entangle_duration": float(spec.entangle_duration),
+                             "duration": float(spec.duration), **dict(spec.overrides),
+                             "device": spec.device}
+                        p["id"] = point_id(p)
+                        p["_analyze"] = dict(spec.analyze)
+                        out.append(p)
+    return out
+
+
+def _worker_name() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def _one_line(e: BaseException) -> str:
+    msg = str(e).strip().splitlines()
+    msg = msg[0] if msg else ""
+    return f"{type(e).__name__}: {msg}" if not isinstance(e, RodwarpError) else f"error: {msg}"
+
+
+def _empty_row(point: dict) -> dict:
+    """A results row of ``point``: its parameters, every result column empty."""
+    row = {k: v for k, v in point.items() if not k.startswith("_")}
+    row.update({k: None for k in RESULT_KEYS})
+    return row
+
+
+def run_point(point: dict, outdir: str) -> dict:
+    """Run one point: simulate into ``outdir`` then analyze its final packing (no figures).
+
+    Never raises: a failure is returned as a row whose ``status`` is the error's one-line
+    message. The row holds every parameter of the point and the results (see ``RESULT_KEYS``).
+    A checkpoint left in ``outdir`` by an interrupted run is resumed.
+    """
+    t0 = time.perf_counter()
+    row = _empty_row(point)
+    row["worker"] = _worker_name()
+    row["F_tilde"] = point.get("static_load")
+    try:
+        from rodwarp.analysis import analyze
+        from rodwarp.experiments._protocol import run_protocol
+
+        params = _point_params(point)
+        row["a_over_g"] = params.a_over_g
+        out = Path(outdir)
+        resume = (out / "checkpoints").is_dir() and any((out / "checkpoints").glob("ckpt_*.npz")) \
+            and (out / "initial.npz").exists()
+        try:
+            # the point's folder belongs to the sweep: a fresh run replaces whatever it holds
+            summary = run_protocol(params, out, progress=False, resume=resume, overwrite=not resume)
+        except RodwarpError:
+            if not resume:
+                raise
+            # a checkpoint of other parameters, or of a finished run
+            summary = run_protocol(params, out, progress=False, resume=False, overwrite=True)
+        opts = _point_analysis(point)
+        dev = summary.get("device", "cpu")
+        if opts.device == "cpu" and "device" not in point.get("_analyze", {}) and str(dev).startswith("cuda"):
+            opts.device = dev
+        a = analyze(out, out / "analysis", opts)
+        row.update({
+            "n_rods": summary["n_rods"], "a_over_g": summary["a_over_g"],
+            "largest_cluster_fraction": summary["largest_cluster_fraction"],
+            "height_kept": summary["height_kept"], "persistence": summary["persistence"],
+            "rods_left": summary["rods_left"],
+            "contacts_per_rod": summary["contacts_per_rod"], "stable": bool(summary["stable"]),
+            "max_penetration_over_d": summary.get("max_penetration_over_d"), "device": dev,
+            "cv_e": a.get("cv_e"), "mean_e": a.get("mean_e"), "std_e": a.get("std_e"),
+            "status": "ok",
+        })
+    except BaseException as e:  # noqa: BLE001 - a failed point is recorded, never raised
+        if isinstance(e, (KeyboardInterrupt, SystemExit)):
+            raise
+        row["status"] = _one_line(e)
+        if os.environ.get("RODWARP_DEBUG"):
+            row["status"] += " | " + traceback.format_exc().replace("\n", " ")
+    row["wall_s"] = time.perf_counter() - t0
+    return row
+
+
+def check_points(pts: list[dict], *, local: bool) -> None:
+    """Validate every point's simulate parameters and analyze options before any cluster
+    starts; the first invalid point is refused with its id and the reason (one line).
+
+    ``local``: the points run on this machine, so the device must exist here too.
+    """
+    for p in pts:
+        try:
+            _validate_point(p)
+        except RodwarpError as e:
+            bad = sum(1 for q in pts if _invalid(q))
+            raise RodwarpError(f"sweep point {p['id']} is invalid ({e}); invalid points: {bad} of {len(pts)}; "
+                               f"no point was run: fix the sweep's values") from None
+    if local and pts:
+        from rodwarp import _warp
+
+        _warp.resolve_device(pts[0]["device"])
+
+
+def _point_params(point: dict) -> ProtocolParams:
+    """The simulate parameters of a point (its id and ``_``-keys left out; a box read back as a list)."""
+    kw = {k: v for k, v in point.items() if k != "id" and not k.startswith("_")}
+    if "box" in kw and isinstance(kw["box"], list):
+        kw["box"] = tuple(kw["box"])
+    return ProtocolParams(**kw)
+
+
+def _point_analysis(point: dict):
+    """The analyze options of a point (never figures: a sweep draws its own)."""
+    from rodwarp.analysis import AnalyzeOptions
+
+    return AnalyzeOptions(**{**point.get("_analyze", {}), "figures": False})
+
+
+def _validate_point(point: dict) -> None:
+    _point_params(point).validate()
+    _point_analysis(point).validate()
+
+
+def _invalid(p: dict) -> bool:
+    try:
+        _validate_point(p)
+    except RodwarpError:
+        return True
+    return False
+
+
+def _stop_http(dask_worker=None, dask_scheduler=None) -> None:
+    node = dask_worker or dask_scheduler
+    server = getattr(node, "http_server", None)
+    if server is not None:
+        server.stop()
+
+
+def _connect(address: str, timeout: float = 5.0):
+    """A Client of the scheduler at ``address``, or a one-line error within ``timeout`` s.
+
+    The TCP check of :func:`rodwarp.experiments.check_scheduler` comes first; this catches a
+    port that accepts connections but does not speak Dask (a proxy, another service)."""
+    from distributed import Client
+
+    try:
+        return Client(address, timeout=f"{timeout:g}s")
+    except Exception as e:  # noqa: BLE001 - distributed raises OSError, TimeoutError, even MemoryError here
+        raise RodwarpError(f"--scheduler {address}: no Dask scheduler answers there within {timeout:g} s "
+                           f"({type(e).__name__}); start one with `dask scheduler` or check the address") from None
+
+
+def _local_cluster(n_workers: int):
+    """A LocalCluster of single-threaded worker processes on 127.0.0.1 with no HTTP server.
+
+    distributed always starts an HTTP server on the scheduler (port 8787: /metrics, /health,
+    /info even without a dashboard) and on each worker; a sweep on this machine needs none,
+    so no routes are mounted and the servers are stopped once the cluster is up.
+    """
+    import dask
+    from distributed import Client, LocalCluster
+
+    with dask.config.set({"distributed.scheduler.http.routes": [], "distributed.worker.http.routes": []}):
+        # a random loopback port (not 8787, which another cluster may hold) for the server
+        # that is stopped below
+        cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address=None, worker_dashboard_address=None,
+                               scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"})
+    client = Client(cluster)
+    _stop_http(dask_scheduler=cluster.scheduler)
+    client.run(_stop_http)
+    return cluster, client
+
+
+# --------------------------------------------------------------------------------------- CSV
+
+
+def read_results(path) -> list[dict]:
+    """Rows of a results.csv as dicts of strings (empty list when it does not exist)."""
+    path = Path(path)
+    if not path.exists():
+        return []
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _columns(rows: list[dict]) -> list[str]:
+    first = ["id", *GRID_KEYS, *FIXED_KEYS]
+    extra = []
+    for r in rows:
+        for k in r:
+            if k not in first and k not in RESULT_KEYS and k not in extra:
+                extra.append(k)
+    return first + extra + list(RESULT_KEYS)
+
+
+def _cell(v) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return "" if math.isnan(v) else repr(v)
+    if isinstance(v, (list, tuple)):
+        return " ".join(_cell(x) for x in v)
+    return str(v)
+
+
+def write_results(path, rows: list[dict]) -> None:
+    """Write the whole CSV to a temporary file and rename it over ``path`` (crash-safe)."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=_columns(rows), extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: _cell(v) for k, v in r.items()})
+    write_text(path, buf.getvalue())
+
+
+def _same_point(row: dict, point: dict) -> bool:
+    """A CSV row (strings) was produced by this point's parameters."""
+    for k, v in point.items():
+        if k.startswith("_") or k in ("id", "device"):
+            continue
+        s = row.get(k)
+        if s is None:
+            return False
+        if _cell(v) == s:
+            continue
+        try:
+            if math.isclose(float(s), float(v), rel_tol=1e-9):
+                continue
+        except (TypeError, ValueError):
+            pass
+        return False
+    return True
+
+
+# ------------------------------------------------------------------------------------- sweep
+
+
+def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int | None = None,
+              progress: bool = True) -> Path:
+    """Run every unfinished point of ``spec`` on Dask and record the results under ``out``.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        The grid.
+    out : path-like
+        Sweep directory (created). ``out/results.csv`` gets one row per point, rewritten
+        atomically as each point completes; ``out/points/<id>/`` holds each point's outputs.
+    scheduler : str, optional
+        Address of an existing Dask scheduler (``tcp://HOST:8786``). Without it a
+        ``LocalCluster`` of ``workers`` single-threaded worker processes is started on
+        127.0.0.1 with no dashboard, and closed at the end.
+    workers : int, optional
+        Worker processes of the local cluster (default: the number of cores). Ignored with
+        ``scheduler``.
+    progress : bool
+        Show a progress bar (points done of total, time remaining).
+
+    Returns
+    -------
+    Path
+        ``out/results.csv``.
+    """
+    from distributed import as_completed
+
+    from rodwarp._util import progress_bar, versions
+    from rodwarp.experiments._checks import check_scheduler
+    from rodwarp.validation import output_location
+
+    spec.validate()
+    pts = points(spec)
+    check_points(pts, local=not scheduler)
+    out = Path(out)
+    output_location(out, "--out")
+    if scheduler:
+        scheduler = check_scheduler(scheduler)
+    (out / "points").mkdir(parents=True, exist_ok=True)
+    csv_path = out / "results.csv"
+    old = {r.get("id"): r for r in read_results(csv_path)}
+    done, todo = [], []
+    for p in pts:
+        r = old.get(p["id"])
+        if r is not None and r.get("status") == "ok" and _same_point(r, p):
+            done.append(p["id"])
+        else:
+            todo.append(p)
+    # rows in grid order: finished rows kept as read, the others filled in as they complete
+    rows: dict = {pid: old[pid] for pid in done}
+    extra = {k: v for k, v in old.items() if k not in {p["id"] for p in pts}}  # rows of other grids: kept
+    order = [p["id"] for p in pts]
+
+    def flush():
+        ordered = [rows[i] for i in order if i in rows] + list(extra.values())
+        if ordered:
+            write_results(csv_path, ordered)
+
+    meta = {"spec": spec.to_dict(), "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+            "scheduler": scheduler or "LocalCluster(127.0.0.1)",
+            "workers": None if scheduler else (workers or os.cpu_count()),
+            "n_points": len(pts), "skipped": len(done), "submitted": len(todo),
+            "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "finished": None, "failed": None,
+            "versions": versions("dask", "distributed"), "results": "results.csv", "points": "points/"}
+    write_json(out / "sweep.json", meta)
+    failed = 0
+    t0 = time.perf_counter()
+    if todo:
+        cluster = None
+        if scheduler:
+            client = _connect(scheduler)
+        else:
+            cluster, client = _local_cluster(workers or os.cpu_count() or 1)
+        try:
+            futs = {}
+            for p in todo:
+                fut = client.submit(run_point, p, str((out / "points" / p["id"]).resolve()), pure=False,
+                                    key=f"rodwarp-{p['id']}-{time.time_ns()}")
+                futs[fut] = p
+            with progress_bar(progress, "points", remaining=True, note=True) as update:
+                n_done = len(done)
+                update("sweep", n_done, len(pts))
+                for fut in as_completed(list(futs)):
+                    p = futs[fut]
+                    try:
+                        row = fut.result()
+                    except Exception as e:  # noqa: BLE001 - worker died (KilledWorker) or similar
+                        row = _empty_row(p)
+                        row["status"] = _one_line(e)
+                    if row.get("status") != "ok":
+                        failed += 1
+                        meta.setdefault("first_failure", f"{p['id']}: {row.get('status')}")
+                    rows[p["id"]] = row
+                    flush()
+                    n_done += 1
+                    update("sweep", n_done, len(pts), note=f"{p['id']}: {row.get('status')}"[:80])
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    else:
+        flush()
+    meta.update({"finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "failed": failed,
+                 "wall_s": time.perf_counter() - t0})
+    write_json(out / "sweep.json", meta)
+    return csv_path

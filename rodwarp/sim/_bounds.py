@@ -1,0 +1,195 @@
+"""Step bounds of a scene and the step the solver takes: the time-step side of :class:`RodSolver`.
+
+The *step bound* is the largest time step a scene resolves (docs/physics.md, "Step bounds and
+the adaptive step"): the smaller of
+
+* the contact resolution bound: a rod crosses at most ``reach`` diameters per step relative
+  to the walls, d_min / (v + v_drive), so speculative contacts see every approach; and
+  gravity alone moves a resting vertex by at most 1% of a diameter per step,
+  g dt^2 <= 0.01 d_min, which keeps frictional stacks from creeping;
+* with explicit (symplectic) bending, its numerical stability bound 2 / omega_max.
+
+It is not the *stability test* of the protocol (the vibrated pile, :mod:`rodwarp.experiments`):
+the methods keep their historical names (``max_stable_dt`` is the step bound, and
+:meth:`StepBounds.step_bound` its new name). The default step is a fraction of the bound and at
+least 40 steps per drive period; the adaptive step recomputes it at the fastest vertex speed
+every step. Rodwarp's constraints need none of the explicit axial limit h / sqrt(E / rho).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from rodwarp.errors import RodwarpError
+
+
+class StepBounds:
+    """The step bounds, default and adaptive steps and the step guard of :class:`RodSolver`.
+
+    A mixin: the solver provides ``model``, ``bending``, ``guard_factor``, ``allow_unstable``,
+    ``_eb_dt`` (the cached explicit-bending bound) and ``_control(control)``.
+    """
+
+    def explicit_bending_dt(self) -> float:
+        """Numerical stability bound of symplectic (explicit) bending, 2 / omega_max (s; cached)."""
+        if self._eb_dt is None:
+            self._eb_dt = self._explicit_bending_dt()
+        return self._eb_dt
+
+    def _explicit_bending_dt(self) -> float:
+        """Largest stable step of symplectic (explicit) bending (s): 2 / omega_max.
+
+        omega_max^2 is bounded by the Gershgorin row sums of M^-1 K, which is exact for the
+        uniform stencil (16 E I / (rho A h^4)).
+        """
+        m = self.model
+        rows = np.zeros(m.n_vertices)
+        offs = m.rods.offsets
+        h = m.rest_length_np
+        free = (~m.pinned).astype(np.float64)
+        for r in range(m.n_rods):
+            a, b = offs[r], offs[r + 1]
+            if b - a < 3:
+                continue
+            i = np.arange(a + 1, b - 1)
+            cm = 1.0 / h[i - 1]
+            cp = 1.0 / h[i]
+            c0 = cm + cp
+            k = m.bend_stiffness_np[r] * 2.0 / (h[i - 1] + h[i])
+            # pinned vertices do not move, so their columns do not enter the eigenproblem
+            tot = cm * free[i - 1] + c0 * free[i] + cp * free[i + 1]
+            np.add.at(rows, i - 1, k * cm * tot)
+            np.add.at(rows, i, k * c0 * tot)
+            np.add.at(rows, i + 1, k * cp * tot)
+        fr = ~m.pinned
+        lam = np.max(rows[fr] / m.mass_np[fr]) if np.any(fr) else 0.0
+        return math.inf if lam <= 0 else 2.0 / math.sqrt(lam)
+
+    def explicit_stretch_dt(self) -> float:
+        """Explicit axial limit h_min / sqrt(E / rho) (s); rodwarp's constraints do not need it."""
+        m = self.model
+        h = m.rest_length_np
+        # edges with both ends pinned (a clamp's ghost edge) never move: leave them out
+        moving = (h > 0) & ~(m.pinned & np.roll(m.pinned, -1))
+        return float(h[moving].min() / m.material.wave_speed)
+
+    def characteristic_speed(self, control=None) -> float:
+        """Free-fall speed over the scene height plus the drive's peak speed (m/s)."""
+        m = self.model
+        control = self._control(control)
+        bb = m.box if m.box is not None else m.rods.bounding_box()
+        g = float(np.linalg.norm(m.gravity))
+        # the fall height is the scene's extent along gravity, not its widest side
+        down = m.gravity / g if g > 0 else np.array([0.0, 0.0, -1.0])
+        height = float(np.abs(bb[1] - bb[0]) @ np.abs(down))
+        v0 = 0.0 if m.rods.velocities is None else float(np.linalg.norm(m.rods.velocities, axis=1).max())
+        return math.sqrt(2.0 * g * height) + control.drive.peak_speed + v0 + 1e-3
+
+    def contact_dt(self, control=None, speed: float | None = None, reach: float = 1.0) -> float:
+        """Resolution bound of the contact model (s): a rod crosses at most one diameter per
+        step relative to the walls, so speculative contacts see every approach and the
+        linearised normals stay valid; and gravity alone moves a resting vertex by at most 1%
+        of a diameter per step (g dt^2 <= 0.01 d), which keeps frictional stacks from creeping.
+
+        ``speed`` (m/s) is the fastest vertex now; without it, the worst case of the scene
+        (free fall over its height, :meth:`characteristic_speed`), which holds whatever happens.
+        """
+        control = self._control(control)
+        d = self.model.min_diameter
+        if speed is None:
+            v = self.characteristic_speed(control)
+        else:
+            v = float(speed) + control.drive.peak_speed + 1e-3
+        b = reach * d / v
+        g = float(np.linalg.norm(self.model.gravity))
+        if g > 0:
+            b = min(b, math.sqrt(0.01 * d / g))
+        return b
+
+    def step_bound(self, bending: str | None = None, control=None, speed: float | None = None,
+                   reach: float = 1.0) -> float:
+        """Step bound of this scene for the chosen bending integration (s): the contact
+        resolution bound (:meth:`contact_dt`) at ``speed`` (m/s) when given, else for the
+        worst case, and with explicit bending its stability bound too. ``reach``: diameters a
+        rod may cross per step."""
+        mode = bending or self.bending
+        b = self.contact_dt(control, speed, reach)
+        if mode == "explicit":
+            b = min(b, self.explicit_bending_dt())
+        return b
+
+    def max_stable_dt(self, bending: str | None = None, control=None, speed: float | None = None,
+                      reach: float = 1.0) -> float:
+        """The step bound (s): the former name of :meth:`step_bound`, kept for existing code."""
+        return self.step_bound(bending, control, speed, reach)
+
+    def default_dt(self, control=None, safety: float = 0.5, speed: float | None = None) -> float:
+        """Default step: ``safety`` x the step bound, and at least 40 steps per drive period."""
+        control = self._control(control)
+        dt = safety * self.step_bound(control=control, speed=speed)
+        f = control.drive.frequency
+        if f > 0:
+            dt = min(dt, 1.0 / (40.0 * f))
+        return dt
+
+    def adaptive_dt(self, control, speed: float, previous: float | None = None, safety: float = 0.5,
+                    growth: float = 1.25) -> float:
+        """A step that follows the motion (s): :meth:`default_dt` at the current fastest
+        vertex speed, growing by at most ``growth`` per step (falling at once), so a resting
+        pile takes large steps and an impact small ones. Deterministic: the same state and
+        previous step give the same step.
+
+        Parameters
+        ----------
+        speed : float
+            Fastest vertex speed at the end of the last step (m/s), ``StepInfo.max_speed``.
+        previous : float, optional
+            The last step (s).
+        """
+        dt = self.default_dt(control, safety=safety, speed=speed)
+        if previous is not None and previous > 0:
+            dt = min(dt, growth * previous)
+        return dt
+
+    def theta_for(self, dt: float) -> float:
+        """Bending integration of a step of ``dt`` s: 0 explicit (symplectic), 1 implicit Euler."""
+        if self.bending == "implicit" or self.model.curved:
+            return 1.0
+        if self.bending == "explicit":
+            return 0.0
+        return 0.0 if dt <= 0.8 * self.explicit_bending_dt() else 1.0
+
+    def check_dt(self, dt: float, control=None, speed: float | None = None) -> None:
+        """Refuse (or, with ``allow_unstable``, flag) a step above the step bound (at
+        ``speed`` when given, see :meth:`contact_dt`)."""
+        if not (dt > 0 and math.isfinite(dt)):
+            raise RodwarpError(f"time step must be a positive number, got {dt}")
+        control = self._control(control)
+        if speed is not None and not self._can_touch(control):
+            # nothing to touch: the contact bound does not apply, only explicit bending's
+            if self.bending != "explicit" or dt <= self.explicit_bending_dt():
+                return
+        # at the actual speeds, speculative contacts resolve approaches of up to two diameters
+        # per step (the narrowphase's reach covers twice the travel)
+        bound = self.step_bound(control=control, speed=speed, reach=self.guard_factor if speed is not None else 1.0)
+        if dt > bound * (1.0 + 1e-9):
+            msg = (f"time step {dt:.3g} s exceeds this scene's step bound {bound:.3g} s (its numerical stability "
+                   f"bound: {self._bound_reason(control, speed)}); use dt <= {bound:.3g} s")
+            if not self.allow_unstable:
+                raise RodwarpError(msg + " or allow_unstable=True")
+            warnings.warn(msg, stacklevel=3)
+
+    def _can_touch(self, control) -> bool:
+        """Whether any contact is possible: rod-rod contacts on, or a wall in place."""
+        m = self.model
+        return (m.rod_contacts and m.n_segments > 1) or bool(len(m.planes) and control.walls_in_place())
+
+    def _bound_reason(self, control=None, speed=None) -> str:
+        if self.bending == "explicit" and self.explicit_bending_dt() < self.contact_dt(control, speed):
+            return "explicit bending, 2/omega_max"
+        if speed is None:
+            return "contact resolution, d_min / characteristic speed"
+        return f"contact resolution, d_min / (fastest vertex {speed:.3g} m/s + drive speed)"

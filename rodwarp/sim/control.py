@@ -1,0 +1,147 @@
+"""Time-varying inputs of a rod scene (:class:`Control`): walls in place, the drive, torques.
+
+The model declares every wall a scene can have; a control says which are in place and how
+the moving ones move, so a protocol that vibrates a closed container and then removes its
+side walls changes only its control: the model and the states keep their sizes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+from rodwarp.errors import RodwarpError
+
+
+@dataclass
+class Drive:
+    """Prescribed displacement A sin(2 pi f (t - phase_time)) of the moving walls along ``direction``."""
+
+    amplitude: float = 0.0
+    frequency: float = 0.0
+    direction: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    phase_time: float = 0.0
+
+    def displacement(self, t: float) -> float:
+        """Displacement at time t (m)."""
+        if self.amplitude == 0.0 or self.frequency == 0.0:
+            return 0.0
+        return self.amplitude * math.sin(2.0 * math.pi * self.frequency * (t - self.phase_time))
+
+    @property
+    def peak_speed(self) -> float:
+        """2 pi f |A| (m/s)."""
+        return 2.0 * math.pi * self.frequency * abs(self.amplitude)
+
+
+class Control:
+    """Which walls of ``model`` are in place, the drive of the moving ones, applied axial torques.
+
+    Parameters
+    ----------
+    model : Model
+        The scene whose walls (``model.planes``) this control switches.
+    """
+
+    def __init__(self, model):
+        self.model = model
+        self.on = np.ones(len(model.planes), dtype=bool)
+        self.drive = Drive()
+        self._torque = None
+
+    # ------------------------------------------------------------------ walls
+    def _sync(self) -> None:
+        # walls added to the model after this control was made are in place
+        n = len(self.model.planes)
+        if self.on.size < n:
+            self.on = np.concatenate([self.on, np.ones(n - self.on.size, dtype=bool)])
+
+    def remove_walls(self, names) -> None:
+        """Take walls out by name (e.g. the side walls and lid before the stability test)."""
+        self._sync()
+        names = set(names)
+        known = {p.name for p in self.model.planes}
+        unknown = sorted(names - known)
+        if unknown:
+            raise RodwarpError(f"no wall named {', '.join(unknown)}; the model has {', '.join(sorted(known))}")
+        for k, p in enumerate(self.model.planes):
+            if p.name in names:
+                self.on[k] = False
+
+    def restore_walls(self, names=None) -> None:
+        """Put walls back in place (all when ``names`` is None)."""
+        self._sync()
+        for k, p in enumerate(self.model.planes):
+            if names is None or p.name in set(names):
+                self.on[k] = True
+
+    def walls_in_place(self) -> list[str]:
+        self._sync()
+        return [p.name for k, p in enumerate(self.model.planes) if self.on[k]]
+
+    def set_drive(self, amplitude: float, frequency: float, direction=(0.0, 0.0, 1.0), phase_time: float = 0.0) -> None:
+        """Moving walls follow x = A sin(2 pi f (t - phase_time)) along ``direction`` (m, Hz)."""
+        if frequency < 0:
+            raise RodwarpError(f"drive frequency must be >= 0 Hz, got {frequency}")
+        d = np.asarray(direction, float)
+        self.drive = Drive(float(amplitude), float(frequency), d / np.linalg.norm(d), float(phase_time))
+
+    def floor_height(self, t: float) -> float | None:
+        """Height z (m) at time t of the wall named ``floor`` (moving with the drive when it is
+        ``moving``); None when the scene has no floor in place."""
+        self._sync()
+        for k, p in enumerate(self.model.planes):
+            if p.name == "floor" and self.on[k]:
+                z = p.offset / p.normal[2] if abs(p.normal[2]) > 0 else p.offset
+                if p.moving:
+                    z += float(self.drive.direction[2]) * self.drive.displacement(t)
+                return float(z)
+        return None
+
+    def wall_kinematics(self, t: float, dt: float):
+        """Wall normals, offsets at time t, mean velocities over [t, t + dt], friction, in place."""
+        self._sync()
+        P = len(self.model.planes)
+        normals = np.zeros((max(P, 1), 3))
+        offsets = np.zeros(max(P, 1))
+        vel = np.zeros((max(P, 1), 3))
+        mus = np.zeros(max(P, 1))
+        on = np.zeros(max(P, 1), dtype=np.int32)
+        d0 = self.drive.displacement(t)
+        d1 = self.drive.displacement(t + dt)
+        for k, p in enumerate(self.model.planes):
+            normals[k] = p.normal
+            mus[k] = p.mu
+            offsets[k] = p.offset
+            on[k] = int(self.on[k])
+            if p.moving:
+                offsets[k] += float(p.normal @ self.drive.direction) * d0
+                vel[k] = self.drive.direction * ((d1 - d0) / dt)
+        return normals, offsets, vel, mus, on
+
+    # ------------------------------------------------------------------ torques
+    def set_torque(self, torque) -> None:
+        """Axial torque on the edges (N m): one value per rod (spread over its edges by their
+        share of the rod's axial inertia) or one per vertex slot (V,); None removes it."""
+        m = self.model
+        if torque is None:
+            self._torque = None
+            return
+        t = np.asarray(torque, dtype=np.float64).ravel()
+        if t.size == m.n_rods:
+            I = m.inertia_np
+            tot = np.bincount(m.vertex_rod_np, weights=I, minlength=m.n_rods)
+            t = t[m.vertex_rod_np] * I / np.where(tot > 0, tot, 1.0)[m.vertex_rod_np]
+        if t.size != m.n_vertices:
+            raise RodwarpError(f"torque needs {m.n_rods} (per rod) or {m.n_vertices} (per vertex slot) values, "
+                               f"got {t.size}")
+        self._torque = wp.array(t, dtype=wp.float64, device=m.device)
+
+    def torque(self):
+        """Axial torques per edge slot on the device (zeros when none are applied)."""
+        if self._torque is None:
+            self._torque = wp.zeros(self.model.n_vertices, dtype=wp.float64, device=self.model.device)
+        return self._torque

@@ -1,0 +1,77 @@
+"""What a simulation state measures: the contacts of the packing and the centroid height.
+
+The *contacts of the packing* (:func:`rod_contacts`) are touching rod pairs, one per pair: the
+surface gap of the pair's closest segments below the contact distance (d / 10 by default,
+docs/protocol.md).  They are not the solver's *contact points* (``StepInfo.n_contacts``: every
+segment pair a step solves, speculative ones included) nor its *contact candidates* (the
+broadphase's pair list, :class:`~rodwarp.sim.contacts.ContactPipeline`).  The contact graph's
+measures (contacts per rod, the largest cluster) need no engine and live in
+:mod:`rodwarp.rodset`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from rodwarp.kernels import narrowphase
+from rodwarp.rodset import Contacts
+from rodwarp.sim.model import Model
+from rodwarp.sim.state import State
+
+
+def rod_contacts(model: Model, state: State, tolerance: float | None = None) -> Contacts:
+    """The contacts of the packing in ``state``: rod pairs whose surface gap is below ``tolerance``.
+
+    Gaps are re-evaluated at the state's positions for the pairs the last step detected
+    (its speculative margin includes every pair within the contact distance).
+
+    Parameters
+    ----------
+    tolerance : float, optional
+        Contact distance (m); default ``model.contact_distance`` (d / 10).
+
+    Returns
+    -------
+    Contacts
+        One entry per touching rod pair (the closest of its segment pairs).
+    """
+    tol = model.contact_distance if tolerance is None else tolerance
+    n = state.contact_count
+    if n == 0:
+        return Contacts(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0))
+    dev = model.device
+    gap = wp.zeros(n, dtype=wp.float64, device=dev)
+    scratch = wp.zeros(1, dtype=wp.float64, device=dev)
+    wp.launch(narrowphase.contact_overlap, dim=n, device=dev, inputs=[
+        n, state.contact_seg, model.arrays.seg_vertex, model.arrays.vertex_rod, model.arrays.radius, state.x, gap,
+        scratch])
+    g = gap.numpy()
+    seg = state.contact_seg.numpy()[:n]
+    st = state.contact_st.numpy()[:n]
+    x = state.x.numpy()
+    va = model.seg_vertex_np[seg[:, 0]]
+    vb = model.seg_vertex_np[seg[:, 1]]
+    ra = model.vertex_rod_np[va]
+    rb = model.vertex_rod_np[vb]
+    keep = (g < tol) & (ra != rb)
+    pa = x[va] + st[:, :1] * (x[va + 1] - x[va])
+    pb = x[vb] + st[:, 1:] * (x[vb + 1] - x[vb])
+    pts = 0.5 * (pa + pb)
+    lo = np.minimum(ra, rb)[keep]
+    hi = np.maximum(ra, rb)[keep]
+    g, pts = g[keep], pts[keep]
+    if len(lo) == 0:
+        return Contacts(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0))
+    order = np.lexsort((g, hi, lo))
+    lo, hi, g, pts = lo[order], hi[order], g[order], pts[order]
+    first = np.ones(len(lo), bool)
+    first[1:] = (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])
+    return Contacts(lo[first].astype(np.int64), hi[first].astype(np.int64), pts[first], g[first])
+
+
+def centroid_height(model: Model, state: State, floor: float = 0.0) -> float:
+    """Mass-weighted mean height of all vertices above the floor plane z = ``floor`` (m)
+    (``Control.floor_height`` gives the floor of a scene at a time)."""
+    x = state.x.numpy()
+    return float(np.average(x[:, 2], weights=model.mass_np) - floor)

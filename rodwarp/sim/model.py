@@ -1,0 +1,490 @@
+"""The static description of a rod scene: :class:`Material`, walls (:class:`Plane`), :class:`Model`.
+
+Follows the Model / State / Control / solver split of Warp's simulation examples and of
+Newton: the model holds what does not change during a run (masses, inertias, rest shape,
+stiffness, the walls a scene can have); a :class:`~rodwarp.sim.state.State` holds what
+evolves; a :class:`~rodwarp.sim.control.Control` holds the time-varying inputs (which walls
+are in place, the container drive, applied torques); a solver advances ``state_in`` to
+``state_out`` under a control.
+
+Two rod models (``rod_model``):
+
+``"elastic"``
+    Polylines of any number of vertices with lumped masses, bending, stretching and twist
+    (discrete elastic rods), and a spin degree of freedom per edge.
+``"rigid"``
+    Each (straight) rod is one rigid capsule: two vertices joined by an inextensible edge,
+    with the *consistent* mass matrix of a rigid bar, M = [[a, b], [b, a]] (a + b = m / 2,
+    a - b = 2 I_perp / l^2), which gives the exact translational mass m and transverse
+    inertia I_perp = m (l^2 / 12 + r^2 / 4) of a solid cylinder, plus the spin about the
+    axis with I = m r^2 / 2. About 5x cheaper than ten elastic vertices per rod.
+
+All quantities are SI (m, kg, s, N, Pa).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from rodwarp import _warp
+from rodwarp.errors import RodwarpError
+from rodwarp.rodset import RodSet
+
+ROD_MODELS = ("elastic", "rigid")
+
+
+@dataclass(frozen=True)
+class Material:
+    """Isotropic elastic material.
+
+    Parameters
+    ----------
+    young : float
+        Young's modulus E (Pa).
+    density : float
+        Mass density rho (kg/m^3).
+    poisson : float
+        Poisson ratio nu; sets the shear modulus G = E / (2 (1 + nu)) of twist.
+    """
+
+    young: float = 200e9
+    density: float = 7850.0
+    poisson: float = 0.3
+
+    def __post_init__(self):
+        if not (self.young > 0 and math.isfinite(self.young)):
+            raise RodwarpError(f"Young's modulus must be positive, got {self.young}; pass e.g. --young 2e11")
+        if not (self.density > 0 and math.isfinite(self.density)):
+            raise RodwarpError(f"density must be positive, got {self.density}; pass e.g. --density 7850")
+        if not (-1.0 < self.poisson < 0.5):
+            raise RodwarpError(f"Poisson ratio must lie in (-1, 0.5), got {self.poisson}")
+
+    @property
+    def shear(self) -> float:
+        """Shear modulus G (Pa)."""
+        return self.young / (2.0 * (1.0 + self.poisson))
+
+    @property
+    def wave_speed(self) -> float:
+        """Axial wave speed sqrt(E / rho) (m/s)."""
+        return math.sqrt(self.young / self.density)
+
+
+STEEL = Material()
+
+
+@dataclass
+class Plane:
+    """Half-space wall {x : n . x >= offset} with Coulomb friction.
+
+    Parameters
+    ----------
+    normal : (3,) array
+        Unit normal pointing into the allowed region.
+    offset : float
+        Plane position n . x at rest (m).
+    mu : float
+        Friction coefficient against rods.
+    moving : bool
+        Whether the wall follows the container drive of the control.
+    name : str
+        Label used by :meth:`Control.remove_walls` and in messages.
+    """
+
+    normal: np.ndarray
+    offset: float
+    mu: float = 0.2
+    moving: bool = False
+    name: str = "plane"
+
+
+# ----------------------------------------------------------------------------- frames (host)
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _any_perpendicular(t):
+    axis = np.eye(3)[int(np.argmin(np.abs(t)))]
+    return _unit(np.cross(t, axis))
+
+
+def _transport(u, t0, t1):
+    """u carried by the smallest rotation taking unit t0 to unit t1 (rows)."""
+    b = np.cross(t0, t1)
+    c = np.sum(t0 * t1, axis=-1, keepdims=True)
+    return u * c + np.cross(b, u) + b * (np.sum(b * u, axis=-1, keepdims=True) / (1.0 + c))
+
+
+def _space_parallel_directors(x, offsets=None):
+    """Tangents and directors of every edge by space-parallel transport along each rod from an
+    arbitrary first director (the Bishop frame); rows at the edge's first vertex, the slot of
+    a rod's last vertex repeats its last edge. Vectorised over rods (loop over edge rank)."""
+    x = np.asarray(x, float)
+    if offsets is None:
+        offsets = np.array([0, len(x)])
+    V = len(x)
+    t = np.zeros((V, 3))
+    t[:-1] = np.diff(x, axis=0)
+    starts = np.asarray(offsets[:-1])
+    n_edges = np.diff(offsets) - 1
+    ok = np.ones(V, bool)
+    ok[np.asarray(offsets[1:]) - 1] = False
+    t[ok] = _unit(t[ok])
+    u = np.zeros((V, 3))
+    u[starts] = np.stack([_any_perpendicular(t[i]) for i in starts]) if len(starts) else u[starts]
+    for j in range(1, int(n_edges.max(initial=0))):
+        rows = starts[n_edges > j] + j
+        w = _transport(u[rows - 1], t[rows - 1], t[rows])
+        w -= t[rows] * np.sum(w * t[rows], axis=1, keepdims=True)
+        u[rows] = _unit(w)
+    last = np.asarray(offsets[1:]) - 1
+    t[last] = t[last - 1]
+    u[last] = u[last - 1]
+    return t, u
+
+
+def _window_rotation(x, rest, j):
+    """Rotation that best maps the rest window around edge j onto the current one (Kabsch)."""
+    lo, hi = max(0, j - 1), min(len(x), j + 3)
+    A = (x[lo:hi] - x[lo:hi].mean(0)).T @ (rest[lo:hi] - rest[lo:hi].mean(0))
+    U, _, Vt = np.linalg.svd(A)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    return U @ D @ Vt
+
+
+def _vertex_frame(t, d1):
+    """Bisector b, first and second directors of the vertex frames between consecutive edges."""
+    b = _unit(t[:-1] + t[1:])
+    m1 = _transport(d1[:-1], t[:-1], b) + _transport(d1[1:], t[1:], b)
+    m1 -= b * np.sum(m1 * b, axis=-1, keepdims=True)
+    m1 = _unit(m1)
+    return b, m1, np.cross(b, m1)
+
+
+class Model:
+    """Static parameters of a rod scene, allocated on a Warp device.
+
+    Parameters
+    ----------
+    rods : RodSet
+        Rods in metres (converted when given in mm or um). The rest shape is
+        ``rods.rest_points`` when present, else the initial polylines.
+    material : Material
+        Elastic material of every rod (steel by default).
+    gravity : (3,) float
+        Body acceleration (m/s^2); the default is Earth gravity along -z.
+    mu : float
+        Rod-rod friction coefficient.
+    damping : float
+        Viscous damping rate gamma (1/s) on every vertex velocity and edge spin. Off by default.
+    pinned : array of int, optional
+        Input vertex indices held fixed (infinite mass); an edge with both ends pinned is
+        clamped in twist too. With ``rod_model="rigid"`` a rod with any pinned vertex is fixed.
+    contact_distance : float, optional
+        Surface gap below which two rods count as touching (m); default d_min / 10.
+    rod_contacts : bool
+        Detect rod-rod contacts (off for single-rod validation scenes).
+    extensible : bool
+        Give edges the axial compliance h / (E A). Off by default: for stiff rods the
+        axial strain is ~1e-8 and axial waves (kHz) are not resolved by the step, so exact
+        inextensibility is the cheaper model and, unlike implicitly damped stretching, it
+        conserves energy. Turn on to measure axial deformation.
+    rod_model : {"elastic", "rigid"}
+        See the module docstring; ``"rigid"`` needs straight rods.
+    rolling : bool
+        Let rods spin about their axes (friction at the surface rolls them). False locks the
+        spin (an infinite axial inertia): friction then acts on the centreline only, the
+        model of the seed paper's disMech, kept for comparison (docs/physics.md, "Coulomb
+        friction at the surface, and rolling").
+    device : str
+        ``cpu``, ``cuda``, ``cuda:N`` or ``auto``.
+    """
+
+    def __init__(
+        self,
+        rods: RodSet,
+        material: Material = STEEL,
+        *,
+        gravity=(0.0, 0.0, -9.81),
+        mu: float = 0.2,
+        damping: float = 0.0,
+        pinned=None,
+        contact_distance: float | None = None,
+        rod_contacts: bool = True,
+        extensible: bool = False,
+        rod_model: str = "elastic",
+        rolling: bool = True,
+        device: str = "cpu",
+    ):
+        _warp.init()
+        if rods.units != "m":
+            if rods.units == "voxel":
+                raise RodwarpError("rods are in voxels; convert with rods.to_units('m', voxel_size=...) first")
+            rods = rods.to_units("m")
+        if not (mu >= 0 and math.isfinite(mu)):
+            raise RodwarpError(f"friction coefficient must be >= 0, got {mu}")
+        if damping < 0:
+            raise RodwarpError(f"damping must be >= 0, got {damping}")
+        if rod_model not in ROD_MODELS:
+            raise RodwarpError(f"rod model must be elastic or rigid, got '{rod_model}'")
+        self.rod_model = rod_model
+        self.rolling = bool(rolling)
+        self.material = material
+        self.gravity = np.asarray(gravity, dtype=np.float64).reshape(3)
+        self.mu = float(mu)
+        self.damping = float(damping)
+        self.device = _warp.resolve_device(device)
+        self.rod_contacts = bool(rod_contacts)
+        self.planes: list[Plane] = []
+        self.box: np.ndarray | None = None if rods.box is None else np.asarray(rods.box, float)
+        pin_in = np.zeros(rods.n_vertices, dtype=bool)
+        if pinned is not None:
+            idx = np.asarray(pinned, dtype=np.int64).ravel()
+            if idx.size and (idx.min() < 0 or idx.max() >= rods.n_vertices):
+                raise RodwarpError(f"pinned vertex index out of range 0..{rods.n_vertices - 1}")
+            pin_in[idx] = True
+        if rod_model == "rigid":
+            rods, pin_in = self._as_rigid(rods, pin_in)
+        self.rods = rods
+        self.pinned = pin_in
+
+        N, V = rods.n_rods, rods.n_vertices
+        offsets = rods.offsets.astype(np.int64)
+        rest = rods.rest_points if rods.rest_points is not None else rods.points
+        edge = np.linalg.norm(np.diff(rest, axis=0), axis=1)
+        last = np.zeros(V, dtype=bool)
+        last[offsets[1:] - 1] = True
+        first = np.zeros(V, dtype=bool)
+        first[offsets[:-1]] = True
+        rest_length = np.zeros(V)
+        rest_length[:-1] = np.where(last[:-1], 0.0, edge)
+        if np.any(rest_length[~last] <= 0):
+            raise RodwarpError("a rod has two coincident consecutive vertices; remove duplicate points")
+        vertex_rod = np.repeat(np.arange(N), np.diff(offsets))
+        r = rods.radii
+        area = math.pi * r**2
+        inertia_area = math.pi * r**4 / 4.0
+        edge_mass = rest_length * area[vertex_rod] * material.density  # 0 in the last-vertex slots
+        cross_mass = np.zeros(V)
+        cross_inv = np.zeros(V)
+        if rod_model == "rigid":
+            m = edge_mass[offsets[:-1]]
+            L = rest_length[offsets[:-1]]
+            a = m / 3.0 + m * r**2 / (4.0 * L**2)
+            b = m / 6.0 - m * r**2 / (4.0 * L**2)
+            mass = np.repeat(a, 2)
+            cross_mass[offsets[:-1]] = b
+            det = a * a - b * b
+            fixed = pin_in[offsets[:-1]]
+            inv_mass = np.repeat(np.where(fixed, 0.0, a / det), 2)
+            cross_inv[offsets[:-1]] = np.where(fixed, 0.0, -b / det)
+        else:
+            # lumped masses: each vertex carries half of each adjacent edge
+            mass = 0.5 * edge_mass
+            mass[1:] += 0.5 * edge_mass[:-1]
+            inv_mass = np.where(pin_in, 0.0, 1.0 / mass)
+        compliance = np.where(last | (not extensible), 0.0, rest_length / (material.young * area[vertex_rod]))
+        inertia = 0.5 * edge_mass * r[vertex_rod] ** 2
+        clamped = last | (pin_in & np.roll(pin_in, -1)) | (not rolling)
+        inv_inertia = np.where(clamped | (inertia <= 0), 0.0, 1.0 / np.where(inertia > 0, inertia, 1.0))
+        # twist between edges i-1 and i at interior vertex i: l_i / (G J), J = pi r^4 / 2
+        interior = ~first & ~last
+        l_int = np.zeros(V)
+        l_int[1:] = 0.5 * (rest_length[:-1] + rest_length[1:])
+        twist_compliance = np.where(interior, l_int / (material.shear * 2.0 * inertia_area[vertex_rod]), 0.0)
+
+        # rest frames: curvature components (k1, k2) in the vertex material frames
+        rest_kappa = np.zeros((V, 2))
+        curved = np.zeros(N, dtype=np.int32)
+        x0 = rods.points
+        t_r, u_r = _space_parallel_directors(rest, offsets)
+        kap_rest = np.zeros((V, 3))
+        kap_rest[interior] = t_r[np.flatnonzero(interior)] - t_r[np.flatnonzero(interior) - 1]
+        np.maximum.at(curved, vertex_rod, (np.linalg.norm(kap_rest, axis=1) > 1e-9).astype(np.int32))
+        director = _space_parallel_directors(x0, offsets)[1]
+        for k in np.flatnonzero(curved):
+            a_, b_ = offsets[k], offsets[k + 1]
+            tk, uk = t_r[a_:b_ - 1], u_r[a_:b_ - 1]
+            _, m1, m2 = _vertex_frame(tk, uk)
+            kap = kap_rest[a_ + 1:b_ - 1]
+            rest_kappa[a_ + 1:b_ - 1, 0] = np.sum(kap * m1, axis=1)
+            rest_kappa[a_ + 1:b_ - 1, 1] = np.sum(kap * m2, axis=1)
+            if np.allclose(x0[a_:b_], rest[a_:b_], rtol=0, atol=1e-12):
+                director[a_:b_ - 1] = uk
+            else:  # carry the rest directors onto the current shape edge by edge
+                t_c = _unit(np.diff(x0[a_:b_], axis=0))
+                u_c = np.stack([_window_rotation(x0[a_:b_], rest[a_:b_], j) @ uk[j] for j in range(len(t_c))])
+                u_c -= t_c * np.sum(u_c * t_c, axis=1, keepdims=True)
+                director[a_:b_ - 1] = _unit(u_c)
+            director[b_ - 1] = director[b_ - 2]
+        self.curved = bool(curved.any())
+        self.curved_rods_np = curved
+        self.rest_kappa_np = rest_kappa
+        self.director0_np = director
+
+        self.n_rods, self.n_vertices = N, V
+        self.seg_vertex_np = np.flatnonzero(~last).astype(np.int32)
+        self.n_segments = int(self.seg_vertex_np.size)
+        self.mass_np = mass
+        self.cross_mass_np = cross_mass
+        self.inv_mass_np = inv_mass
+        self.cross_inv_mass_np = cross_inv
+        self.inertia_np = inertia
+        self.inv_inertia_np = inv_inertia
+        self.rest_length_np = rest_length
+        self.vertex_rod_np = vertex_rod.astype(np.int32)
+        self.bend_stiffness_np = material.young * inertia_area
+        self.radius_np = r.astype(np.float64)
+        self.contact_distance = float(contact_distance) if contact_distance is not None else 0.1 * float(2 * r.min())
+
+        d = self.device
+        st = self.arrays = _structs().RodModel()
+        st.n_rods = N
+        st.n_vertices = V
+        st.rod_start = wp.array(offsets.astype(np.int32), dtype=wp.int32, device=d)
+        st.vertex_rod = wp.array(self.vertex_rod_np, dtype=wp.int32, device=d)
+        st.seg_vertex = wp.array(self.seg_vertex_np, dtype=wp.int32, device=d)
+        f64 = lambda a: wp.array(np.ascontiguousarray(a, dtype=np.float64), dtype=wp.float64, device=d)  # noqa: E731
+        st.mass = f64(mass)
+        st.cross_mass = f64(cross_mass)
+        st.inv_mass = f64(inv_mass)
+        st.cross_inv_mass = f64(cross_inv)
+        st.rest_length = f64(rest_length)
+        st.compliance = f64(compliance)
+        st.bend_stiffness = f64(self.bend_stiffness_np)
+        st.radius = f64(self.radius_np)
+        st.inertia = f64(inertia)
+        st.inv_inertia = f64(inv_inertia)
+        st.twist_compliance = f64(twist_compliance)
+        st.rest_twist = f64(np.zeros(V))
+        st.rest_kappa = wp.array(rest_kappa, dtype=wp.vec2d, device=d)
+        st.curved = wp.array(curved, dtype=wp.int32, device=d)
+        rigid = np.full(N, 1 if rod_model == "rigid" else 0, dtype=np.int32)
+        st.rigid = wp.array(rigid, dtype=wp.int32, device=d)
+        rod_mass = self.rod_masses()
+        fixed = np.logical_or.reduceat(pin_in, offsets[:-1]) if N else np.zeros(0, bool)
+        st.rod_inv_mass = f64(np.where(fixed, 0.0, 1.0 / rod_mass))
+        if rod_model == "rigid":
+            Lr = rest_length[offsets[:-1]]
+            iperp = rod_mass * (Lr**2 / 12.0 + r**2 / 4.0)
+            st.rod_inv_iperp = f64(np.where(fixed, 0.0, 1.0 / iperp))
+        else:
+            st.rod_inv_iperp = f64(np.zeros(N))
+
+    @staticmethod
+    def _as_rigid(rods: RodSet, pinned: np.ndarray):
+        """Two-vertex rods (the end points) of straight input rods; refuses curved ones."""
+        off = rods.offsets
+        a, b = off[:-1], off[1:] - 1
+        for name, pts in (("shape", rods.points), ("rest shape", rods.rest_points)):
+            if pts is None:
+                continue
+            p0, p1 = pts[a], pts[b]
+            chord = p1 - p0
+            L = np.linalg.norm(chord, axis=1)
+            rid = np.repeat(np.arange(rods.n_rods), np.diff(off))
+            rel = pts - p0[rid]
+            dev = np.linalg.norm(np.cross(rel, chord[rid]), axis=1) / L[rid]
+            worst = np.zeros(rods.n_rods)
+            np.maximum.at(worst, rid, dev)
+            bad = np.flatnonzero(worst > 1e-3 * rods.radii)
+            if bad.size:
+                k = int(bad[0])
+                raise RodwarpError(f"rod {k} is not straight (its {name} leaves the chord by "
+                                   f"{worst[k] / (2 * rods.radii[k]):.3g} d); rigid rods must be straight: "
+                                   f"use rod_model='elastic' (--rod-model elastic)")
+        idx = np.stack([a, b], axis=1).ravel()
+        fixed = np.logical_or.reduceat(pinned, off[:-1]) if rods.n_rods else np.zeros(0, bool)
+        out = RodSet(rods.points[idx], np.arange(rods.n_rods + 1) * 2, rods.radii, units=rods.units,
+                     rest_points=None, velocities=None if rods.velocities is None else rods.velocities[idx],
+                     box=rods.box, attrs=dict(rods.attrs))
+        return out, np.repeat(fixed, 2)
+
+    # ------------------------------------------------------------------ walls
+    def add_plane(self, normal, offset: float, *, mu: float | None = None, moving: bool = False,
+                  name: str = "plane") -> Plane:
+        """Add a half-space wall {x : n . x >= offset}; returns the :class:`Plane`."""
+        n = np.asarray(normal, dtype=np.float64).reshape(3)
+        ln = np.linalg.norm(n)
+        if not ln > 0:
+            raise RodwarpError("plane normal must be a non-zero vector")
+        plane = Plane(n / ln, float(offset), self.mu if mu is None else float(mu), bool(moving), name)
+        self.planes.append(plane)
+        return plane
+
+    def add_box(self, lower, upper, *, walls=("floor", "x-", "x+", "y-", "y+"), mu: float | None = None,
+                moving: bool = False):
+        """Add the walls of an axis-aligned container (z up).
+
+        Parameters
+        ----------
+        lower, upper : (3,) float
+            Container corners (m).
+        walls : sequence of str
+            Which of ``floor``, ``ceiling``, ``x-``, ``x+``, ``y-``, ``y+`` to add. Walls a run
+            removes later (the stability test keeps only the floor) are switched off in its
+            :class:`~rodwarp.sim.control.Control`, not removed here.
+        """
+        lo = np.asarray(lower, float)
+        hi = np.asarray(upper, float)
+        if np.any(hi <= lo):
+            raise RodwarpError(f"box upper corner {hi.tolist()} must exceed lower corner {lo.tolist()}")
+        spec = {
+            "floor": ((0, 0, 1), lo[2]), "ceiling": ((0, 0, -1), -hi[2]),
+            "x-": ((1, 0, 0), lo[0]), "x+": ((-1, 0, 0), -hi[0]),
+            "y-": ((0, 1, 0), lo[1]), "y+": ((0, -1, 0), -hi[1]),
+        }
+        for w in walls:
+            if w not in spec:
+                raise RodwarpError(f"unknown wall '{w}'; use floor, ceiling, x-, x+, y-, y+")
+            n, off = spec[w]
+            self.add_plane(n, off, mu=mu, moving=moving, name=w)
+        self.box = np.stack([lo, hi])
+
+    def control(self):
+        """A new :class:`~rodwarp.sim.control.Control`: every wall in place, no drive, no torque."""
+        from rodwarp.sim.control import Control
+
+        return Control(self)
+
+    # ------------------------------------------------------------------ scene scales
+    @property
+    def min_diameter(self) -> float:
+        return float(2 * self.radius_np.min())
+
+    def total_mass(self) -> float:
+        return float(self.mass_np.sum() + 2.0 * self.cross_mass_np.sum())
+
+    def rod_masses(self) -> np.ndarray:
+        """Mass of every rod (kg)."""
+        m = np.bincount(self.vertex_rod_np, weights=self.mass_np, minlength=self.n_rods)
+        return m + 2.0 * np.bincount(self.vertex_rod_np, weights=self.cross_mass_np, minlength=self.n_rods)
+
+    def momentum(self, v: np.ndarray) -> np.ndarray:
+        """Total linear momentum (kg m/s) of vertex velocities ``v`` (V, 3), cross terms included."""
+        p = (self.mass_np[:, None] * v).sum(axis=0)
+        c = self.cross_mass_np[:-1, None]
+        return p + (c * (v[:-1] + v[1:])).sum(axis=0)
+
+    def state(self) -> "State":
+        """A new :class:`~rodwarp.sim.state.State` at the rods' positions and velocities, t = 0."""
+        from rodwarp.sim.state import State
+
+        s = State(self)
+        s.x.assign(wp.array(self.rods.points, dtype=wp.vec3d, device=self.device))
+        if self.rods.velocities is not None:
+            s.v.assign(wp.array(self.rods.velocities, dtype=wp.vec3d, device=self.device))
+        s.director.assign(wp.array(self.director0_np, dtype=wp.vec3d, device=self.device))
+        return s
+
+
+def _structs():
+    from rodwarp.kernels import structs
+
+    return structs

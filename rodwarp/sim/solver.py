@@ -1,0 +1,574 @@
+"""Projected Gauss-Seidel solver: implicit elastics, exact Coulomb contact at the rods' surfaces.
+
+One step of :meth:`RodSolver.step` (all on the model's device):
+
+1. frames at the start of the step: edge tangents, reference twists, and the rest
+   curvature of curved rods in the current material frame;
+2. velocity predictor, one thread per rod: damping, gravity, applied torques and, for
+   symplectic (explicit) bending, the bending force;
+3. contacts at the start-of-step positions (:class:`~rodwarp.sim.contacts.ContactPipeline`):
+   speculative, sorted, warm-started; walls of the control within reach, warm-started;
+4. ``iterations`` Gauss-Seidel sweeps over rod-rod contacts, wall contacts and exact per-rod
+   solves of bending, twist and edge-length constraints; every block uses the same mass
+   metric, so the converged step is implicit Euler with exact Coulomb contact and its fixed
+   point is the static equilibrium;
+5. x' = x + dt v', theta' = theta + dt omega', directors transported with their edges.
+
+``state_in`` is never modified, so a step that fails its checks leaves the last good state.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from rodwarp.errors import RodwarpError, SimulationBlowUp
+from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, overlap, solve
+from rodwarp.kernels.structs import ContactFrame, RodFactors, StepParams, WallContacts, Walls
+from rodwarp.sim._bounds import StepBounds
+from rodwarp.sim.contacts import ContactPipeline
+from rodwarp.sim.model import Model
+from rodwarp.sim.state import State
+
+
+@dataclass
+class StepInfo:
+    """Diagnostics of one step.
+
+    Attributes
+    ----------
+    iterations : int
+        Gauss-Seidel sweeps actually run.
+    n_contacts : int
+        Contact points solved (rod-rod, speculative ones included; docs/physics.md,
+        "Contact"), not the contacts of the packing (:func:`rodwarp.sim.rod_contacts`).
+    max_speed : float
+        Fastest vertex speed at the end of the step (m/s).
+    theta : float
+        Bending integration of the step: 0 explicit (symplectic), 1 implicit Euler.
+    contact_residual : float
+        Largest velocity change (m/s) that any contact caused in the last Gauss-Seidel sweep;
+        0 for a fully converged solve.
+    stretch_residual : float
+        Largest edge-length error (m) before the last stretch projection.
+    """
+
+    step: int
+    time: float
+    dt: float
+    iterations: int
+    n_contacts: int
+    contact_residual: float
+    stretch_residual: float
+    max_speed: float
+    theta: float
+
+
+class RodSolver(StepBounds):
+    """Advance a :class:`~rodwarp.sim.model.Model` from ``state_in`` to ``state_out``.
+
+    The step bounds, the default and adaptive steps and the step guard (``step_bound``,
+    ``max_stable_dt``, ``default_dt``, ``adaptive_dt``, ``check_dt``, ...) come from
+    :class:`~rodwarp.sim._bounds.StepBounds`; docs/physics.md describes them.
+
+    Parameters
+    ----------
+    model : Model
+        The scene.
+    iterations : int
+        Most Gauss-Seidel sweeps per step (contacts, walls, bending, twist, stretching each).
+    tolerance : float
+        Stop sweeping early once a sweep changes no contact velocity by more than this (m/s;
+        1e-5 m/s: 10 um of drift per second) and no edge length is off by more than 1e-6 of the
+        shortest edge; 0 always runs ``iterations`` sweeps. Checked every second sweep.
+    bending : {"auto", "implicit", "explicit"}
+        Bending integration. ``auto`` uses symplectic (explicit) bending when the step is
+        below 0.8 of its numerical stability bound 2 / omega_max, which conserves energy, and
+        implicit Euler above it.
+        Curved rods always bend implicitly (their bending is coupled to twist).
+    coloring : {"auto", "on", "off"}
+        Colour rod-rod contacts so that each colour can be solved in parallel without data
+        races. ``auto`` colours on CUDA only; a CPU launch is already sequential.
+    warm_start : float
+        Fraction of last step's impulses reused (0 disables warm starting).
+    baumgarte : float
+        Fraction of an overlap (beyond the slop) removed per position sweep of the
+        post-stabilisation.
+    position_sweeps : int
+        Gauss-Seidel sweeps of the post-stabilisation that removes overlaps from the
+        end-of-step positions (0: none, overlaps are then only prevented, never undone).
+    slop : float
+        Overlap left alone, in units of the smallest diameter: a resting contact is not
+        pushed apart, so its velocity problem repeats from step to step, warm starting holds
+        and the sweep converges.
+    relax : float
+        Over-relaxation of each contact's impulse update (successive over-relaxation; 1 is
+        plain Gauss-Seidel), the relaxed impulse projected back onto the friction cone.
+    penetration_limit : float
+        A step whose deepest rod overlap exceeds this fraction of the smallest diameter
+        raises :class:`SimulationBlowUp`.
+    speed_limit : float, optional
+        Speeds above this (m/s) are treated as a blow-up; default 20 x the scene's
+        characteristic speed (free fall over the scene height, drive speed, initial speeds
+        and the speed the initial elastic energy could give all rods).
+    allow_unstable : bool
+        Accept a step above the step bound with a warning instead of an error.
+    energy_check_every : int
+        Steps between energy-jump checks (0 disables them).
+    skin : float, optional
+        Extra reach of the broadphase pair list (m); the list is rebuilt when a vertex has
+        moved by half of it. Default d_min + min(h_max, 20 d_min) / 5 (measured knees,
+        benchmarks).
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        *,
+        iterations: int = 40,
+        tolerance: float = 1e-5,
+        bending: str = "auto",
+        coloring: str = "auto",
+        warm_start: float = 1.0,
+        baumgarte: float = 0.8,
+        slop: float = 0.01,
+        relax: float = 1.5,
+        position_sweeps: int = 4,
+        penetration_limit: float = 0.25,
+        speed_limit: float | None = None,
+        allow_unstable: bool = False,
+        energy_check_every: int = 10,
+        skin: float | None = None,
+    ):
+        if iterations < 1:
+            raise RodwarpError(f"iterations must be >= 1, got {iterations}")
+        if bending not in ("auto", "implicit", "explicit"):
+            raise RodwarpError(f"bending must be auto, implicit or explicit, got '{bending}'")
+        if bending == "explicit" and model.curved:
+            raise RodwarpError("explicit bending is not available for curved rods (their bending is coupled to "
+                               "twist); use bending='implicit' or 'auto'")
+        if coloring not in ("auto", "on", "off"):
+            raise RodwarpError(f"coloring must be auto, on or off, got '{coloring}'")
+        self.model = model
+        self.iterations = int(iterations)
+        self.tolerance = float(tolerance)
+        self.length_tolerance = 1e-6 * float(model.rest_length_np[model.rest_length_np > 0].min())
+        self.bending = bending
+        self.coloring = coloring == "on" or (coloring == "auto" and wp.get_device(model.device).is_cuda)
+        self.warm_start = float(warm_start)
+        self.baumgarte = float(baumgarte)
+        self.slop = float(slop)
+        self.relax = float(relax)
+        self.guard_factor = 2.0
+        self.penetration_limit = float(penetration_limit)
+        self.allow_unstable = bool(allow_unstable)
+        self._speed_limit = speed_limit
+        self._v_elastic = None
+        self._eb_dt = None
+        self._last_mech = None
+        self.energy_check_every = int(energy_check_every)
+        self._default_control = None
+        d = model.device
+        V = model.n_vertices
+        f = self.factors = RodFactors()
+        f.implicit_bending = 1
+        for name, dtype in (("bcoef", wp.vec4d), ("btarget", wp.vec3d), ("bdiag", wp.float64), ("boff1", wp.float64),
+                            ("boff2", wp.float64), ("blam", wp.vec3d), ("brhs", wp.vec3d), ("bdl", wp.vec3d),
+                            ("sdir", wp.vec3d), ("sdiag", wp.float64), ("soff", wp.float64), ("slam", wp.float64),
+                            ("srhs", wp.float64), ("tangent", wp.vec3d), ("ref_twist", wp.float64),
+                            ("tdiag", wp.float64), ("toff", wp.float64), ("tlam", wp.float64), ("trhs", wp.float64),
+                            ("gcouple", wp.vec3d), ("clam", wp.vec4d), ("crhs", wp.vec4d), ("cdl", wp.vec4d)):
+            setattr(f, name, wp.zeros(V, dtype=dtype, device=d))
+        Vc = V if model.curved else 1
+        for name in ("cd", "cinv", "cl1", "cl2"):
+            setattr(f, name, wp.zeros(Vc, dtype=wp.mat44d, device=d))
+        self._bfactor_dt = None
+        self._scalar = wp.zeros(4, dtype=wp.float64, device=d)
+        self._energy_out = wp.zeros(5, dtype=wp.float64, device=d)
+        self._residual = wp.zeros(1, dtype=wp.float64, device=d)
+        self._sresidual = wp.zeros(1, dtype=wp.float64, device=d)
+        if skin is None:
+            # measured knees: d + h/5 for ten-vertex rods; capped at 20 d for long (rigid) segments,
+            # whose candidate list would otherwise hold every rod within a fifth of a length
+            dmin = model.min_diameter
+            skin = dmin + 0.2 * min(float(model.rest_length_np.max()), 20.0 * dmin)
+        self.contacts = ContactPipeline(model, skin, self._launch, lambda: self.timings)
+        self._wall_gap = wp.zeros(V * max(len(model.planes), 1), dtype=wp.float64, device=d)
+        self._active = wp.zeros(max(model.n_rods, 1), dtype=wp.int32, device=d)
+        self._n_active = wp.zeros(1, dtype=wp.int32, device=d)
+        self._solve_out = wp.zeros(3, dtype=wp.float64, device=d)
+        self._proj_out = wp.zeros(1, dtype=wp.float64, device=d)
+        self.position_sweeps = int(position_sweeps)
+        self._frames = wp.empty(max(16, 4 * model.n_segments), dtype=ContactFrame, device=d)
+        self._walls_struct = None
+        self._walls_key = None
+        # sequential devices run the whole solve in one launch (same order, no launch overhead)
+        self.fused = (not self.coloring) and not wp.get_device(model.device).is_cuda
+        self.last_info: StepInfo | None = None
+        # per-stage kernel seconds (elastics, broadphase, narrowphase, friction, checks) when
+        # profiling; None (no synchronisation, no overhead) otherwise
+        self.timings: dict | None = None
+
+    @property
+    def skin(self) -> float:
+        return self.contacts.skin
+
+    @property
+    def pair_builds(self) -> int:
+        return self.contacts.builds
+
+    @property
+    def colors_used(self) -> int:
+        return self.contacts.colors_used
+
+    def invalidate_pairs(self) -> None:
+        """Force the broadphase to rebuild its pair list at the next step (benchmarks)."""
+        self.contacts.pairs_n = None
+
+    def _control(self, control):
+        if control is not None:
+            return control
+        if self._default_control is None:
+            self._default_control = self.model.control()
+        return self._default_control
+
+    # ------------------------------------------------------------------ profiling
+    def _launch(self, stage: str, kernel, **kw) -> None:
+        if self.timings is None:
+            wp.launch(kernel, **kw)
+            return
+        wp.synchronize_device(self.model.device)
+        t = time.perf_counter()
+        wp.launch(kernel, **kw)
+        wp.synchronize_device(self.model.device)
+        self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - t
+
+    def reset_timings(self) -> None:
+        """Start (or restart) accumulating kernel time per stage in ``self.timings`` (s)."""
+        self.timings = {}
+
+    # ------------------------------------------------------------------ step
+    def _walls(self, control, t: float, dt: float) -> Walls:
+        """The Walls bundle of this step: per-wall arrays copied only when the control's walls
+        change; the drive enters as three scalars."""
+        m = self.model
+        P = len(m.planes)
+        key = (id(control), P, tuple(control.on.tolist()), tuple(control.drive.direction.tolist()))
+        w = self._walls_struct
+        if w is None or self._walls_key != key:
+            dev = m.device
+            rows = max(P, 1)
+            normal = np.zeros((rows, 3))
+            offset = np.zeros(rows)
+            moving = np.zeros(rows, dtype=np.int32)
+            shift = np.zeros(rows)
+            mu = np.zeros(rows)
+            on = np.zeros(rows, dtype=np.int32)
+            for k, p in enumerate(m.planes):
+                normal[k], offset[k], mu[k], on[k] = p.normal, p.offset, p.mu, int(control.on[k])
+                moving[k] = int(p.moving)
+                shift[k] = float(p.normal @ control.drive.direction) if p.moving else 0.0
+            w = self._walls_struct = Walls()
+            w.n = P
+            w.normal = wp.array(normal, dtype=wp.vec3d, device=dev)
+            w.offset = wp.array(offset, dtype=wp.float64, device=dev)
+            w.moving = wp.array(moving, dtype=wp.int32, device=dev)
+            w.shift = wp.array(shift, dtype=wp.float64, device=dev)
+            w.mu = wp.array(mu, dtype=wp.float64, device=dev)
+            w.on = wp.array(on, dtype=wp.int32, device=dev)
+            w.drive_dir = wp.vec3d(*control.drive.direction)
+            self._walls_key = key
+        d0 = control.drive.displacement(t)
+        d1 = control.drive.displacement(t + dt)
+        w.drive_disp = wp.float64(d0)
+        w.drive_vel = wp.float64((d1 - d0) / dt)
+        return w
+
+    def step(self, state_in: State, state_out: State, control=None, dt: float | None = None, *,
+             check: bool = True) -> StepInfo:
+        """Advance ``state_in`` by ``dt`` seconds into ``state_out`` under ``control``.
+
+        Parameters
+        ----------
+        state_in, state_out : State
+            Distinct states of this model; ``state_in`` is not modified.
+        control : Control, optional
+            Walls in place, drive and torques; default: every wall in place, no drive.
+        dt : float
+            Time step (s).
+
+        Raises
+        ------
+        RodwarpError
+            ``dt`` above the step bound (unless ``allow_unstable``).
+        SimulationBlowUp
+            Non-finite or runaway velocities, or rods overlapping deeper than
+            ``penetration_limit`` diameters; ``state_in`` is left untouched.
+        """
+        if dt is None:
+            raise RodwarpError("step needs a time step dt (s)")
+        m = self.model
+        dev = m.device
+        control = self._control(control)
+        if check:
+            if not (dt > 0 and math.isfinite(dt)):
+                raise RodwarpError(f"time step must be a positive number, got {dt}")
+            if self._v_elastic is None:
+                e = self.energy(state_in)
+                self._v_elastic = math.sqrt(2.0 * (e["bending"] + e["stretching"] + e["twist"]) / m.total_mass())
+        theta = self.theta_for(dt)
+        fdt = wp.float64(dt)
+        V, N = m.n_vertices, m.n_rods
+        state_in.ensure_wall_storage()
+        state_out.ensure_wall_storage()
+        P = len(m.planes)
+        if self._wall_gap.shape[0] != V * max(P, 1):
+            self._wall_gap = wp.zeros(V * max(P, 1), dtype=wp.float64, device=dev)
+        f = self.factors
+        f.implicit_bending = int(theta != 0.0)
+        rs_in = state_in.rod_state()
+
+        self._launch("elastics", frames.step_frames, dim=N, device=dev, inputs=[m.arrays, rs_in, f])
+        self._launch("elastics", elastics.velocity_predictor, dim=N, device=dev, inputs=[
+            m.arrays, rs_in, f.btarget, control.torque(), wp.vec3d(*m.gravity), wp.float64(m.damping), fdt,
+            int(theta == 0.0), state_out.v, state_out.spin])
+
+        self._scalar.zero_()
+        self._launch("checks", broadphase.max_speed, dim=V, device=dev, inputs=[state_out.v, self._scalar])
+        sc = self._scalar.numpy()
+        if sc[1] != 0.0:
+            raise self._blowup(state_in, dt, theta, "non-finite velocity after the elastic predictor", control)
+        vmax = float(sc[0])
+        if check:
+            # the guard follows the motion: the bound at the speeds this step starts from
+            self.check_dt(dt, control, speed=vmax)
+
+        n_contacts = self.contacts.detect(state_in, state_out, vmax, dt) if m.rod_contacts and m.n_segments > 1 else 0
+        state_out.contact_count = n_contacts
+        contacts = state_out.rod_contacts(n_contacts)
+
+        params = StepParams()
+        params.dt = fdt
+        params.mu = wp.float64(m.mu)
+        params.beta = wp.float64(self.baumgarte)
+        params.slop = wp.float64(self.slop * m.min_diameter)
+        params.max_push = wp.float64(max(self.characteristic_speed(control), 1e-3))
+        params.contact_distance = wp.float64(m.contact_distance)
+        params.warm = wp.float64(self.warm_start)
+        params.relax = wp.float64(self.relax)
+
+        if n_contacts:
+            if self._frames.shape[0] < n_contacts:
+                self._frames = wp.empty(2 * n_contacts, dtype=ContactFrame, device=dev)
+            self._launch("friction", friction.prepare_rod_contacts, dim=n_contacts, device=dev, inputs=[
+                m.arrays, state_in.x, contacts, f.tangent, params, self._frames])
+            self.contacts.warm_start(state_in, state_out, n_contacts, self.warm_start)
+            self._launch("friction", friction.apply_rod_impulses, dim=n_contacts, device=dev, inputs=[
+                contacts, self._frames, state_out.v, state_out.spin])
+            if self.coloring:
+                self.contacts.color(state_out, n_contacts)
+
+        walls = self._walls(control, state_in.time, dt)
+        wc = WallContacts()
+        wc.gap, wc.impulse, wc.active, wc.n_active = self._wall_gap, state_out.wall_impulse, self._active, \
+            self._n_active
+        self._n_active.zero_()
+        if P:
+            state_out.wall_impulse.assign(state_in.wall_impulse)
+            self._launch("friction", friction.prepare_wall_contacts, dim=N, device=dev, inputs=[
+                m.arrays, state_in.x, f.tangent, walls, params, wc, state_out.v, state_out.spin])
+
+        f.blam.zero_()
+        f.slam.zero_()
+        f.tlam.zero_()
+        if m.curved:
+            f.clam.zero_()
+            self._launch("elastics", elastics.curved_factor, dim=N, device=dev, inputs=[m.arrays, fdt, f])
+        if theta != 0.0 and self._bfactor_dt != dt:
+            self._launch("elastics", elastics.bending_factor, dim=N, device=dev, inputs=[m.arrays, fdt, f])
+            self._bfactor_dt = dt
+        self._launch("elastics", elastics.stretch_twist_factor, dim=N, device=dev, inputs=[
+            m.arrays, state_in.x, fdt, f])
+
+        if self.fused:
+            self._launch("solve", solve.gauss_seidel_sequential, dim=1, device=dev, inputs=[
+                self.iterations, wp.float64(self.tolerance), wp.float64(self.length_tolerance), m.arrays, rs_in,
+                contacts, self._frames, walls, wc, f, params, state_out.v, state_out.spin, self._solve_out])
+            res, sres, used = (float(x) for x in self._solve_out.numpy())
+            used = int(used)
+        else:
+            res, sres, used = self._sweeps(rs_in, state_out, contacts, walls, wc, params, P)
+
+        self._launch("elastics", elastics.integrate_positions, dim=V, device=dev,
+                     inputs=[state_in.x, state_out.v, fdt, state_out.x])
+        if self.position_sweeps and (n_contacts or P):
+            self._project_positions(rs_in, state_out, contacts, walls, wc, params, P)
+        self._launch("elastics", frames.advance_frames, dim=V, device=dev, inputs=[
+            m.arrays, state_in.x, state_out.x, state_in.director, state_in.theta, state_out.spin, fdt,
+            state_out.director, state_out.theta])
+        state_out.time = state_in.time + dt
+        state_out.step_index = state_in.step_index + 1
+
+        self._scalar.zero_()
+        self._launch("checks", broadphase.max_speed, dim=V, device=dev, inputs=[state_out.v, self._scalar])
+        if n_contacts:
+            self._launch("checks", narrowphase.contact_overlap, dim=n_contacts, device=dev, inputs=[
+                n_contacts, state_out.contact_seg, m.arrays.seg_vertex, m.arrays.vertex_rod, m.arrays.radius,
+                state_out.x, self.contacts.gap_check, self._scalar[2:3]])
+        sc = self._scalar.numpy()
+        vmax_out = float(sc[0])
+        if check:
+            if sc[1] != 0.0:
+                raise self._blowup(state_in, dt, theta, "non-finite velocity", control)
+            limit = self.speed_limit_for(control)
+            if vmax_out > limit:
+                raise self._blowup(state_in, dt, theta, f"speed {vmax_out:.3g} m/s above the limit {limit:.3g} m/s",
+                                   control)
+            depth = float(sc[2])
+            if depth > self.penetration_limit * m.min_diameter:
+                raise self._blowup(state_in, dt, theta, f"rods overlap by {depth / m.min_diameter:.2f} d", control)
+            if self.energy_check_every and state_out.step_index % self.energy_check_every == 0:
+                self._check_energy(state_in, state_out, dt, theta, control)
+        info = StepInfo(state_out.step_index, state_out.time, dt, used, n_contacts,
+                        float(res), float(sres), vmax_out, theta)
+        self.last_info = info
+        return info
+
+    def _project_positions(self, rs_in, state_out, contacts, walls, wc, params, P):
+        """Post-stabilisation: overlaps beyond the slop removed from the end-of-step positions
+        (velocities untouched), so the velocity solve carries no Baumgarte term."""
+        m = self.model
+        dev = m.device
+        f = self.factors
+        if self.fused:
+            self._launch("friction", overlap.project_positions_sequential, dim=1, device=dev, inputs=[
+                self.position_sweeps, m.arrays, rs_in.x, contacts, self._frames, f.tangent, walls, wc, params,
+                state_out.x, self._proj_out])
+            return
+        n_active = int(self._n_active.numpy()[0]) if P else 0
+        for _ in range(self.position_sweeps):
+            if contacts.count:
+                ids = self.contacts.color_ids
+                if self.coloring:
+                    for c0, c1 in self.contacts.color_ranges:
+                        self._launch("friction", overlap.project_rod_contacts, dim=c1 - c0, device=dev,
+                                     inputs=[ids[c0:c1], 1, m.arrays, contacts, self._frames, params, state_out.x])
+                else:
+                    self._launch("friction", overlap.project_rod_contacts, dim=contacts.count, device=dev,
+                                 inputs=[ids, 0, m.arrays, contacts, self._frames, params, state_out.x])
+            if n_active:
+                self._launch("friction", overlap.project_wall_contacts, dim=n_active, device=dev, inputs=[
+                    m.arrays, rs_in.x, f.tangent, walls, wc, params, state_out.x])
+
+    def _sweeps(self, rs_in, state_out, contacts, walls, wc, params, P):
+        """Gauss-Seidel sweeps as separate launches (coloured contacts; the GPU path)."""
+        m = self.model
+        dev = m.device
+        f = self.factors
+        n_active = int(self._n_active.numpy()[0]) if P else 0
+        n_contacts = contacts.count
+        ids = self.contacts.color_ids
+        used = 0
+        for it in range(self.iterations):
+            measure = it == self.iterations - 1 or (self.tolerance > 0 and it % 2 == 1)
+            if measure:
+                self._residual.zero_()
+                self._sresidual.zero_()
+            if n_contacts:
+                args = [m.arrays, contacts, self._frames, params, state_out.v, state_out.spin, self._residual]
+                if self.coloring:
+                    for c0, c1 in self.contacts.color_ranges:
+                        self._launch("friction", friction.solve_rod_contacts, dim=c1 - c0, device=dev,
+                                     inputs=[ids[c0:c1], 1, *args])
+                else:
+                    self._launch("friction", friction.solve_rod_contacts, dim=n_contacts, device=dev,
+                                 inputs=[ids, 0, *args])
+            if n_active:
+                self._launch("friction", friction.solve_wall_contacts, dim=n_active, device=dev, inputs=[
+                    m.arrays, rs_in.x, f.tangent, walls, params, wc, state_out.v, state_out.spin, self._residual])
+            self._launch("elastics", elastics.rod_projection, dim=m.n_rods, device=dev, inputs=[
+                m.arrays, rs_in, state_out.v, state_out.spin, f, params.dt, self._sresidual])
+            used = it + 1
+            if measure and self.tolerance > 0 and it < self.iterations - 1:
+                if (self._residual.numpy()[0] < self.tolerance
+                        and self._sresidual.numpy()[0] < self.length_tolerance):
+                    break
+        return float(self._residual.numpy()[0]), float(self._sresidual.numpy()[0]), used
+
+    def _check_energy(self, state_in: State, state_out: State, dt: float, theta: float, control) -> None:
+        """Energy-jump test: kinetic + elastic energy may not grow 4x between checks beyond
+        what the scene can supply (all mass at the characteristic speed)."""
+        e = self.energy(state_out)
+        mech = e["kinetic"] + e["bending"] + e["stretching"] + e["twist"]
+        floor = 0.5 * self.model.total_mass() * self.characteristic_speed(control) ** 2
+        prev = self._last_mech
+        self._last_mech = mech
+        if not math.isfinite(mech):
+            raise self._blowup(state_in, dt, theta, "non-finite energy", control)
+        if prev is not None and mech > 4.0 * prev + floor:
+            raise self._blowup(state_in, dt, theta,
+                               f"energy jump from {prev:.3g} J to {mech:.3g} J within {self.energy_check_every} steps",
+                               control)
+
+    @property
+    def speed_limit(self) -> float:
+        return self.speed_limit_for(None)
+
+    def speed_limit_for(self, control) -> float:
+        if self._speed_limit is not None:
+            return self._speed_limit
+        return 20.0 * (self.characteristic_speed(control) + (self._v_elastic or 0.0))
+
+    def _blowup(self, state_in: State, dt: float, theta: float, what: str, control=None) -> SimulationBlowUp:
+        step = state_in.step_index + 1
+        t = state_in.time + dt
+        eb = self.explicit_bending_dt()
+        if theta == 0.0 and dt > eb:
+            cause = f"explicit bending at dt = {dt:.3g} s above its bound {eb:.3g} s; use bending='implicit' or a smaller step"
+        elif "overlap" in what:
+            cause = (f"contacts under-resolved (tunnelling or too few iterations: {self.iterations}); "
+                     f"lower dt (now {dt:.3g} s, contact bound {self.contact_dt(control):.3g} s) or raise iterations")
+        else:
+            cause = (f"step {dt:.3g} s too large for this scene (step bound {self.step_bound(control=control):.3g} s) "
+                     f"or too few iterations")
+        return SimulationBlowUp(f"simulation blew up at step {step} (t = {t:.6g} s): {what}; likely cause: {cause}",
+                                step=step, time=t, cause=cause)
+
+    # ------------------------------------------------------------------ diagnostics
+    def energy(self, state: State) -> dict:
+        """Kinetic (translation and spin), potential (gravity), bending, stretching and twist
+        energy (J) of ``state``."""
+        m = self.model
+        rs = state.rod_state()
+        self._launch("checks", frames.step_frames, dim=m.n_rods, device=m.device, inputs=[m.arrays, rs, self.factors])
+        self._energy_out.zero_()
+        self._launch("checks", elastics.elastic_energy, dim=m.n_rods, device=m.device, inputs=[
+            m.arrays, rs, self.factors.btarget, self.factors.ref_twist, wp.vec3d(*m.gravity), self._energy_out])
+        k, p, b, s, tw = (float(x) for x in self._energy_out.numpy())
+        return {"kinetic": k, "potential": p, "bending": b, "stretching": s, "twist": tw,
+                "total": k + p + b + s + tw}
+
+
+def run(solver: RodSolver, state: State, duration: float, dt: float, *, control=None, callback=None,
+        every: int = 1) -> State:
+    """Step ``state`` forward by ``duration`` seconds with step ``dt``; returns the final state.
+
+    Two states are ping-ponged; ``callback(state, info)`` is called every ``every`` steps
+    with the state just written. The input ``state`` object is updated in place at the end.
+    """
+    n = int(round(duration / dt))
+    a = state
+    b = State(solver.model, a.contact_capacity)
+    b.copy_from(a)
+    for k in range(n):
+        info = solver.step(a, b, control, dt)
+        a, b = b, a
+        if callback is not None and (k + 1) % every == 0:
+            callback(a, info)
+    if a is not state:
+        state.copy_from(a)
+    return state

@@ -1,0 +1,90 @@
+"""The package's layers import downwards only (README, "Layout").
+
+    bottom  rodwarp.errors, rodwarp._util, rodwarp._warp, rodwarp.validation, rodwarp.kernels
+    io      rodwarp.rodset (rod sets, formats, files, trajectories, run folders)
+    peers   rodwarp.sim, rodwarp.analysis, rodwarp.ct, rodwarp.testing
+    top     rodwarp.experiments
+    face    rodwarp.cli
+
+Every import statement in ``rodwarp/`` and ``kernels/`` is read (module level and inside
+functions alike, since a deferred import is still a dependency); a module may import its own
+subpackage and any lower layer, never a higher one nor a peer subpackage (the bottom layer's
+few modules may use each other: errors under the rest).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+LAYERS = {
+    "rodwarp.errors": 0, "rodwarp._util": 0, "rodwarp._warp": 0, "rodwarp.validation": 0, "rodwarp.kernels": 0,
+    "rodwarp.rodset": 1,
+    "rodwarp.sim": 2, "rodwarp.analysis": 2, "rodwarp.ct": 2, "rodwarp.testing": 2,
+    "rodwarp.experiments": 3,
+    "rodwarp.cli": 4,
+}
+
+
+def _unit(module: str) -> str | None:
+    """The layer unit (a key of LAYERS) a dotted module name belongs to."""
+    for key in sorted(LAYERS, key=len, reverse=True):
+        if module == key or module.startswith(key + "."):
+            return key
+    return None
+
+
+def _modules():
+    for path in sorted((ROOT / "rodwarp").rglob("*.py")):
+        rel = path.relative_to(ROOT).with_suffix("")
+        yield ".".join(p for p in rel.parts if p != "__init__"), path
+    for path in sorted((ROOT / "kernels").glob("*.py")):
+        yield "rodwarp.kernels" + ("" if path.stem == "__init__" else "." + path.stem), path
+
+
+def _imports(path: Path, package: str):
+    """(line, imported dotted module) for every import in the file."""
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield node.lineno, alias.name
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:  # relative: resolve against the importing package
+                parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(parts + ([base] if base else []))
+            for alias in node.names:
+                # `from rodwarp import _warp` imports a module; `from rodwarp.sim import Model` a name
+                yield node.lineno, f"{base}.{alias.name}" if _unit(f"{base}.{alias.name}") else base
+
+
+def upward_imports() -> list[str]:
+    """Every import that goes up a layer or across to a peer subpackage, as 'file:line: a -> b'."""
+    bad = []
+    for module, path in _modules():
+        mine = _unit(module)
+        if mine is None:  # the package's own face (rodwarp/__init__.py re-exports every layer)
+            continue
+        package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        for line, target in _imports(path, package):
+            theirs = _unit(target)
+            if theirs is None and target.startswith("rodwarp."):
+                bad.append(f"{path.relative_to(ROOT)}:{line}: {module} -> {target} (a module of no layer: add it "
+                           f"to LAYERS)")
+                continue
+            if theirs is None or theirs == mine:
+                continue  # not rodwarp (or the version from the package face), or its own unit
+            # the bottom layer's modules build on each other; above it, peers stay apart
+            if LAYERS[theirs] > LAYERS[mine] or (LAYERS[theirs] == LAYERS[mine] > 0):
+                bad.append(f"{path.relative_to(ROOT)}:{line}: {module} -> {target}")
+    return bad
+
+
+def test_no_module_imports_from_a_layer_above_it_or_a_peer():
+    assert upward_imports() == []
+
+
+if __name__ == "__main__":  # pragma: no cover - `python tests/test_layers.py` lists the offenders
+    print("\n".join(upward_imports()) or "no upward imports")
