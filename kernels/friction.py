@@ -186,40 +186,35 @@ def side_velocity(c: ContactSide, v: wp.array(dtype=wp.vec3d), spin: wp.array(dt
 
 
 @wp.func
-def side_apply(c: ContactSide, P: wp.vec3d, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
-    """Apply impulse P at the side's point (a rigid-body velocity change for rigid rods)."""
-    i = c.i
+def side_response(c: ContactSide, P: wp.vec3d):
+    """Velocity changes of the side's two vertices and of its edge's spin for impulse P at its
+    point (a rigid-body velocity change for rigid rods)."""
     if c.rigid != 0:
         dvc = P * c.im
         dw = c.iinv * wp.cross(c.lever, P)
         ws = wp.dot(dw, c.t)
         wperp = dw - c.t * ws
-        v[i] = v[i] + dvc + wp.cross(wperp, c.arm0)
-        v[i + 1] = v[i + 1] + dvc + wp.cross(wperp, c.arm1)
-        spin[i] = spin[i] + ws
-    else:
-        v[i] = v[i] + P * c.q0
-        v[i + 1] = v[i + 1] + P * c.q1
-        spin[i] = spin[i] + wp.dot(P, c.g) * c.ispin
+        return dvc + wp.cross(wperp, c.arm0), dvc + wp.cross(wperp, c.arm1), ws
+    return P * c.q0, P * c.q1, wp.dot(P, c.g) * c.ispin
+
+
+@wp.func
+def side_apply(c: ContactSide, P: wp.vec3d, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
+    """Apply impulse P at the side's point."""
+    dv0, dv1, ds = side_response(c, P)
+    v[c.i] = v[c.i] + dv0
+    v[c.i + 1] = v[c.i + 1] + dv1
+    spin[c.i] = spin[c.i] + ds
     return 0
 
 
 @wp.func
 def side_apply_atomic(c: ContactSide, P: wp.vec3d, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
     """``side_apply`` with atomic adds, for launches whose threads may share a rod."""
-    i = c.i
-    if c.rigid != 0:
-        dvc = P * c.im
-        dw = c.iinv * wp.cross(c.lever, P)
-        ws = wp.dot(dw, c.t)
-        wperp = dw - c.t * ws
-        wp.atomic_add(v, i, dvc + wp.cross(wperp, c.arm0))
-        wp.atomic_add(v, i + 1, dvc + wp.cross(wperp, c.arm1))
-        wp.atomic_add(spin, i, ws)
-    else:
-        wp.atomic_add(v, i, P * c.q0)
-        wp.atomic_add(v, i + 1, P * c.q1)
-        wp.atomic_add(spin, i, wp.dot(P, c.g) * c.ispin)
+    dv0, dv1, ds = side_response(c, P)
+    wp.atomic_add(v, c.i, dv0)
+    wp.atomic_add(v, c.i + 1, dv1)
+    wp.atomic_add(spin, c.i, ds)
     return 0
 
 

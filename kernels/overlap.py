@@ -13,7 +13,7 @@ thread per rod.
 
 import warp as wp
 
-from rodwarp.kernels.friction import contact_side, vertex_edge
+from rodwarp.kernels.friction import contact_side, side_response, vertex_edge
 from rodwarp.kernels.structs import ContactFrame, ContactSide, RodContacts, RodModel, StepParams, WallContacts, Walls
 
 wp.set_module_options({"enable_backward": False})
@@ -32,16 +32,9 @@ def side_point(c: ContactSide, x: wp.array(dtype=wp.vec3d)):
 def side_shift(c: ContactSide, D: wp.vec3d, x: wp.array(dtype=wp.vec3d)):
     """Move the side's rod by the 'position impulse' D through its mobility (a rigid rod as a
     small rigid motion, an elastic one at the edge's two vertices); velocities are untouched."""
-    i = c.i
-    if c.rigid != 0:
-        dxc = D * c.im
-        dw = c.iinv * wp.cross(c.lever, D)
-        wperp = dw - c.t * wp.dot(dw, c.t)
-        x[i] = x[i] + dxc + wp.cross(wperp, c.arm0)
-        x[i + 1] = x[i + 1] + dxc + wp.cross(wperp, c.arm1)
-    else:
-        x[i] = x[i] + D * c.q0
-        x[i + 1] = x[i + 1] + D * c.q1
+    dx0, dx1, _turn = side_response(c, D)  # the spin's share turns a round rod onto itself: no shift
+    x[c.i] = x[c.i] + dx0
+    x[c.i + 1] = x[c.i + 1] + dx1
     return 0
 
 
