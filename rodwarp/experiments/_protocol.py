@@ -78,7 +78,7 @@ class ProtocolParams:
                                  "it")
     rod_model: str = _param("auto", f"auto (rigid when the rods' self-weight sag is below {RIGID_SAG:g} d), rigid "
                                     "or elastic.")
-    step_safety: float = _param(1.0, "Adaptive step: the fastest rod crosses at most this many diameters per step "
+    step_safety: float = _param(0.5, "Adaptive step: the fastest rod crosses at most this many diameters per step "
                                      "(ignored with --dt).")
     rolling: bool = _param(True, "Rods spin about their axes; --no-rolling locks the spin (friction on the "
                                  "centreline only).")
