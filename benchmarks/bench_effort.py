@@ -16,10 +16,6 @@ seed-to-seed spread at a setting is the noise an outcome difference must exceed.
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -58,18 +54,10 @@ def _settings(quick: bool):
 
 def _run(p: dict) -> dict:
     out = RUNS / f"it{p['iterations']}_safety{p['step_safety']:g}_seed{p['seed']}"
-    if not (out / "summary.json").exists():
-        cmd = [sys.executable, "-m", "rodwarp.cli", "simulate", "--iterations", str(p["iterations"]),
-               "--step-safety", f"{p['step_safety']:g}", "--seed", str(p["seed"]), "--device", "cpu", "--quiet",
-               "--out", str(out)]
-        cmd.append("--resume" if (out / "checkpoints").exists() else "--overwrite")
-        t = time.time()
-        r = subprocess.run(cmd, capture_output=True, text=True)
-        common.log(f"effort: {out.name}: {'ok' if r.returncode == 0 else r.stderr.strip()[-300:]} "
-                   f"({time.time() - t:.0f} s)")
-        if r.returncode != 0:
-            return {**p, "failure": (r.stderr.strip().splitlines() or ["failed"])[-1]}
-    s = json.loads((out / "summary.json").read_text())
+    s, failure = common.simulate_once(out, ["--iterations", str(p["iterations"]), "--step-safety",
+                                            f"{p['step_safety']:g}", "--seed", str(p["seed"])], "effort")
+    if failure:
+        return {**p, "failure": failure}
     return {**p, "Z": s["contacts_per_rod"], "f": s["largest_cluster_fraction"], "h": s["height_kept"],
             "tau": s["persistence"], "stable": s["stable"], "wall_s": s["wall_time_s"], "steps": s["steps"],
             "max_penetration_over_d": s["max_penetration_over_d"], "failure": None}

@@ -15,11 +15,7 @@ rigid model saves. Runs go to ``runs/rigid`` (reused when the command is repeate
 
 from __future__ import annotations
 
-import json
 import math
-import subprocess
-import sys
-import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -51,21 +47,12 @@ def _freq(g: float) -> float:
 
 def _run_point(p: dict) -> dict:
     out = RUNS / f"alpha{p['alpha']:g}_g{p['gravity']:g}_{p['rod_model']}_seed{p['seed']}"
-    if not (out / "summary.json").exists():
-        cmd = [sys.executable, "-m", "rodwarp.cli", "simulate", "--alpha", f"{p['alpha']:g}",
-               "--freq", f"{_freq(p['gravity']):.6f}", "--gravity", f"{p['gravity']:g}",
-               "--entangle-duration", f"{DURATIONS[0]:g}", "--duration", f"{DURATIONS[1]:g}",
-               "--rod-model", p["rod_model"], "--seed", str(p["seed"]), "--device", "cpu", "--quiet",
-               "--out", str(out)]
-        if out.exists():  # a run cut short: resume from its checkpoint, or start it again
-            cmd.append("--resume" if (out / "checkpoints").exists() else "--overwrite")
-        t = time.time()
-        r = subprocess.run(cmd, capture_output=True, text=True)
-        common.log(f"rigid: {out.name}: {'ok' if r.returncode == 0 else r.stderr.strip()[-200:]} "
-                   f"({time.time() - t:.0f} s)")
-        if r.returncode != 0:
-            return {**p, "failure": r.stderr.strip().splitlines()[-1] if r.stderr.strip() else "failed"}
-    s = json.loads((out / "summary.json").read_text())
+    s, failure = common.simulate_once(out, [
+        "--alpha", f"{p['alpha']:g}", "--freq", f"{_freq(p['gravity']):.6f}", "--gravity", f"{p['gravity']:g}",
+        "--entangle-duration", f"{DURATIONS[0]:g}", "--duration", f"{DURATIONS[1]:g}",
+        "--rod-model", p["rod_model"], "--seed", str(p["seed"])], "rigid")
+    if failure:
+        return {**p, "failure": failure}
     return {**p, "n_rods": s["n_rods"], "Z": s["contacts_per_rod"], "f": s["largest_cluster_fraction"],
             "h": s["height_kept"], "tau": s["persistence"], "stable": s["stable"], "wall_s": s["wall_time_s"],
             "steps": s["steps"], "sag_over_d": s["rod_model_rule"]["sag_over_d"], "failure": None}
@@ -97,7 +84,8 @@ def run(quick: bool, device: str) -> dict:
                 case[f"noise_{k}"] = abs(rig[0][k] - rig[1][k]) if len(rig) > 1 else None
             cases.append(case)
     return {"title": "Rigid against elastic rods: protocol outcome and cost against the self-weight sag",
-            "rows": rows, "cases": cases, "grid_estimate": grid_estimate(rows, RIGID_SAG), "rigid_sag_threshold": RIGID_SAG, "durations_s": list(DURATIONS),
+            "rows": rows, "cases": cases, "grid_estimate": grid_estimate(rows, RIGID_SAG),
+            "rigid_sag_threshold": RIGID_SAG, "durations_s": list(DURATIONS),
             "amplitude": AMPLITUDE, "paper_durations_s": [5.0, 5.0],
             "problems": [f"{r['alpha']:g}/{r['gravity']:g}/{r['rod_model']}: {r['failure']}" for r in rows
                          if r["failure"]]}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import json
 import math
 import os
 import platform
@@ -353,3 +354,22 @@ def inverse_spread(s: dict, k: float = 1.0) -> dict:
 
 def python_command() -> str:
     return "python -m benchmarks " + " ".join(sys.argv[1:])
+
+
+def simulate_once(out: Path, args: list[str], tag: str) -> tuple[dict | None, str | None]:
+    """``rodwarp simulate ARGS --out OUT`` in a fresh process unless OUT already holds a finished
+    run (its summary is reused); a run cut short resumes from its checkpoint, or starts again.
+    Returns (summary.json, None) or (None, the error's last line)."""
+    out = Path(out)
+    if not (out / "summary.json").exists():
+        cmd = [sys.executable, "-m", "rodwarp.cli", "simulate", *args, "--device", "cpu", "--quiet", "--out", str(out)]
+        if out.exists():
+            cmd.append("--resume" if (out / "checkpoints").exists() else "--overwrite")
+        t = time.time()
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        err = r.stderr.strip()
+        log(f"{tag}: {out.name}: {'ok' if r.returncode == 0 else err[-300:]} ({time.time() - t:.0f} s)")
+        if r.returncode != 0:
+            return None, (err.splitlines() or ["failed"])[-1]
+    return json.loads((out / "summary.json").read_text()), None
+
