@@ -48,6 +48,7 @@ def find_candidate_pairs(
     seg_vertex: wp.array(dtype=wp.int32),
     vertex_rod: wp.array(dtype=wp.int32),
     rod_radius: wp.array(dtype=wp.float64),
+    arc: wp.array(dtype=wp.float64),
     x: wp.array(dtype=wp.vec3d),
     query_radius: float,
     margin: wp.float64,
@@ -58,7 +59,12 @@ def find_candidate_pairs(
     """Broadphase (Verlet list): every pair sa < sb whose capsule gap is below ``margin``
     (contact margin + skin), found through the hash grid (midpoints within
     ``query_radius`` = h_max + 2 r_max + margin). The list stays valid until some vertex has
-    moved by half the skin."""
+    moved by half the skin.
+
+    Two segments of one rod less than a diameter of arc length apart never form a contact:
+    they could touch only if the rod bent to a radius below its own, and with edges shorter
+    than a diameter they overlap in the rod's rest shape (the pair would push the rod apart
+    along its own axis)."""
     sa = wp.tid()
     ia = seg_vertex[sa]
     ra = vertex_rod[ia]
@@ -75,8 +81,10 @@ def find_candidate_pairs(
             continue
         ib = seg_vertex[sb]
         rb = vertex_rod[ib]
-        if rb == ra and (ib == ia + 1 or ia == ib + 1):
-            continue
+        if rb == ra:
+            # sb > sa, so ib > ia: the arc length strictly between the two segments
+            if arc[ib] - arc[ia + 1] < rod_radius[ra] + rod_radius[rb]:
+                continue
         # the distance between the two infinite lines bounds the segments' from below: a cheap
         # reject of most pairs of long (rigid) rods, which the midpoint test alone keeps
         da = x[ia + 1] - x[ia]

@@ -275,8 +275,8 @@ def solve_rod_contact(
     spin: wp.array(dtype=wp.float64),
 ):
     """Exact local solve of rod-rod contact k (its frame, accumulated impulse and normal);
-    returns the velocity change it caused (m/s). Takes the arrays it reads rather than the
-    model and contact bundles: the innermost call of every sweep, so nothing else is copied."""
+    returns the velocity change it caused (m/s). Takes the arrays it reads rather than the model and contact bundles:
+    the innermost call of every sweep, so nothing else is copied."""
     f = frames[k]
     u = side_velocity(f.a, v, spin) - side_velocity(f.b, v, spin)
     P = impulse[k]
@@ -351,6 +351,20 @@ def wall_velocity(walls: Walls, p: int):
     return wp.vec3d(F0, F0, F0)
 
 
+@wp.func
+def wall_frame(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d), walls: Walls,
+               params: StepParams, contacts: WallContacts, k: int):
+    """The local frame of wall contact k (vertex x wall), side ``a`` the rod's."""
+    i = k // walls.n
+    p = k - i * walls.n
+    e, se = vertex_edge(model, i)
+    n = walls.normal[p]
+    c = contact_side(model, x, tangent, e, se, n * (-model.radius[model.vertex_rod[i]]))
+    f = local_frame(c.W, n, approach_target(contacts.gap[k], params))
+    f.a = c
+    return f
+
+
 @wp.kernel
 def prepare_wall_contacts(
     model: RodModel,
@@ -363,7 +377,8 @@ def prepare_wall_contacts(
     spin: wp.array(dtype=wp.float64),
 ):
     """One thread per rod: gaps of its vertex spheres to every wall at the start of the step,
-    warm-started impulses (applied), and the rod joins ``active`` when any is within reach.
+    warm-started impulses (applied); a rod with any contact within reach joins ``active``
+    with a span of frames (written when they fit; the host grows the list otherwise).
 
     A capsule touches a plane first at a segment endpoint, so vertex spheres suffice.
     Contacts out of reach get gap = +inf and zero impulse.
@@ -372,7 +387,7 @@ def prepare_wall_contacts(
     a = model.rod_start[r]
     b = model.rod_start[r + 1]
     rr = model.radius[r]
-    any_active = int(0)
+    count = int(0)
     for i in range(a, b):
         e, se = vertex_edge(model, i)
         for p in range(walls.n):
@@ -387,57 +402,77 @@ def prepare_wall_contacts(
                 P = n * pn + (P - n * wp.dot(P, n))
                 contacts.impulse[k] = P
                 side_apply(contact_side(model, x, tangent, e, se, n * (-rr)), P, v, spin)
-                any_active = 1
+                count += 1
             else:
                 contacts.gap[k] = FAR
                 contacts.impulse[k] = wp.vec3d(F0, F0, F0)
-    if any_active != 0:
-        contacts.active[wp.atomic_add(contacts.n_active, 0, 1)] = r
+    if count == 0:
+        return
+    base = wp.atomic_add(contacts.n_frames, 0, count)
+    q = wp.atomic_add(contacts.n_active, 0, 1)
+    contacts.active[q] = r
+    contacts.span[q] = wp.vec2i(base, count)
+    if base + count > contacts.frames.shape[0]:
+        return
+    j = base
+    for k in range(a * walls.n, b * walls.n):
+        if contacts.gap[k] < FAR:
+            contacts.key[j] = k
+            contacts.frames[j] = wall_frame(model, x, tangent, walls, params, contacts, k)
+            j += 1
 
 
-@wp.func
-def solve_rod_walls(
-    r: int,
+@wp.kernel
+def fill_wall_frames(
     model: RodModel,
     x: wp.array(dtype=wp.vec3d),
     tangent: wp.array(dtype=wp.vec3d),
     walls: Walls,
     params: StepParams,
     contacts: WallContacts,
+):
+    """One thread per active rod: its span of frames (after the host grew the list)."""
+    q = wp.tid()
+    r = contacts.active[q]
+    j = contacts.span[q][0]
+    for k in range(model.rod_start[r] * walls.n, model.rod_start[r + 1] * walls.n):
+        if contacts.gap[k] < FAR:
+            contacts.key[j] = k
+            contacts.frames[j] = wall_frame(model, x, tangent, walls, params, contacts, k)
+            j += 1
+
+
+@wp.func
+def solve_rod_walls(
+    q: int,
+    walls: Walls,
+    params: StepParams,
+    contacts: WallContacts,
     v: wp.array(dtype=wp.vec3d),
     spin: wp.array(dtype=wp.float64),
 ):
-    """Every wall contact of rod r in turn (same exact local solve as rod-rod contacts);
-    returns the largest velocity change caused (m/s)."""
-    a = model.rod_start[r]
-    b = model.rod_start[r + 1]
-    rr = model.radius[r]
+    """Every wall contact of active rod q in turn (same exact local solve as rod-rod
+    contacts, frames prepared once per step); returns the largest velocity change caused (m/s)."""
     worst = F0
-    for i in range(a, b):
-        e, se = vertex_edge(model, i)
-        for p in range(walls.n):
-            k = i * walls.n + p
-            gap = contacts.gap[k]
-            if gap > FAR:
-                continue
-            n = walls.normal[p]
-            c = contact_side(model, x, tangent, e, se, n * (-rr))
-            u = side_velocity(c, v, spin) - wall_velocity(walls, p)
-            P = contacts.impulse[k]
-            P_new = relaxed(solve_local(u, local_frame(c.W, n, approach_target(gap, params)), n, P, walls.mu[p]), P, n,
-                            walls.mu[p], params.relax)
-            dP = P_new - P
-            side_apply(c, dP, v, spin)
-            contacts.impulse[k] = P_new
-            worst = wp.max(worst, wp.length(c.W * dP))
+    sp = contacts.span[q]
+    for j in range(sp[0], sp[0] + sp[1]):
+        k = contacts.key[j]
+        p = k % walls.n
+        f = contacts.frames[j]
+        n = walls.normal[p]
+        mu = walls.mu[p]
+        u = side_velocity(f.a, v, spin) - wall_velocity(walls, p)
+        P = contacts.impulse[k]
+        P_new = relaxed(solve_local(u, f, n, P, mu), P, n, mu, params.relax)
+        dP = P_new - P
+        side_apply(f.a, dP, v, spin)
+        contacts.impulse[k] = P_new
+        worst = wp.max(worst, wp.length(f.W * dP))
     return worst
 
 
 @wp.kernel
 def solve_wall_contacts(
-    model: RodModel,
-    x: wp.array(dtype=wp.vec3d),
-    tangent: wp.array(dtype=wp.vec3d),
     walls: Walls,
     params: StepParams,
     contacts: WallContacts,
@@ -446,8 +481,7 @@ def solve_wall_contacts(
     residual: wp.array(dtype=wp.float64),
 ):
     """One thread per rod that touches a wall (``active`` lists them)."""
-    r = contacts.active[wp.tid()]
-    wp.atomic_max(residual, 0, solve_rod_walls(r, model, x, tangent, walls, params, contacts, v, spin))
+    wp.atomic_max(residual, 0, solve_rod_walls(wp.tid(), walls, params, contacts, v, spin))
 
 
 # ----------------------------------------------------------------------------- colouring
@@ -532,3 +566,51 @@ def warm_start_rod_contacts(
             pt = old - n * wp.dot(old, n)
             p = (n * pn + pt) * warm
     impulse[k] = p
+
+
+# ----------------------------------------------------------------------------- diagnostics
+
+
+@wp.kernel
+def rod_contact_residual(
+    count: int,
+    frames: wp.array(dtype=ContactFrame),
+    impulse: wp.array(dtype=wp.vec3d),
+    normal: wp.array(dtype=wp.vec3d),
+    params: StepParams,
+    v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
+    residual: wp.array(dtype=wp.float64),
+):
+    """Per rod-rod contact, read only: the velocity change (m/s) its exact local solve would
+    make against the current velocities (the Gauss-Seidel residual of every contact, solved
+    or skipped)."""
+    k = wp.tid()
+    if k >= count:
+        return
+    f = frames[k]
+    u = side_velocity(f.a, v, spin) - side_velocity(f.b, v, spin)
+    P = impulse[k]
+    dP = solve_local(u, f, normal[k], P, params.mu) - P
+    wp.atomic_max(residual, 0, wp.length(f.W * dP))
+
+
+@wp.kernel
+def wall_contact_residual(
+    walls: Walls,
+    contacts: WallContacts,
+    v: wp.array(dtype=wp.vec3d),
+    spin: wp.array(dtype=wp.float64),
+    residual: wp.array(dtype=wp.float64),
+):
+    """``rod_contact_residual`` for the wall contacts (one thread per frame)."""
+    j = wp.tid()
+    if j >= contacts.n_frames[0]:
+        return
+    k = contacts.key[j]
+    p = k % walls.n
+    f = contacts.frames[j]
+    u = side_velocity(f.a, v, spin) - wall_velocity(walls, p)
+    P = contacts.impulse[k]
+    dP = solve_local(u, f, walls.normal[p], P, walls.mu[p]) - P
+    wp.atomic_max(residual, 0, wp.length(f.W * dP))

@@ -46,8 +46,7 @@ def gauss_seidel_sequential(
         for k in range(contacts.count):
             cres = wp.max(cres, solve_rod_contact(k, frames, contacts.impulse, contacts.normal, params, v, spin))
         for q in range(na):
-            cres = wp.max(cres, solve_rod_walls(wall_contacts.active[q], model, state.x, factors.tangent, walls,
-                                                params, wall_contacts, v, spin))
+            cres = wp.max(cres, solve_rod_walls(q, walls, params, wall_contacts, v, spin))
         for r in range(model.n_rods):
             sres = wp.max(sres, project_rod(r, model, state, v, spin, factors, params.dt))
         used = it + 1

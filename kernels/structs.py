@@ -34,6 +34,7 @@ class RodModel:
     inv_mass: wp.array(dtype=wp.float64)  # diagonal of M^-1 (1/kg); 0 for pinned vertices
     cross_inv_mass: wp.array(dtype=wp.float64)  # M^-1[i, i+1] at edge i (1/kg)
     rest_length: wp.array(dtype=wp.float64)  # edge (m)
+    arc: wp.array(dtype=wp.float64)  # vertex: rest arc length from its rod's first vertex (m)
     compliance: wp.array(dtype=wp.float64)  # edge stretch compliance h / (E A) (m/N)
     bend_stiffness: wp.array(dtype=wp.float64)  # rod E I (N m^2)
     radius: wp.array(dtype=wp.float64)  # rod (m)
@@ -123,6 +124,10 @@ class WallContacts:
     impulse: wp.array(dtype=wp.vec3d)  # vertex x wall (N s)
     active: wp.array(dtype=wp.int32)  # rods with a vertex within reach of a wall
     n_active: wp.array(dtype=wp.int32)
+    span: wp.array(dtype=wp.vec2i)  # per active rod: its first frame and number of frames
+    key: wp.array(dtype=wp.int32)  # per frame: its vertex x wall index
+    frames: wp.array(dtype=ContactFrame)  # per in-reach contact, side ``a`` only (the wall has none)
+    n_frames: wp.array(dtype=wp.int32)  # frames needed this step (may exceed the capacity)
 
 
 @wp.struct

@@ -225,3 +225,53 @@ def test_implicit_bending_is_stable_where_explicit_fails():
     state = run(solver, state, 500 * dt, dt)
     assert np.all(np.isfinite(state.positions()))
     assert solver.energy(state)["total"] <= e0  # implicit Euler only removes energy
+
+
+def test_a_finely_divided_rod_does_not_collide_with_itself_along_its_axis():
+    """Edges of 0.85 d: segments two apart overlap in the rest shape. They are not a contact
+    (they could touch only if the rod bent to a radius below its own); a free straight rod
+    stays exactly at rest instead of pushing itself apart."""
+    r = 0.01
+    rods = RodSet.from_polylines([straight_rod((0, 0, 0), (1, 0, 0), 0.5, r, n_vertices=31)], r)
+    assert np.diff(rods.points[:, 0]).max() < 0.9 * 2 * r
+    model = Model(rods, STEEL, gravity=(0, 0, 0))
+    solver = RodSolver(model)
+    state = model.state()
+    infos = []
+    run(solver, state, 0.05, 1e-3, callback=lambda s, i: infos.append(i))
+    assert max(i.n_contacts for i in infos) == 0
+    assert np.abs(state.positions() - rods.points).max() < 1e-12
+
+
+def test_a_folded_rod_still_collides_with_itself():
+    """A hairpin whose legs (0.5 d apart, an arc of 2.4 d between them) are thrown at each
+    other at 1 m/s relative speed: self-contact stops them, they never pass through. A soft
+    rod whose rest shape is straight: it unfolds far slower than the legs meet."""
+    r = 0.01
+    leg = np.linspace(0.3, 0.0, 16)
+    turn = np.linspace(-np.pi / 2, np.pi / 2, 9)[1:-1]
+    R = 0.015
+    pts = np.concatenate([
+        np.stack([leg, np.zeros_like(leg), np.zeros_like(leg)], 1),
+        np.stack([-R * np.cos(turn), R + R * np.sin(turn), np.zeros_like(turn)], 1),
+        np.stack([leg[::-1], np.full_like(leg, 2 * R), np.zeros_like(leg)], 1)])
+    v = np.zeros_like(pts)
+    v[:16, 1] = 0.5
+    v[-16:, 1] = -0.5
+    rods = RodSet.from_polylines([pts], r)
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+    straight = np.stack([arc, np.zeros_like(arc), np.zeros_like(arc)], 1)
+    rods = RodSet(rods.points, rods.offsets, rods.radii, velocities=v, rest_points=straight)
+    soft = Material(young=1e5, density=1000.0, poisson=0.45)
+    model = Model(rods, soft, gravity=(0, 0, 0))
+    solver = RodSolver(model)
+    state = model.state()
+    gaps = []
+
+    def record(s, info):
+        p = s.positions()
+        gaps.append(np.min(p[-16:-8, 1]) - np.max(p[:8, 1]) - 2 * r)  # the legs' straight tips
+
+    run(solver, state, 0.03, 2e-4, callback=record)
+    assert min(gaps) > -0.05 * 2 * r  # without self-contact the tips would cross by 0.02 m
+    assert gaps[-1] > min(gaps)  # and they come apart again

@@ -150,8 +150,8 @@ class ContactPipeline:
         while True:
             self._count.zero_()
             self._launch("broadphase", broadphase.find_candidate_pairs, dim=S, device=dev, inputs=[
-                self._grid.id, self._mid, m.arrays.seg_vertex, m.arrays.vertex_rod, m.arrays.radius, state.x,
-                float(query), wp.float64(margin), self.pairs_cap, self._count, self.pairs])
+                self._grid.id, self._mid, m.arrays.seg_vertex, m.arrays.vertex_rod, m.arrays.radius, m.arrays.arc,
+                state.x, float(query), wp.float64(margin), self.pairs_cap, self._count, self.pairs])
             n = int(self._count.numpy()[0])
             if n <= self.pairs_cap:
                 break

@@ -356,6 +356,8 @@ class Model:
         st.inv_mass = f64(inv_mass)
         st.cross_inv_mass = f64(cross_inv)
         st.rest_length = f64(rest_length)
+        cum = np.concatenate([[0.0], np.cumsum(rest_length)])[:-1]
+        st.arc = f64(cum - cum[offsets[:-1]][vertex_rod] if V else cum)
         st.compliance = f64(compliance)
         st.bend_stiffness = f64(self.bend_stiffness_np)
         st.radius = f64(self.radius_np)

@@ -200,7 +200,12 @@ class RodSolver(StepBounds):
         self._wall_gap = wp.zeros(V * max(len(model.planes), 1), dtype=wp.float64, device=d)
         self._active = wp.zeros(max(model.n_rods, 1), dtype=wp.int32, device=d)
         self._n_active = wp.zeros(1, dtype=wp.int32, device=d)
+        self._wall_span = wp.zeros(max(model.n_rods, 1), dtype=wp.vec2i, device=d)
+        self._n_wall_frames = wp.zeros(1, dtype=wp.int32, device=d)
+        self._wall_key = wp.zeros(max(16, 2 * model.n_rods), dtype=wp.int32, device=d)
+        self._wall_frames = wp.empty(max(16, 2 * model.n_rods), dtype=ContactFrame, device=d)
         self._solve_out = wp.zeros(3, dtype=wp.float64, device=d)
+        self._last_solve = None
         self._proj_out = wp.zeros(1, dtype=wp.float64, device=d)
         self.position_sweeps = int(position_sweeps)
         self._frames = wp.empty(max(16, 4 * model.n_segments), dtype=ContactFrame, device=d)
@@ -373,14 +378,22 @@ class RodSolver(StepBounds):
                 self.contacts.color(state_out, n_contacts)
 
         walls = self._walls(control, state_in.time, dt)
-        wc = WallContacts()
-        wc.gap, wc.impulse, wc.active, wc.n_active = self._wall_gap, state_out.wall_impulse, self._active, \
-            self._n_active
+        self._last_solve = (contacts, params, walls)
+        wc = self._wall_contacts(state_out)
         self._n_active.zero_()
+        self._n_wall_frames.zero_()
         if P:
             state_out.wall_impulse.assign(state_in.wall_impulse)
             self._launch("friction", friction.prepare_wall_contacts, dim=N, device=dev, inputs=[
                 m.arrays, state_in.x, f.tangent, walls, params, wc, state_out.v, state_out.spin])
+            needed = int(self._n_wall_frames.numpy()[0])
+            if needed > self._wall_frames.shape[0]:
+                # more wall contacts than ever before: grow the frame list and fill it
+                self._wall_key = wp.zeros(2 * needed, dtype=wp.int32, device=dev)
+                self._wall_frames = wp.empty(2 * needed, dtype=ContactFrame, device=dev)
+                wc = self._wall_contacts(state_out)
+                self._launch("friction", friction.fill_wall_frames, dim=int(self._n_active.numpy()[0]), device=dev,
+                             inputs=[m.arrays, state_in.x, f.tangent, walls, params, wc])
 
         f.blam.zero_()
         f.slam.zero_()
@@ -438,6 +451,14 @@ class RodSolver(StepBounds):
         self.last_info = info
         return info
 
+    def _wall_contacts(self, state_out: State) -> WallContacts:
+        wc = WallContacts()
+        wc.gap, wc.impulse, wc.active, wc.n_active = self._wall_gap, state_out.wall_impulse, self._active, \
+            self._n_active
+        wc.span, wc.key, wc.frames, wc.n_frames = self._wall_span, self._wall_key, self._wall_frames, \
+            self._n_wall_frames
+        return wc
+
     def _project_positions(self, rs_in, state_out, contacts, walls, wc, params, P):
         """Post-stabilisation: overlaps beyond the slop removed from the end-of-step positions
         (velocities untouched), so the velocity solve carries no Baumgarte term."""
@@ -489,7 +510,7 @@ class RodSolver(StepBounds):
                                  inputs=[ids, 0, *args])
             if n_active:
                 self._launch("friction", friction.solve_wall_contacts, dim=n_active, device=dev, inputs=[
-                    m.arrays, rs_in.x, f.tangent, walls, params, wc, state_out.v, state_out.spin, self._residual])
+                    walls, params, wc, state_out.v, state_out.spin, self._residual])
             self._launch("elastics", elastics.rod_projection, dim=m.n_rods, device=dev, inputs=[
                 m.arrays, rs_in, state_out.v, state_out.spin, f, params.dt, self._sresidual])
             used = it + 1
@@ -539,6 +560,23 @@ class RodSolver(StepBounds):
                                 step=step, time=t, cause=cause)
 
     # ------------------------------------------------------------------ diagnostics
+    def full_residual(self, state_out: State) -> float:
+        """Largest velocity change (m/s) one more exact local solve of any contact, rod-rod or
+        wall, would make after the last :meth:`step` (which wrote ``state_out``): the
+        residual of every contact (the step itself reports only its last sweep's largest change)."""
+        contacts, params, walls = self._last_solve
+        m = self.model
+        out = wp.zeros(1, dtype=wp.float64, device=m.device)
+        if contacts.count:
+            wp.launch(friction.rod_contact_residual, dim=contacts.count, device=m.device, inputs=[
+                contacts.count, self._frames, contacts.impulse, contacts.normal, params, state_out.v, state_out.spin,
+                out])
+        n = int(self._n_wall_frames.numpy()[0])
+        if n:
+            wp.launch(friction.wall_contact_residual, dim=n, device=m.device, inputs=[
+                walls, self._wall_contacts(state_out), state_out.v, state_out.spin, out])
+        return float(out.numpy()[0])
+
     def energy(self, state: State) -> dict:
         """Kinetic (translation and spin), potential (gravity), bending, stretching and twist
         energy (J) of ``state``."""
