@@ -26,7 +26,7 @@ from rodwarp._util import json_safe
 from rodwarp.analysis._registry import fields_with
 from rodwarp.errors import RodwarpError
 
-__all__ = ["outlier_bound", "find_tangles", "histogram", "z_profiles", "field_statistics",
+__all__ = ["outlier_bound", "find_tangles", "histogram", "z_profiles", "field_statistics", "power_law_fit",
            "AXES"]
 
 AXES = ("x", "y", "z")
@@ -247,6 +247,73 @@ def histogram(values, bins: int = 40, range=None) -> dict[str, np.ndarray]:  # n
     return {"edges": edges, "counts": counts, "density": density, "n": int(v.size)}
 
 
+def power_law_fit(values, *, xmin: float | None = None, min_tail: int = 50, candidates: int = 60) -> dict | None:
+    """Power-law tail p(x) ~ x^-gamma for x >= x_min, fitted by maximum likelihood with x_min
+    chosen by the Kolmogorov-Smirnov distance (Clauset, Shalizi & Newman 2009, continuous
+    form).
+
+    Parameters
+    ----------
+    values : array_like
+        Sample (e.g. a field's valid voxels); non-finite and non-positive values are dropped.
+    xmin : float, optional
+        Fix the lower end of the tail instead of choosing it.
+    min_tail : int
+        Fewest samples a tail may hold.
+    candidates : int
+        x_min candidates tried: quantiles of the positive sample between 0 and the point that
+        leaves ``min_tail`` samples above it.
+
+    Returns
+    -------
+    dict or None
+        ``gamma`` (exponent of the density), ``gamma_err`` = (gamma - 1) / sqrt(n_tail) (the
+        estimator's standard error for independent samples; voxels of overlapping balls are
+        correlated, so the true uncertainty is larger), ``xmin``, ``xmax``, ``decades``
+        (log10 xmax / xmin: the range the power law is fitted over), ``n_tail``,
+        ``tail_fraction``, ``ks`` (KS distance of the tail to the fit) and ``note`` (says so
+        when the tail spans less than one decade: too narrow to call it a power law); None
+        when fewer than ``min_tail`` positive values exist.
+    """
+    v = np.asarray(values, dtype=np.float64).ravel()
+    v = np.sort(v[np.isfinite(v) & (v > 0)])
+    n = v.size
+    if n < min_tail:
+        return None
+
+    def fit(x0):
+        tail = v[np.searchsorted(v, x0, side="left"):]
+        m = tail.size
+        logs = np.log(tail / x0)
+        sl = logs.sum()
+        if m < min_tail or sl <= 0:
+            return None
+        g = 1.0 + m / sl
+        emp = np.arange(1, m + 1) / m  # empirical CDF at each sorted tail value
+        model = 1.0 - (tail / x0) ** (1.0 - g)
+        ks = float(np.max(np.maximum(np.abs(emp - model), np.abs(emp - 1.0 / m - model))))
+        return g, ks, m
+
+    if xmin is not None:
+        best = (float(xmin), fit(float(xmin)))
+        if best[1] is None:
+            return None
+    else:
+        qs = np.unique(np.quantile(v[: n - min_tail + 1], np.linspace(0.0, 1.0, candidates)))
+        best = None
+        for x0 in qs:
+            r = fit(float(x0))
+            if r is not None and (best is None or r[1] < best[1][1]):
+                best = (float(x0), r)
+        if best is None:
+            return None
+    x0, (g, ks, m) = best
+    decades = float(np.log10(v[-1] / x0))
+    note = "" if decades >= 1.0 else f"tail spans {decades:.2f} decades: too narrow to call it a power law"
+    return {"gamma": float(g), "gamma_err": float((g - 1.0) / np.sqrt(m)), "xmin": x0, "xmax": float(v[-1]),
+            "decades": decades, "n_tail": int(m), "tail_fraction": m / n, "ks": ks, "note": note}
+
+
 def z_profiles(fields) -> dict[str, np.ndarray]:
     """Horizontal (x, y) means of each field at every height z.
 
@@ -313,8 +380,9 @@ def field_statistics(fields, method: str = "q3", connectivity: int = 26, bins: i
         ``percolates`` (any tangle spans the system along some axis), ``percolating_axes``,
         ``tangles`` (the 50 largest, see :func:`find_tangles`), ``tangles_truncated``,
         ``histograms`` ({field: histogram as lists, or None} for the fields with a histogram
-        panel), ``z_profiles`` (lists, None
-        for NaN) and ``largest_contact_cluster_fraction``. Lengths are in ``units``.
+        panel), ``power_law`` ({"e", "c": :func:`power_law_fit` of the valid voxels' values, the
+        tails of the paper's Fig. 4E-F}), ``z_profiles`` (lists, None for NaN) and
+        ``largest_contact_cluster_fraction``. Lengths are in ``units``.
 
     Raises
     ------
@@ -392,6 +460,8 @@ def field_statistics(fields, method: str = "q3", connectivity: int = 26, bins: i
         hk = histogram(v, bins=bins)
         hists[name] = {"edges": hk["edges"], "counts": hk["counts"], "density": hk["density"], "n": hk["n"]}
     out["histograms"] = hists
+    # Fig. 4E-F: the tails of p(e) and p(c)
+    out["power_law"] = {name: power_law_fit(samples[name]) if name in samples else None for name in ("e", "c")}
     out["z_profiles"] = z_profiles(fields)
     out["largest_contact_cluster_fraction"] = (None if contact_cluster_fraction is None
                                                else float(contact_cluster_fraction))
