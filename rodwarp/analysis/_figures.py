@@ -20,9 +20,10 @@ import matplotlib
 import numpy as np
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
 
 from rodwarp.analysis._registry import field_spec, fields_with
-from rodwarp.analysis._stats import field_statistics, find_tangles, z_profiles
+from rodwarp.analysis._stats import field_statistics, find_tangles, power_law_density, z_profiles
 from rodwarp.rodset.files import save_figure
 
 __all__ = ["plot_histograms", "plot_slices", "plot_zprofiles", "plot_tangles"]
@@ -352,8 +353,8 @@ def plot_tangles(fields, labels, stats: dict | None, path) -> Path:
 
 def plot_distributions(fields, stats: dict, path) -> Path:
     """p(e) and p(c) on log-log axes (the paper's Fig. 4E-F): log-binned densities of the valid
-    voxels' values and the fitted power-law tail (:func:`rodwarp.analysis.power_law_fit`)
-    drawn over its range, with its exponent and the decades it spans.
+    voxels' values and the fitted power law (:func:`rodwarp.analysis.power_law_fit`) drawn
+    over its range, with its exponent and the decades it spans.
 
     Parameters
     ----------
@@ -387,13 +388,14 @@ def plot_distributions(fields, stats: dict, path) -> Path:
         if fit:
             x = np.geomspace(fit["xmin"], fit["xmax"], 20)
             # the tail's density: (gamma - 1) / xmin (x / xmin)^-gamma, times the tail's share
-            y = fit["tail_fraction"] * (fit["gamma"] - 1) / fit["xmin"] * (x / fit["xmin"]) ** -fit["gamma"]
+            y = power_law_density(x, fit)
             ax.loglog(x, y, "-", color="C3",
                       label=f"gamma = {fit['gamma']:.2f} +- {fit['gamma_err']:.2f} over {fit['decades']:.2f} dec.")
         ax.set_xlabel(_label(name))
         ax.set_ylabel("density")
         ax.legend(fontsize=7)
-        ax.grid(alpha=0.3, which="both")
+        ax.grid(alpha=0.3, which="major")
+        ax.xaxis.set_minor_formatter(NullFormatter())
     fig.suptitle(f"distributions of the fields ({int(fields.valid.sum())} valid voxels)", fontsize=10)
     save_figure(fig, path)
     return Path(path)

@@ -27,6 +27,7 @@ from rodwarp.analysis._registry import fields_with
 from rodwarp.errors import RodwarpError
 
 __all__ = ["outlier_bound", "find_tangles", "histogram", "z_profiles", "field_statistics", "power_law_fit",
+           "power_law_density",
            "AXES"]
 
 AXES = ("x", "y", "z")
@@ -247,71 +248,111 @@ def histogram(values, bins: int = 40, range=None) -> dict[str, np.ndarray]:  # n
     return {"edges": edges, "counts": counts, "density": density, "n": int(v.size)}
 
 
-def power_law_fit(values, *, xmin: float | None = None, min_tail: int = 50, candidates: int = 60) -> dict | None:
-    """Power-law tail p(x) ~ x^-gamma for x >= x_min, fitted by maximum likelihood with x_min
-    chosen by the Kolmogorov-Smirnov distance (Clauset, Shalizi & Newman 2009, continuous
-    form).
+def _truncated_gamma(logx: np.ndarray, la: float, lb: float) -> float:
+    """Maximum-likelihood exponent of p(x) ~ x^-gamma on [a, b] (logs given), by a bounded scalar solve."""
+    from scipy.optimize import minimize_scalar
+
+    n = logx.size
+    s = logx.sum()
+    span = lb - la
+
+    def nll(g):
+        # log of Z(g) = integral of x^-g over [a, b], written to stay finite near g = 1
+        q = (1.0 - g) * span
+        if abs(q) < 1e-8:
+            logz = la + np.log(span)
+        elif q > 0:
+            logz = (1.0 - g) * la + np.log(np.expm1(q) / (1.0 - g))
+        else:
+            logz = (1.0 - g) * lb + np.log(-np.expm1(-q) / (1.0 - g))
+        return g * s + n * logz
+
+    return float(minimize_scalar(nll, bounds=(-5.0, 15.0), method="bounded", options={"xatol": 1e-6}).x)
+
+
+def _truncated_cdf(x: np.ndarray, a: float, b: float, g: float) -> np.ndarray:
+    if abs(g - 1.0) < 1e-9:
+        return np.log(x / a) / np.log(b / a)
+    return (x ** (1.0 - g) - a ** (1.0 - g)) / (b ** (1.0 - g) - a ** (1.0 - g))
+
+
+def power_law_fit(values, *, min_range: int = 50, candidates: int = 24) -> dict | None:
+    """The widest range [x_min, x_max] over which the sample follows p(x) ~ x^-gamma, and gamma.
+
+    For every pair of candidate bounds (log-spaced quantiles of the positive sample) holding at
+    least ``min_range`` values, gamma is the maximum-likelihood exponent of a power law
+    truncated to [x_min, x_max] and the fit is accepted when its Kolmogorov-Smirnov distance is
+    below the 5% critical value 1.36 / sqrt(n) (the power law is not rejected there); the
+    accepted range spanning the most decades wins (without any accepted, the closest fit).
+    The bounds are part of the answer: a field's distribution is a power law over a range,
+    cut off by the finite ball and rod sizes (Clauset, Shalizi & Newman 2009 for the
+    estimator; the range test is theirs with an upper bound).
 
     Parameters
     ----------
     values : array_like
         Sample (e.g. a field's valid voxels); non-finite and non-positive values are dropped.
-    xmin : float, optional
-        Fix the lower end of the tail instead of choosing it.
-    min_tail : int
-        Fewest samples a tail may hold.
+    min_range : int
+        Fewest samples a range may hold.
     candidates : int
-        x_min candidates tried: quantiles of the positive sample between 0 and the point that
-        leaves ``min_tail`` samples above it.
+        Candidate bounds tried on each side.
 
     Returns
     -------
     dict or None
-        ``gamma`` (exponent of the density), ``gamma_err`` = (gamma - 1) / sqrt(n_tail) (the
-        estimator's standard error for independent samples; voxels of overlapping balls are
-        correlated, so the true uncertainty is larger), ``xmin``, ``xmax``, ``decades``
-        (log10 xmax / xmin: the range the power law is fitted over), ``n_tail``,
-        ``tail_fraction``, ``ks`` (KS distance of the tail to the fit) and ``note`` (says so
-        when the tail spans less than one decade: too narrow to call it a power law); None
-        when fewer than ``min_tail`` positive values exist.
+        ``gamma`` (exponent of the density), ``gamma_err`` = |gamma - 1| / sqrt(n) + 1 / sqrt(n)
+        (the estimator's standard error for independent samples; voxels of overlapping balls
+        are correlated, so the true uncertainty is larger), ``xmin``, ``xmax``, ``decades``
+        (log10 xmax / xmin), ``n_range`` (samples inside), ``range_fraction``, ``ks``,
+        ``accepted`` (the KS test passed) and ``note`` (says when the range spans less than one
+        decade, or no range passed); None when fewer than ``min_range`` positive values exist.
     """
     v = np.asarray(values, dtype=np.float64).ravel()
     v = np.sort(v[np.isfinite(v) & (v > 0)])
     n = v.size
-    if n < min_tail:
+    if n < min_range or v[-1] <= v[0]:
         return None
-
-    def fit(x0):
-        tail = v[np.searchsorted(v, x0, side="left"):]
-        m = tail.size
-        logs = np.log(tail / x0)
-        sl = logs.sum()
-        if m < min_tail or sl <= 0:
-            return None
-        g = 1.0 + m / sl
-        emp = np.arange(1, m + 1) / m  # empirical CDF at each sorted tail value
-        model = 1.0 - (tail / x0) ** (1.0 - g)
-        ks = float(np.max(np.maximum(np.abs(emp - model), np.abs(emp - 1.0 / m - model))))
-        return g, ks, m
-
-    if xmin is not None:
-        best = (float(xmin), fit(float(xmin)))
-        if best[1] is None:
-            return None
+    lv = np.log(v)
+    bounds = np.unique(np.exp(np.linspace(lv[0], lv[-1], candidates + 1)))
+    best = None  # (accepted, decades, n_range, -ks) ordering
+    for i, a in enumerate(bounds[:-1]):
+        ia = np.searchsorted(v, a, side="left")
+        for b in bounds[i + 1:]:
+            ib = np.searchsorted(v, b, side="right")
+            m = ib - ia
+            if m < min_range:
+                continue
+            x = v[ia:ib]
+            g = _truncated_gamma(lv[ia:ib], np.log(a), np.log(b))
+            cdf = _truncated_cdf(x, a, b, g)
+            emp = np.arange(1, m + 1) / m
+            ks = float(np.max(np.maximum(np.abs(emp - cdf), np.abs(emp - 1.0 / m - cdf))))
+            ok = ks <= 1.36 / np.sqrt(m)
+            key = (ok, np.log10(b / a) if ok else -ks, m)
+            if best is None or key > best[0]:
+                best = (key, a, b, g, ks, m, ok)
+    if best is None:
+        return None
+    _, a, b, g, ks, m, ok = best
+    decades = float(np.log10(b / a))
+    if not ok:
+        note = "no range passes the KS test: not a power law"
+    elif decades < 1.0:
+        note = f"the power law spans {decades:.2f} decades: too narrow to call it one"
     else:
-        qs = np.unique(np.quantile(v[: n - min_tail + 1], np.linspace(0.0, 1.0, candidates)))
-        best = None
-        for x0 in qs:
-            r = fit(float(x0))
-            if r is not None and (best is None or r[1] < best[1][1]):
-                best = (float(x0), r)
-        if best is None:
-            return None
-    x0, (g, ks, m) = best
-    decades = float(np.log10(v[-1] / x0))
-    note = "" if decades >= 1.0 else f"tail spans {decades:.2f} decades: too narrow to call it a power law"
-    return {"gamma": float(g), "gamma_err": float((g - 1.0) / np.sqrt(m)), "xmin": x0, "xmax": float(v[-1]),
-            "decades": decades, "n_tail": int(m), "tail_fraction": m / n, "ks": ks, "note": note}
+        note = ""
+    return {"gamma": g, "gamma_err": float((abs(g - 1.0) + 1.0) / np.sqrt(m)), "xmin": float(a), "xmax": float(b),
+            "decades": decades, "n_range": int(m), "range_fraction": float(m / n), "ks": ks, "accepted": bool(ok),
+            "note": note}
+
+
+def power_law_density(x, fit: dict) -> np.ndarray:
+    """The fitted power law of :func:`power_law_fit` as a density of the whole sample at ``x``
+    (inside its range: the range's share of the sample, x^-gamma normalised over the range)."""
+    x = np.asarray(x, dtype=np.float64)
+    g, a, b = fit["gamma"], fit["xmin"], fit["xmax"]
+    z = np.log(b / a) if abs(g - 1.0) < 1e-9 else (b ** (1.0 - g) - a ** (1.0 - g)) / (1.0 - g)
+    return fit["range_fraction"] * x ** -g / z
 
 
 def z_profiles(fields) -> dict[str, np.ndarray]:
@@ -347,7 +388,7 @@ def z_profiles(fields) -> dict[str, np.ndarray]:
 # ----------------------------------------------------------------------------------------------
 
 def field_statistics(fields, method: str = "q3", connectivity: int = 26, bins: int = 40,
-                     contact_cluster_fraction: float | None = None) -> dict[str, Any]:
+                     contact_cluster_fraction: float | None = None, power_laws: bool = True) -> dict[str, Any]:
     """Summary statistics of one set of fields, JSON-serialisable.
 
     Parameters
@@ -363,6 +404,9 @@ def field_statistics(fields, method: str = "q3", connectivity: int = 26, bins: i
     contact_cluster_fraction : float, optional
         Fraction of rods in the largest contact cluster (the paper's stability measure f),
         when the caller has it; stored as ``largest_contact_cluster_fraction``.
+    power_laws : bool
+        Fit the power laws of p(e) and p(c) (``power_law``; about 0.1-1 s); False leaves
+        them None.
 
     Returns
     -------
@@ -461,7 +505,8 @@ def field_statistics(fields, method: str = "q3", connectivity: int = 26, bins: i
         hists[name] = {"edges": hk["edges"], "counts": hk["counts"], "density": hk["density"], "n": hk["n"]}
     out["histograms"] = hists
     # Fig. 4E-F: the tails of p(e) and p(c)
-    out["power_law"] = {name: power_law_fit(samples[name]) if name in samples else None for name in ("e", "c")}
+    out["power_law"] = {name: power_law_fit(samples[name]) if power_laws and name in samples else None
+                        for name in ("e", "c")}
     out["z_profiles"] = z_profiles(fields)
     out["largest_contact_cluster_fraction"] = (None if contact_cluster_fraction is None
                                                else float(contact_cluster_fraction))

@@ -145,7 +145,7 @@ class Recorder:
         rods = self.rods.with_points(x)
         rods.contacts = contacts
         try:
-            st = field_statistics(compute_fields(rods, device=self.model.device))
+            st = field_statistics(compute_fields(rods, device=self.model.device), power_laws=False)
         except RodwarpError:  # no ball fits or no valid voxel (a pile spread to a monolayer)
             st = {}
         self.fields_wall_s += _time.perf_counter() - t0
