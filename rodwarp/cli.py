@@ -98,7 +98,8 @@ def _field_options(cls, table: dict, order: tuple[str, ...]):
 _SIMULATE_OPTIONS = ("alpha", "freq", "amplitude", "gravity", "duration", "entangle_duration", "entangle_freq",
                      "entangle_amplitude", "static_load", "n_rods", "length", "vertices", "box", "mu", "young",
                      "density", "dt", "iterations", "step_safety", "rod_model", "rolling", "save_every",
-                     "checkpoint_every", "resume", "overwrite", "entangle", "seed", "device", "out", "initial", "quiet")
+                     "checkpoint_every", "fields_every", "resume", "overwrite", "entangle", "seed", "device", "out", "initial",
+                     "quiet")
 
 app = typer.Typer(add_completion=False, no_args_is_help=False,
                   help="Simulate and analyse packings of elastic rods (NVIDIA Warp).",

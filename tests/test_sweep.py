@@ -202,3 +202,39 @@ def test_local_cluster_serves_no_http(tmp_path):
     finally:
         client.close()
         cluster.close()
+
+
+def test_phase_diagram_draws_the_points_time_series_and_distributions(tmp_path):
+    """From each point's own files: Z(t), f(t), cv_e(t) per alpha, and p(e), p(c) per alpha
+    pooled over seeds with the fitted power law (power_law.csv), whose exponent is that of
+    the synthetic fields (e ~ x^-1.5 on [1, 100])."""
+    import numpy as np
+
+    from rodwarp.analysis import Fields
+
+    _synthetic(tmp_path)
+    rng = np.random.default_rng(0)
+    rows = [r for r in csv.DictReader(open(tmp_path / "results.csv")) if r["status"] == "ok"]
+    for r in rows:
+        d = tmp_path / "points" / r["id"]
+        (d / "analysis").mkdir(parents=True)
+        with open(d / "metrics.csv", "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=["time", "stage", "contacts_per_rod", "largest_cluster_fraction",
+                                               "cv_e"])
+            w.writeheader()
+            for k in range(11):
+                w.writerow({"time": 0.1 * k, "stage": "entangle" if k < 5 else "stability",
+                            "contacts_per_rod": 3.0, "largest_cluster_fraction": 0.9,
+                            "cv_e": 1.0 + 0.01 * k if k % 5 == 0 else ""})
+        u = rng.random((8, 8, 8))
+        e = ((100 ** -0.5 - 1) * u + 1) ** (1 / -0.5)  # p(e) ~ e^-1.5 on [1, 100]
+        ax = np.arange(8) * 0.1
+        Fields(phi=0.1 + 0 * e, S=0 * e, c=1.0 + 4 * u, e=e, n=1.0 + 0 * e, x=ax, y=ax, z=ax, radius=0.2,
+               spacing=0.1).save(d / "analysis" / "fields.zarr")
+    names = {p.name for p in phase_diagram(tmp_path)}
+    groups = {(r["freq"], r["gravity"], r["static_load"]) for r in rows}
+    assert len([n for n in names if n.startswith("phase_timeseries")]) == len(groups)
+    assert len([n for n in names if n.startswith("phase_distributions")]) == len(groups)
+    table = list(csv.DictReader(open(tmp_path / "power_law.csv")))
+    fits = [t for t in table if t["field"] == "e"]
+    assert fits and all(abs(float(t["gamma"]) - 1.5) < 0.15 for t in fits)

@@ -231,7 +231,8 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
         figs = [fieldplots.plot_histograms(fields, stats, out / "histograms.png"),
                 fieldplots.plot_slices(fields, out / "slices.png"),
                 fieldplots.plot_zprofiles(stats, out / "zprofiles.png"),
-                fieldplots.plot_tangles(fields, labels, stats, out / "tangles.png")]
+                fieldplots.plot_tangles(fields, labels, stats, out / "tangles.png"),
+                fieldplots.plot_distributions(fields, stats, out / "distributions.png")]
         summary["figures"] = [Path(f).name for f in figs]
     summary["analysis_wall_s"] = time.perf_counter() - t0
     write_json(out / "summary.json", summary, finite=True)

@@ -20,9 +20,10 @@ import matplotlib
 import numpy as np
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
 
 from rodwarp.analysis._registry import field_spec, fields_with
-from rodwarp.analysis._stats import field_statistics, find_tangles, z_profiles
+from rodwarp.analysis._stats import field_statistics, find_tangles, power_law_density, z_profiles
 from rodwarp.rodset.files import save_figure
 
 __all__ = ["plot_histograms", "plot_slices", "plot_zprofiles", "plot_tangles"]
@@ -348,3 +349,53 @@ def plot_tangles(fields, labels, stats: dict | None, path) -> Path:
               "; no tangle percolates"))
     fig.suptitle(sub, fontsize=10)
     return save_figure(fig, path)
+
+
+def plot_distributions(fields, stats: dict, path) -> Path:
+    """p(e) and p(c) on log-log axes (the paper's Fig. 4E-F): log-binned densities of the valid
+    voxels' values and the fitted power law (:func:`rodwarp.analysis.power_law_fit`) drawn
+    over its range, with its exponent and the decades it spans.
+
+    Parameters
+    ----------
+    fields : rodwarp.analysis.Fields
+        The fields (valid voxels only).
+    stats : dict
+        Output of :func:`rodwarp.analysis.field_statistics` (its ``power_law``).
+    path : path-like
+        PNG to write.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    fig = Figure(figsize=(9.0, 3.6))
+    axs = fig.subplots(1, 2, gridspec_kw=_GRID)
+    for ax, name in zip(axs, ("e", "c")):
+        a = fields.get(name)
+        v = a[fields.valid & np.isfinite(a)]
+        v = v[v > 0]
+        if v.size < 2 or v.max() <= v.min():
+            _not_available(ax, _label(name))
+            continue
+        edges = np.geomspace(v.min(), v.max(), 30)
+        counts, _ = np.histogram(v, bins=edges)
+        dens = counts / (v.size * np.diff(edges))
+        mid = np.sqrt(edges[1:] * edges[:-1])
+        ok = dens > 0
+        ax.loglog(mid[ok], dens[ok], "o", ms=3, color="C0", label=f"p({_symbol(name)})")
+        fit = (stats.get("power_law") or {}).get(name)
+        if fit:
+            x = np.geomspace(fit["xmin"], fit["xmax"], 20)
+            # the tail's density: (gamma - 1) / xmin (x / xmin)^-gamma, times the tail's share
+            y = power_law_density(x, fit)
+            ax.loglog(x, y, "-", color="C3",
+                      label=f"gamma = {fit['gamma']:.2f} +- {fit['gamma_err']:.2f} over {fit['decades']:.2f} dec.")
+        ax.set_xlabel(_label(name))
+        ax.set_ylabel("density")
+        ax.legend(fontsize=7)
+        ax.grid(alpha=0.3, which="major")
+        ax.xaxis.set_minor_formatter(NullFormatter())
+    fig.suptitle(f"distributions of the fields ({int(fields.valid.sum())} valid voxels)", fontsize=10)
+    save_figure(fig, path)
+    return Path(path)

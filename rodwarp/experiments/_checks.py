@@ -78,6 +78,12 @@ def check_protocol(p) -> None:
         fail(f"--rod-model must be auto, rigid or elastic, got '{p.rod_model}'")
     number("--save-every", p.save_every, gt=0, unit="s")
     number("--checkpoint-every", p.checkpoint_every, gt=0, unit="s")
+    number("--fields-every", p.fields_every, ge=0, unit="s", hint="0 turns the fields series off")
+    if p.fields_every > 0:
+        k = p.fields_every / p.save_every
+        if k < 1 - 1e-9 or abs(k - round(k)) > 1e-6 * max(k, 1.0):
+            fail(f"--fields-every {p.fields_every:g} s must be a whole multiple of --save-every {p.save_every:g} s "
+                 f"(the fields are taken at sample times); e.g. --fields-every {max(1, round(k)) * p.save_every:g}")
     integer("--seed", p.seed, ge=0, le=2**63 - 1)
     device_name("--device", p.device)
     if p.entangle and not p.initial:

@@ -48,6 +48,7 @@ def _ok_rows(out) -> list[dict]:
             continue
         d["static_load"] = d["static_load"] or 0.0
         d["stable"] = str(r.get("stable")).strip().lower() in ("true", "1", "yes")
+        d["id"] = r.get("id")
         d["ag"] = float(f"{d['a_over_g']:.4g}")
         rows.append(d)
     return rows
@@ -135,8 +136,12 @@ def phase_diagram(out) -> list[Path]:
     shaded stable/unstable regions), ``phase_f_alpha.png`` (Fig. 4H: f against alpha for each
     a/g), ``phase_verdict_alpha.png`` (height kept and persistence against alpha, the verdict's
     thresholds drawn), ``phase_f_ag.png`` (Fig. 4I: f against a/g for each alpha and static load),
-    ``alpha_star.csv`` and ``phase_alpha_star.png`` (alpha* against a/g with its uncertainty).
-    Returns the paths written.
+    ``alpha_star.csv`` and ``phase_alpha_star.png`` (alpha* against a/g with its uncertainty),
+    and from each point's own files: ``phase_timeseries*.png`` (Fig. 4C-D: Z(t), f(t) and
+    cv_e(t) per alpha, from its metrics.csv) and ``phase_distributions*.png`` with
+    ``power_law.csv`` (Fig. 4E-F: p(e) and p(c) per alpha, pooled over seeds, and their fitted
+    power-law tails, from its analysis/fields.zarr); one of each per (a/g, g, F~) group, the
+    group in the name when there are several. Returns the paths written.
     """
     import matplotlib
 
@@ -153,7 +158,140 @@ def phase_diagram(out) -> list[Path]:
     table = alpha_star(rows)
     written.append(_write_table(table, out / "alpha_star.csv"))
     written.append(_alpha_star_figure(rows, table, out / "phase_alpha_star.png"))
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault((r["ag"], r["gravity"], r["static_load"]), []).append(r)
+    fits = []
+    for key, rs in sorted(groups.items()):
+        tag = "" if len(groups) == 1 else f"_ag{key[0]:g}_g{key[1]:g}_F{key[2]:g}"
+        p = _timeseries_figure(out, key, rs, out / f"phase_timeseries{tag}.png")
+        if p is not None:
+            written.append(p)
+        p, f = _distributions_figure(out, key, rs, out / f"phase_distributions{tag}.png")
+        if p is not None:
+            written.append(p)
+        fits += f
+    if fits:
+        written.append(_write_table(fits, out / "power_law.csv"))
     return written
+
+
+def _point_file(out: Path, r: dict, *parts) -> Path | None:
+    """A file of point ``r``'s folder (``out/points/<id>/...``), None when it is missing."""
+    if not r.get("id"):
+        return None
+    p = Path(out, "points", r["id"], *parts)
+    return p if p.exists() else None
+
+
+def _title(key) -> str:
+    ag, g, s = key
+    return f"a/g = {ag:g}, g = {g:g} m/s^2, F~ = {s:g}"
+
+
+def _timeseries_figure(out: Path, key, rows, path: Path) -> Path | None:
+    """Fig. 4C-D: Z(t), f(t) and cv_e(t) through entangling and the test, one colour per alpha
+    (each seed a line), the test's start dashed."""
+    import matplotlib.pyplot as plt
+
+    series = []
+    for r in rows:
+        f = _point_file(out, r, "metrics.csv")
+        if f is not None:
+            series.append((r["alpha"], list(csv.DictReader(io.StringIO(f.read_text())))))
+    if not series:
+        return None
+    alphas = sorted({a for a, _ in series})
+    cmap = plt.get_cmap("viridis")
+    fig, axs = plt.subplots(1, 3, figsize=(13, 3.8))
+    has_cv = False
+    t_test = None
+    for a, m in series:
+        colour = cmap(alphas.index(a) / max(len(alphas) - 1, 1))
+        t = [float(x["time"]) for x in m]
+        for ax, col in zip(axs, ("contacts_per_rod", "largest_cluster_fraction", "cv_e")):
+            pts = [(ti, float(x[col])) for ti, x in zip(t, m) if x.get(col, "") not in ("", None)]
+            if col == "cv_e":
+                has_cv = has_cv or bool(pts)
+            if pts:
+                ax.plot(*zip(*pts), color=colour, lw=1, marker="o" if col == "cv_e" else None, ms=2,
+                        label=f"alpha = {a:g}" if ax is axs[0] and m is next(s for b, s in series if b == a) else None)
+        st = [float(x["time"]) for x in m if x["stage"] == "stability"]
+        if st and any(x["stage"] == "entangle" for x in m):
+            t_test = min(st)
+    for ax, label in zip(axs, ("Z (contacts per rod)", "f (largest cluster)", "cv_e = sigma_e / mu_e")):
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        if t_test is not None:
+            ax.axvline(t_test, ls="--", lw=0.8, color="0.5")
+    if not has_cv:
+        axs[2].text(0.5, 0.5, "no cv_e(t) in these runs\n(--fields-every 0 or older runs)", ha="center",
+                    transform=axs[2].transAxes, fontsize=8)
+    axs[0].legend(fontsize=7)
+    fig.suptitle(f"entanglement over time ({_title(key)}; dashed: the test starts)", fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=DPI)
+    plt.close(fig)
+    return path
+
+
+def _distributions_figure(out: Path, key, rows, path: Path):
+    """Fig. 4E-F: p(e) and p(c) per alpha (valid voxels pooled over seeds, log bins) with the
+    fitted power laws over their ranges; returns the path (None without fields) and one table row per
+    alpha and field."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from rodwarp.analysis import Fields, power_law_density, power_law_fit
+
+    pooled: dict = {}
+    for r in rows:
+        f = _point_file(out, r, "analysis", "fields.zarr")
+        if f is None:
+            continue
+        fl = Fields.load(f)
+        for name in ("e", "c"):
+            a = fl.get(name)
+            pooled.setdefault(r["alpha"], {}).setdefault(name, []).append(a[fl.valid & np.isfinite(a)])
+    if not pooled:
+        return None, []
+    alphas = sorted(pooled)
+    cmap = plt.get_cmap("viridis")
+    fig, axs = plt.subplots(1, 2, figsize=(10, 4))
+    table = []
+    for a in alphas:
+        colour = cmap(alphas.index(a) / max(len(alphas) - 1, 1))
+        for ax, name in zip(axs, ("e", "c")):
+            v = np.concatenate(pooled[a][name])
+            v = v[v > 0]
+            fit = power_law_fit(v)
+            table.append({"a_over_g": key[0], "gravity": key[1], "static_load": key[2], "alpha": a, "field": name,
+                          "seeds": len(pooled[a][name]), "voxels": int(v.size),
+                          **({k: fit[k] for k in ("gamma", "gamma_err", "xmin", "xmax", "decades", "n_range", "ks",
+                                                  "accepted", "note")} if fit else {"note": "too few values"})})
+            if v.size < 2 or v.max() <= v.min():
+                continue
+            edges = np.geomspace(v.min(), v.max(), 30)
+            counts, _ = np.histogram(v, bins=edges)
+            dens = counts / (v.size * np.diff(edges))
+            ok = dens > 0
+            label = f"alpha = {a:g}"
+            if fit:
+                label += f": gamma = {fit['gamma']:.2f} ({fit['decades']:.1f} dec.)"
+                x = np.geomspace(fit["xmin"], fit["xmax"], 20)
+                ax.loglog(x, power_law_density(x, fit), "-", color=colour, lw=1.5, alpha=0.6)
+            ax.loglog(np.sqrt(edges[1:] * edges[:-1])[ok], dens[ok], "o", ms=3, color=colour, label=label)
+    for ax, name in zip(axs, ("e (ACN per ball)", "c (contacts per ball)")):
+        ax.set_xlabel(name)
+        ax.set_ylabel("density")
+        ax.grid(alpha=0.3, which="major")
+        ax.legend(fontsize=6)
+    fig.suptitle(f"p(e) and p(c) ({_title(key)}; lines: fitted power laws over their ranges)", fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=DPI)
+    plt.close(fig)
+    return path, table
 
 
 def _finish(fig, ax, path: Path, *, xlabel: str, ylabel: str, title: str, legend: int | None = 7, ncol: int = 1,
@@ -297,9 +435,11 @@ def _f_ag_figure(rows, path: Path) -> Path:
 
 
 def _write_table(table: list[dict], path: Path) -> Path:
-    """``alpha_star.csv``: one row per (a/g, gravity, static load) of :func:`alpha_star`."""
+    """A CSV of dict rows (``alpha_star.csv``: one per (a/g, gravity, static load) of
+    :func:`alpha_star`; ``power_law.csv``); columns: every key, in order of appearance."""
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(table[0]), lineterminator="\n")
+    names = list(dict.fromkeys(k for t in table for k in t))
+    w = csv.DictWriter(buf, fieldnames=names, lineterminator="\n")
     w.writeheader()
     for t in table:
         w.writerow({k: _cell(v) for k, v in t.items()})

@@ -84,6 +84,9 @@ class ProtocolParams:
                                  "centreline only).")
     save_every: float = _param(0.1, "Metrics and frame interval (s of simulated time).", "save")
     checkpoint_every: float = _param(1.0, "Checkpoint interval (s of simulated time).", "ckpt")
+    fields_every: float = _param(0.5, "Interval (s of simulated time, a multiple of --save-every) of the "
+                                      "entanglement fields during the run: cv_e(t), mean e and phi in "
+                                      "metrics.csv; 0 turns them off.", "fev")
     seed: int = _param(0, "Random seed of the packing.")
     device: str = _param("auto", "auto, cpu or cuda.")
     initial: str | None = _param(None, "Start from this rod set (npz, zarr or CSV) instead of a random packing.")
@@ -389,7 +392,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         state.load_numpy({k[6:]: v for k, v in arrays.items() if k.startswith("state_")})
     n_frames = 1 + sum(int(math.ceil(s.duration / params.save_every)) + 1 for s in stages)
     rec = Recorder(outdir, model, solver, sim_rods, n_frames, checkpoint=ck,
-                   done=[s.name for s in stages[:loop.start_stage]])
+                   done=[s.name for s in stages[:loop.start_stage]], fields_every=params.fields_every)
 
     # the verdict's pile reference measures the input rods (a rigid rod's two-vertex chord may
     # differ from its polyline's length in the last bits)
@@ -407,7 +410,8 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     floor = control.floor_height(state.time)
     summary = _summary(params, model, rec.rows, loop, vd.judge_rows(rec.rows, loop.pile_ref.time, thresholds),
                        c, centroid_height(model, state, 0.0 if floor is None else floor), rule,
-                       {"device": device, "wall_time_s": wall, "resumed": bool(resume), "initial_orientation": orient})
+                       {"device": device, "wall_time_s": wall, "resumed": bool(resume), "initial_orientation": orient,
+                        "fields_wall_s": rec.fields_wall_s})
     rec.write_metrics()
     write_json(outdir / "summary.json", summary)
     plot_metrics(outdir / "metrics.png", rec.rows, summary)
@@ -498,6 +502,14 @@ def _step_stages(params, model, solver, stages, state, other, control, loop, rec
     return state, control
 
 
+def _last(rows, key):
+    """The last non-empty value of column ``key`` (None when there is none)."""
+    for r in reversed(rows):
+        if r.get(key) not in ("", None):
+            return r[key]
+    return None
+
+
 def _summary(params, model, rows, loop, verdict, contacts, centroid_height, rule, run: dict) -> dict:
     """summary.json of a finished run: parameters, results, the verdict and provenance."""
     from rodwarp._util import versions
@@ -518,6 +530,8 @@ def _summary(params, model, rows, loop, verdict, contacts, centroid_height, rule
         "rod_model": rule["rod_model"], "rod_model_rule": rule,
         "seed": params.seed, "device": run["device"], "dt": loop.dts, "steps": loop.steps,
         "wall_time_s": run["wall_time_s"], "resumed": run["resumed"], "initial_orientation": run["initial_orientation"],
+        # time spent on the fields series (this process; a resumed run counts its own part)
+        "fields_wall_s": run["fields_wall_s"], "cv_e_final": _last(rows, "cv_e"),
         "parameters": asdict(params), "versions": versions(),
     }
 
@@ -542,10 +556,10 @@ def default_run_name(params: ProtocolParams) -> str:
 
     if params.initial:
         head = f"{Path(params.initial).stem}_freq{fmt(params.freq)}_g{fmt(params.gravity)}"
-        skip = {"freq", "gravity", "initial", "device", "alpha", "length", "seed"}
+        skip = {"freq", "gravity", "initial", "device", "alpha", "length", "seed", "fields_every"}
     else:
         head = f"alpha{fmt(params.alpha)}_freq{fmt(params.freq)}_g{fmt(params.gravity)}_seed{params.seed}"
-        skip = {"alpha", "freq", "gravity", "seed", "device", "initial"}
+        skip = {"alpha", "freq", "gravity", "seed", "device", "initial", "fields_every"}
 
     def differs(k, v):
         dv = defaults.get(k)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -42,9 +43,15 @@ class Recorder:
         ``(arrays, meta)`` of the checkpoint a resumed run continues from.
     done : sequence of str
         With ``checkpoint``: the stages it had finished (their snapshots come back).
+    fields_every : float
+        Interval (s) of the entanglement fields: at the first sample of each such interval the
+        Warp field kernels of :func:`rodwarp.analysis.compute_fields` run on the sample's rods
+        (default grid, the sample's contacts) and its row gets ``cv_e``, ``mean_e`` and
+        ``mean_phi``, the same numbers ``rodwarp analyze`` gives for that frame; 0: never.
     """
 
-    def __init__(self, outdir: Path, model, solver, rods, n_frames: int, checkpoint=None, done=()):
+    def __init__(self, outdir: Path, model, solver, rods, n_frames: int, checkpoint=None, done=(),
+                 fields_every: float = 0.0):
         from rodwarp.rodset.trajectory import Trajectory
 
         self.outdir = Path(outdir)
@@ -53,6 +60,8 @@ class Recorder:
         self.vtk: list = []  # (time, file) of every VTK frame, for trajectory.pvd
         self.snapshots = [("start", rods.points.copy())]
         self.frame = 0
+        self.fields_every = float(fields_every)
+        self.fields_wall_s = 0.0
         if checkpoint is not None:
             arrays, meta = checkpoint
             self.rows = meta["rows"]
@@ -107,6 +116,7 @@ class Recorder:
             "steps": loop.steps,
             # contact points the step solved (speculative ones included), not touching rod pairs
             "n_contact_pairs": info.n_contacts if info else 0,
+            **self._fields(state.time, x, c),
         })
         self.trajectory.write(self.frame, state.time, x)
         fname = f"vtk/frame_{self.frame:05d}.vtp"
@@ -114,6 +124,33 @@ class Recorder:
         self.vtk.append((state.time, fname))
         write_pvd(self.outdir / "trajectory.pvd", self.vtk)
         self.frame += 1
+
+    def _fields(self, t: float, x: np.ndarray, contacts) -> dict:
+        """``cv_e``, ``mean_e`` and ``mean_phi`` of the rods at positions ``x`` when a fields
+        interval starts at this sample (empty strings otherwise)."""
+        import time as _time
+
+        empty = {"cv_e": "", "mean_e": "", "mean_phi": ""}
+        fe = self.fields_every
+        if fe <= 0:
+            return empty
+        prev = self.rows[-1]["time"] if self.rows else None
+        eps = 1e-9 * fe
+        if prev is not None and math.floor((t + eps) / fe) == math.floor((prev + eps) / fe):
+            return empty
+        from rodwarp.analysis import compute_fields, field_statistics
+        from rodwarp.errors import RodwarpError
+
+        t0 = _time.perf_counter()
+        rods = self.rods.with_points(x)
+        rods.contacts = contacts
+        try:
+            st = field_statistics(compute_fields(rods, device=self.model.device), power_laws=False)
+        except RodwarpError:  # no ball fits or no valid voxel (a pile spread to a monolayer)
+            st = {}
+        self.fields_wall_s += _time.perf_counter() - t0
+        num = lambda v: "" if v is None else float(v)  # noqa: E731
+        return {"cv_e": num(st.get("cv_e")), "mean_e": num(st.get("mean_e")), "mean_phi": num(st.get("mean_phi"))}
 
     def snapshot(self, title: str, x: np.ndarray) -> None:
         """Keep the positions ``x`` (V, 3) m for ``snapshots.png`` under ``title``."""
@@ -158,31 +195,37 @@ class Recorder:
 
 
 def plot_metrics(path, rows, summary) -> None:
-    """metrics.png: Z, f, height kept, rods left, y_c(t)/y_c(0) and kinetic energy against time,
-    the verdict's thresholds drawn on f and h, the entangled part of the test shaded."""
+    """metrics.png: Z, f, height kept, rods left, y_c(t)/y_c(0), kinetic energy and the
+    entanglement order parameter cv_e = sigma_e / mu_e (with the mean ACN e) against time, the
+    verdict's thresholds drawn on f and h, the entangled part of the test shaded."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     def col(key, sel=rows):
-        return np.array([float(r[key]) if r[key] != "" else np.nan for r in sel])
+        return np.array([float(r[key]) if r.get(key, "") != "" else np.nan for r in sel])
 
     t = col("time")
     thr = summary["thresholds"]
     test = [r for r in rows if r["stage"] == "stability" and r["height_kept"] != ""]
     t0 = summary["test_start"]["time"]
     tt = np.concatenate([[t0], col("time", test)])
-    fig, ax = plt.subplots(3, 2, figsize=(10, 8.5), sharex=True)
+    fig, ax = plt.subplots(4, 2, figsize=(10, 11), sharex=True)
     panels = ((ax[0, 0], t, col("contacts_per_rod"), "Z (contacts per rod)", None),
               (ax[0, 1], t, col("largest_cluster_fraction"), "f (largest cluster)", thr["cluster"]),
               (ax[1, 0], tt, np.concatenate([[1.0], col("height_kept", test)]), "height kept h = y_c(t) / y_c(t0)",
                thr["height_kept"]),
               (ax[1, 1], tt, np.concatenate([[0.0], col("rods_left", test)]), "rods left the pile (fraction)", None),
               (ax[2, 0], t, col("centroid_height_ratio"), "y_c(t) / y_c(0) (whole run)", None),
-              (ax[2, 1], t, col("kinetic_energy"), "kinetic energy (J)", None))
+              (ax[2, 1], t, col("kinetic_energy"), "kinetic energy (J)", None),
+              (ax[3, 0], t, col("cv_e"), "cv_e = sigma_e / mu_e", None),
+              (ax[3, 1], t, col("mean_e"), "mean ACN e per ball", None))
     for a, x, y, label, level in panels:
-        a.plot(x, y, lw=1)
+        fields_panel = a in (ax[3, 0], ax[3, 1])
+        a.plot(x[np.isfinite(y)], y[np.isfinite(y)], lw=1, marker="o" if fields_panel else None, ms=3)
+        if fields_panel and not np.isfinite(y).any():
+            a.text(0.5, 0.5, "no fields series (--fields-every 0)", transform=a.transAxes, ha="center", fontsize=8)
         a.set_ylabel(label, fontsize=9)
         a.grid(alpha=0.3)
         if level is not None:
@@ -203,7 +246,7 @@ def plot_metrics(path, rows, summary) -> None:
             a.axvline(t0, ls="--", lw=0.8, color="0.5")
         ax[0, 0].annotate("stability test", (t_stab[0], 0.02), xycoords=("data", "axes fraction"), fontsize=8,
                           color="0.4", xytext=(3, 0), textcoords="offset points")
-    for a in ax[2]:
+    for a in ax[3]:
         a.set_xlabel("t (s)")
     fig.suptitle(f"alpha = {summary['alpha']:g}, a/g = {summary['a_over_g']:.3g}: stable = {summary['stable']} "
                  f"(h = {summary['height_kept']:.2f}, f = {summary['largest_cluster_fraction']:.2f}, "

@@ -39,7 +39,7 @@ SIMULATE_OUTPUTS = ("summary.json", "metrics.csv", "metrics.png", "trajectory.za
                     "initial.npz", "final.npz", "snapshots.png", "checkpoints", "analysis")
 #: what ``rodwarp analyze`` writes in its folder
 ANALYZE_OUTPUTS = ("fields.zarr", "summary.json", "rods.npz", "histograms.png", "slices.png", "zprofiles.png",
-                   "tangles.png")
+                   "tangles.png", "distributions.png")
 #: outputs only a simulation writes (an analysis never replaces a folder holding them)
 _SIMULATION_ONLY = ("final.npz", "trajectory.zarr", "metrics.csv", "checkpoints")
 #: subfolders whose hidden temporary files are cleaned too
