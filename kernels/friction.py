@@ -265,6 +265,21 @@ def prepare_rod_contacts(
 
 
 @wp.func
+def rod_contact_exact(f: ContactFrame, P: wp.vec3d, n: wp.vec3d, mu: wp.float64, v: wp.array(dtype=wp.vec3d),
+                      spin: wp.array(dtype=wp.float64)):
+    """The exact local impulse of a rod-rod contact (frame ``f``, impulse ``P``, normal ``n``)
+    against the current velocities, the other contacts held fixed."""
+    return solve_local(side_velocity(f.a, v, spin) - side_velocity(f.b, v, spin), f, n, P, mu)
+
+
+@wp.func
+def wall_contact_exact(f: ContactFrame, P: wp.vec3d, walls: Walls, p: int, v: wp.array(dtype=wp.vec3d),
+                       spin: wp.array(dtype=wp.float64)):
+    """``rod_contact_exact`` for a wall contact with wall p (frame side ``a`` the rod's)."""
+    return solve_local(side_velocity(f.a, v, spin) - wall_velocity(walls, p), f, walls.normal[p], P, walls.mu[p])
+
+
+@wp.func
 def solve_rod_contact(
     k: int,
     frames: wp.array(dtype=ContactFrame),
@@ -278,10 +293,9 @@ def solve_rod_contact(
     returns the velocity change it caused (m/s). Takes the arrays it reads rather than the model and contact bundles:
     the innermost call of every sweep, so nothing else is copied."""
     f = frames[k]
-    u = side_velocity(f.a, v, spin) - side_velocity(f.b, v, spin)
     P = impulse[k]
     n = normal[k]
-    P_new = relaxed(solve_local(u, f, n, P, params.mu), P, n, params.mu, params.relax)
+    P_new = relaxed(rod_contact_exact(f, P, n, params.mu, v, spin), P, n, params.mu, params.relax)
     dP = P_new - P
     side_apply(f.a, dP, v, spin)
     side_apply(f.b, -dP, v, spin)
@@ -459,11 +473,8 @@ def solve_rod_walls(
         k = contacts.key[j]
         p = k % walls.n
         f = contacts.frames[j]
-        n = walls.normal[p]
-        mu = walls.mu[p]
-        u = side_velocity(f.a, v, spin) - wall_velocity(walls, p)
         P = contacts.impulse[k]
-        P_new = relaxed(solve_local(u, f, n, P, mu), P, n, mu, params.relax)
+        P_new = relaxed(wall_contact_exact(f, P, walls, p, v, spin), P, walls.normal[p], walls.mu[p], params.relax)
         dP = P_new - P
         side_apply(f.a, dP, v, spin)
         contacts.impulse[k] = P_new
@@ -583,16 +594,13 @@ def rod_contact_residual(
     residual: wp.array(dtype=wp.float64),
 ):
     """Per rod-rod contact, read only: the velocity change (m/s) its exact local solve would
-    make against the current velocities (the Gauss-Seidel residual of every contact, solved
-    or skipped)."""
+    make against the current velocities (the Gauss-Seidel residual of every contact)."""
     k = wp.tid()
     if k >= count:
         return
     f = frames[k]
-    u = side_velocity(f.a, v, spin) - side_velocity(f.b, v, spin)
     P = impulse[k]
-    dP = solve_local(u, f, normal[k], P, params.mu) - P
-    wp.atomic_max(residual, 0, wp.length(f.W * dP))
+    wp.atomic_max(residual, 0, wp.length(f.W * (rod_contact_exact(f, P, normal[k], params.mu, v, spin) - P)))
 
 
 @wp.kernel
@@ -608,9 +616,6 @@ def wall_contact_residual(
     if j >= contacts.n_frames[0]:
         return
     k = contacts.key[j]
-    p = k % walls.n
     f = contacts.frames[j]
-    u = side_velocity(f.a, v, spin) - wall_velocity(walls, p)
     P = contacts.impulse[k]
-    dP = solve_local(u, f, walls.normal[p], P, walls.mu[p]) - P
-    wp.atomic_max(residual, 0, wp.length(f.W * dP))
+    wp.atomic_max(residual, 0, wp.length(f.W * (wall_contact_exact(f, P, walls, k % walls.n, v, spin) - P)))
