@@ -3,7 +3,9 @@
 import math
 
 import numpy as np
+import pytest
 
+from rodwarp.errors import RodwarpError
 from rodwarp.rodset import RodSet
 from rodwarp.sim import STEEL, Model, RodSolver, State
 from rodwarp.testing.scenes import log_cabin, straight_rod
@@ -97,6 +99,8 @@ def test_wall_contacts_beyond_the_first_frame_list_are_all_solved():
     model = Model(rods, STEEL, gravity=(0, 0, -G), mu=0.3)
     model.add_plane((0, 0, 1), 0.0, name="floor")
     solver = RodSolver(model)
+    with pytest.raises(RodwarpError, match="call step"):
+        solver.full_residual(model.state())
     assert solver._wall_frames.shape[0] < 60
     control = model.control()
     state, dts, infos = advance(solver, model.state(), control, 200)

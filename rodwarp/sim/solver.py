@@ -564,6 +564,8 @@ class RodSolver(StepBounds):
         """Largest velocity change (m/s) one more exact local solve of any contact, rod-rod or
         wall, would make after the last :meth:`step` (which wrote ``state_out``): the
         residual of every contact (the step itself reports only its last sweep's largest change)."""
+        if self._last_solve is None:
+            raise RodwarpError("full_residual measures the last step: call step() first")
         contacts, params, walls = self._last_solve
         m = self.model
         out = wp.zeros(1, dtype=wp.float64, device=m.device)
