@@ -38,7 +38,7 @@ _WHERE = {
     "gauss_linking": "_acn", "linking_number": "_acn", "average_crossing_number": "_acn",
     # statistics
     "field_statistics": "_stats", "outlier_bound": "_stats", "find_tangles": "_stats", "histogram": "_stats",
-    "power_law_fit": "_stats", "power_law_density": "_stats",
+    "power_law_fit": "_stats", "power_law_density": "_stats", "log_histogram": "_stats",
     "z_profiles": "_stats",
     # figures
     "plot_histograms": "_figures", "plot_slices": "_figures", "plot_zprofiles": "_figures",

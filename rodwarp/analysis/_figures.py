@@ -23,7 +23,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import NullFormatter
 
 from rodwarp.analysis._registry import field_spec, fields_with
-from rodwarp.analysis._stats import field_statistics, find_tangles, power_law_density, z_profiles
+from rodwarp.analysis._stats import field_statistics, find_tangles, log_histogram, power_law_density, z_profiles
 from rodwarp.rodset.files import save_figure
 
 __all__ = ["plot_histograms", "plot_slices", "plot_zprofiles", "plot_tangles"]
@@ -373,23 +373,15 @@ def plot_distributions(fields, stats: dict, path) -> Path:
     axs = fig.subplots(1, 2, gridspec_kw=_GRID)
     for ax, name in zip(axs, ("e", "c")):
         a = fields.get(name)
-        v = a[fields.valid & np.isfinite(a)]
-        v = v[v > 0]
-        if v.size < 2 or v.max() <= v.min():
+        h = log_histogram(a[fields.valid & np.isfinite(a)])
+        if h is None:
             _not_available(ax, _label(name))
             continue
-        edges = np.geomspace(v.min(), v.max(), 30)
-        counts, _ = np.histogram(v, bins=edges)
-        dens = counts / (v.size * np.diff(edges))
-        mid = np.sqrt(edges[1:] * edges[:-1])
-        ok = dens > 0
-        ax.loglog(mid[ok], dens[ok], "o", ms=3, color="C0", label=f"p({_symbol(name)})")
+        ax.loglog(h["x"], h["density"], "o", ms=3, color="C0", label=f"p({_symbol(name)})")
         fit = (stats.get("power_law") or {}).get(name)
         if fit:
             x = np.geomspace(fit["xmin"], fit["xmax"], 20)
-            # the tail's density: (gamma - 1) / xmin (x / xmin)^-gamma, times the tail's share
-            y = power_law_density(x, fit)
-            ax.loglog(x, y, "-", color="C3",
+            ax.loglog(x, power_law_density(x, fit), "-", color="C3",
                       label=f"gamma = {fit['gamma']:.2f} +- {fit['gamma_err']:.2f} over {fit['decades']:.2f} dec.")
         ax.set_xlabel(_label(name))
         ax.set_ylabel("density")

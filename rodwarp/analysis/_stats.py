@@ -27,7 +27,7 @@ from rodwarp.analysis._registry import fields_with
 from rodwarp.errors import RodwarpError
 
 __all__ = ["outlier_bound", "find_tangles", "histogram", "z_profiles", "field_statistics", "power_law_fit",
-           "power_law_density",
+           "power_law_density", "log_histogram",
            "AXES"]
 
 AXES = ("x", "y", "z")
@@ -344,6 +344,26 @@ def power_law_fit(values, *, min_range: int = 50, candidates: int = 24) -> dict 
     return {"gamma": g, "gamma_err": float((abs(g - 1.0) + 1.0) / np.sqrt(m)), "xmin": float(a), "xmax": float(b),
             "decades": decades, "n_range": int(m), "range_fraction": float(m / n), "ks": ks, "accepted": bool(ok),
             "note": note}
+
+
+def log_histogram(values, bins: int = 30) -> dict | None:
+    """Density of the positive finite values in log-spaced bins (for log-log plots).
+
+    Returns
+    -------
+    dict or None
+        ``x`` (geometric bin centres) and ``density`` (counts / (n * bin width), in 1 / units
+        of ``values``) of the non-empty bins; None with fewer than two distinct positive values.
+    """
+    v = np.asarray(values, dtype=np.float64).ravel()
+    v = v[np.isfinite(v) & (v > 0)]
+    if v.size < 2 or v.max() <= v.min():
+        return None
+    edges = np.geomspace(v.min(), v.max(), bins)
+    counts, _ = np.histogram(v, bins=edges)
+    dens = counts / (v.size * np.diff(edges))
+    ok = dens > 0
+    return {"x": np.sqrt(edges[1:] * edges[:-1])[ok], "density": dens[ok]}
 
 
 def power_law_density(x, fit: dict) -> np.ndarray:

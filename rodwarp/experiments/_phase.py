@@ -206,6 +206,7 @@ def _timeseries_figure(out: Path, key, rows, path: Path) -> Path | None:
     fig, axs = plt.subplots(1, 3, figsize=(13, 3.8))
     has_cv = False
     t_test = None
+    labelled = set()
     for a, m in series:
         colour = cmap(alphas.index(a) / max(len(alphas) - 1, 1))
         t = [float(x["time"]) for x in m]
@@ -214,8 +215,10 @@ def _timeseries_figure(out: Path, key, rows, path: Path) -> Path | None:
             if col == "cv_e":
                 has_cv = has_cv or bool(pts)
             if pts:
-                ax.plot(*zip(*pts), color=colour, lw=1, marker="o" if col == "cv_e" else None, ms=2,
-                        label=f"alpha = {a:g}" if ax is axs[0] and m is next(s for b, s in series if b == a) else None)
+                label = f"alpha = {a:g}" if ax is axs[0] and a not in labelled else None
+                if label:
+                    labelled.add(a)
+                ax.plot(*zip(*pts), color=colour, lw=1, marker="o" if col == "cv_e" else None, ms=2, label=label)
         st = [float(x["time"]) for x in m if x["stage"] == "stability"]
         if st and any(x["stage"] == "entangle" for x in m):
             t_test = min(st)
@@ -243,7 +246,7 @@ def _distributions_figure(out: Path, key, rows, path: Path):
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from rodwarp.analysis import Fields, power_law_density, power_law_fit
+    from rodwarp.analysis import Fields, log_histogram, power_law_density, power_law_fit
 
     pooled: dict = {}
     for r in rows:
@@ -270,18 +273,15 @@ def _distributions_figure(out: Path, key, rows, path: Path):
                           "seeds": len(pooled[a][name]), "voxels": int(v.size),
                           **({k: fit[k] for k in ("gamma", "gamma_err", "xmin", "xmax", "decades", "n_range", "ks",
                                                   "accepted", "note")} if fit else {"note": "too few values"})})
-            if v.size < 2 or v.max() <= v.min():
+            h = log_histogram(v)
+            if h is None:
                 continue
-            edges = np.geomspace(v.min(), v.max(), 30)
-            counts, _ = np.histogram(v, bins=edges)
-            dens = counts / (v.size * np.diff(edges))
-            ok = dens > 0
             label = f"alpha = {a:g}"
             if fit:
                 label += f": gamma = {fit['gamma']:.2f} ({fit['decades']:.1f} dec.)"
                 x = np.geomspace(fit["xmin"], fit["xmax"], 20)
                 ax.loglog(x, power_law_density(x, fit), "-", color=colour, lw=1.5, alpha=0.6)
-            ax.loglog(np.sqrt(edges[1:] * edges[:-1])[ok], dens[ok], "o", ms=3, color=colour, label=label)
+            ax.loglog(h["x"], h["density"], "o", ms=3, color=colour, label=label)
     for ax, name in zip(axs, ("e (ACN per ball)", "c (contacts per ball)")):
         ax.set_xlabel(name)
         ax.set_ylabel("density")
