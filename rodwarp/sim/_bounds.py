@@ -80,6 +80,15 @@ class StepBounds:
         """Free-fall speed over the scene height plus the drive's peak speed (m/s)."""
         m = self.model
         control = self._control(control)
+        # a property of the model and the drive alone, read every step: computed once per drive
+        key = (control.drive.peak_speed, None if m.box is None else m.box.tobytes(), tuple(m.gravity))
+        cache = self.__dict__.setdefault("_char_speed", {})
+        if key not in cache:
+            cache[key] = self._characteristic_speed(control)
+        return cache[key]
+
+    def _characteristic_speed(self, control) -> float:
+        m = self.model
         bb = m.box if m.box is not None else m.rods.bounding_box()
         g = float(np.linalg.norm(m.gravity))
         # the fall height is the scene's extent along gravity, not its widest side
