@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import math
 from pathlib import Path
 
@@ -458,15 +459,21 @@ def _alpha_star_figure(rows, table: list[dict], path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(5.5, 4))
     amin = min(r["alpha"] for r in rows)
     amax = max(r["alpha"] for r in rows)
-    for j, s in enumerate(sorted({r["static_load"] for r in rows})):
-        sel = [t for t in table if t["static_load"] == s]
+    gravities = sorted({t["gravity"] for t in table})
+    styles = ("o-", "s--", "^:", "D-.")
+    loads = sorted({r["static_load"] for r in rows})
+    # one line per static load and gravity: a/g alone does not make two gravities one curve
+    for (j, s), (m, g) in itertools.product(enumerate(loads), enumerate(gravities)):
+        sel = sorted((t for t in table if t["static_load"] == s and t["gravity"] == g), key=lambda t: t["a_over_g"])
+        if not sel:
+            continue
         col = f"C{j}"
-        lab = f"F~ = {s:g}"
+        lab = f"F~ = {s:g}" + (f", g = {g:g}" if len(gravities) > 1 else "")
         pts_ = [t for t in sel if t["alpha_star"] is not None]
         if pts_:
             yerr = [max(t["err"] or 0, t["boot_std"] or 0) for t in pts_]
-            ax.errorbar([t["a_over_g"] for t in pts_], [t["alpha_star"] for t in pts_], yerr=yerr, fmt="o-",
-                        color=col, capsize=3, label=lab)
+            ax.errorbar([t["a_over_g"] for t in pts_], [t["alpha_star"] for t in pts_], yerr=yerr,
+                        fmt=styles[m % len(styles)], color=col, capsize=3, label=lab)
             lab = None
         below = [t for t in sel if t["alpha_star"] is None and t["bracket_hi"] is not None]
         above = [t for t in sel if t["alpha_star"] is None and t["bracket_lo"] is not None]
