@@ -263,3 +263,19 @@ def test_phase_diagram_draws_the_points_time_series_and_distributions(tmp_path):
     table = list(csv.DictReader(open(tmp_path / "power_law.csv")))
     fits = [t for t in table if t["field"] == "e"]
     assert fits and all(abs(float(t["gamma"]) - 1.5) < 0.15 for t in fits)
+
+
+def test_sweep_set_reads_each_value_as_its_parameter_type():
+    from rodwarp.cli import _overrides
+    from rodwarp.errors import RodwarpError
+
+    got = _overrides(["rod_model=rigid", "rolling=false", "iterations=6", "step-safety=0.5", "dt=none"])
+    assert got == {"rod_model": "rigid", "rolling": False, "iterations": 6, "step_safety": 0.5, "dt": None}
+    assert type(got["iterations"]) is int and type(got["step_safety"]) is float
+    for bad, msg in (("rod_modl=rigid", "no such simulate parameter"), ("rolling=maybe", "not a valid bool"),
+                     ("iterations=six", "not a valid int"), ("iterations", "needs KEY=VALUE")):
+        with pytest.raises(RodwarpError, match=msg):
+            _overrides([bad])
+    # the overrides reach every point of the grid
+    spec = SweepSpec(alphas=[25.0], freqs=[10.0], seeds=[0, 1], overrides=got)
+    assert all(p["rod_model"] == "rigid" and p["rolling"] is False for p in points(spec))
