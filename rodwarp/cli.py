@@ -359,6 +359,41 @@ def _floats(text: str, name: str) -> list[float]:
     return vals
 
 
+def _overrides(items: list[str]) -> dict:
+    """``--set KEY=VALUE`` items as ProtocolParams overrides, each VALUE read as its field's type."""
+    import dataclasses
+
+    from rodwarp.errors import RodwarpError
+    from rodwarp.experiments import ProtocolParams
+
+    types = {f.name: f.type for f in dataclasses.fields(ProtocolParams)}
+    out = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        key = key.strip().replace("-", "_")
+        if not sep or not key:
+            raise RodwarpError(f"--set needs KEY=VALUE, got '{item}'; e.g. --set rod_model=rigid")
+        if key not in types:
+            raise RodwarpError(f"--set {key}: no such simulate parameter; see `rodwarp simulate --help`")
+        kind = str(types[key])
+        text = text.strip()
+        try:
+            if "bool" in kind:
+                if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                    raise ValueError
+                value = text.lower() in ("true", "1", "yes")
+            elif "int" in kind and "float" not in kind:
+                value = int(text)
+            elif "float" in kind:
+                value = None if text.lower() == "none" and "None" in kind else float(text)
+            else:
+                value = text
+        except ValueError:
+            raise RodwarpError(f"--set {key}={text}: not a valid {kind.replace(' | None', '')}") from None
+        out[key] = value
+    return out
+
+
 @app.command(epilog="Example: rodwarp sweep --alpha 25,50,100 --freq 1,10 --seeds 2 --out runs/sweep   "
                      "(exit 4 when any point failed)")
 @_friendly
@@ -378,6 +413,9 @@ def sweep(
     device: str = _swp("device"),
     figures: bool = typer.Option(True, help="Draw the phase diagram at the end."),
     quiet: bool = typer.Option(False, help="No progress bar."),
+    set_: Optional[list[str]] = typer.Option(None, "--set", help="Any other simulate parameter for every point, "
+                                             "KEY=VALUE (repeatable; the names of `rodwarp simulate`'s options "
+                                             "with underscores), e.g. --set rod_model=rigid --set rolling=false."),
 ):
     """Parameter sweep: simulate + analyze per point on Dask; results.csv, then the phase diagram."""
     from rodwarp import validation as v
@@ -391,7 +429,8 @@ def sweep(
                      seeds=list(range(seeds)), entangle_duration=entangle_duration, duration=duration,
                      amplitude=amplitude, device=device,
                      # only when changed: rows of sweeps run before this option still match their points
-                     overrides={} if save_every == _P["save_every"][0] else {"save_every": save_every})
+                     overrides={**({} if save_every == _P["save_every"][0] else {"save_every": save_every}),
+                                **_overrides(set_ or [])})
     path = run_sweep(spec, out, scheduler=scheduler, workers=workers, progress=not quiet)
     import json
 

@@ -7,6 +7,15 @@ class RodwarpError(ValueError):
     """Bad input or an impossible request: the message says what is wrong and how to fix it."""
 
 
+class StepTooLarge(RodwarpError):
+    """A step above the scene's step bound at the speeds it starts from; ``bound`` (s) is the
+    largest step the guard accepts. :meth:`rodwarp.sim.RodSolver.adaptive_step` retries it shorter."""
+
+    def __init__(self, message: str, bound: float):
+        super().__init__(message)
+        self.bound = bound
+
+
 class SimulationBlowUp(RuntimeError):
     """A run became unphysical (NaN, runaway speed, deep penetration).
 

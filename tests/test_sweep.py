@@ -148,6 +148,31 @@ def test_phase_diagram_from_synthetic(tmp_path):
         assert float(t["bracket_lo"]) == 50 and float(t["bracket_hi"]) == 100
 
 
+def test_static_loads_give_alpha_star_per_load_and_its_figure(tmp_path):
+    """A load that brings down half the alpha-50 seeds moves alpha* up, from between 25 and 50 to 50."""
+    rows = []
+    for F in (0.0, 5.0):
+        for a in (25, 50, 100):
+            for seed in (0, 1):
+                stable = a == 100 or (a == 50 and (F == 0.0 or seed == 1))
+                rows.append({"id": f"a{a}_F{F}_s{seed}", "alpha": a, "freq": 10.0, "gravity": 0.5, "static_load": F,
+                             "seed": seed, "amplitude": 0.001, "a_over_g": 7.9, "largest_cluster_fraction": 0.9,
+                             "contacts_per_rod": 3.0, "cv_e": 1.0, "height_kept": 0.5 if stable else 0.1,
+                             "persistence": 1.0 if stable else 0.3, "rods_left": 0.0, "stable": stable, "status": "ok"})
+    with open(tmp_path / "results.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    names = {p.name for p in phase_diagram(tmp_path)}
+    assert "phase_alpha_star_load.png" in names
+    assert (tmp_path / "phase_alpha_star_load.png").stat().st_size > 1000
+    table = {float(t["static_load"]): t for t in csv.DictReader(open(tmp_path / "alpha_star.csv"))}
+    # no load: every alpha 50 stands, alpha 25 falls: alpha* between them
+    assert float(table[0.0]["bracket_lo"]) == 25 and float(table[0.0]["bracket_hi"]) == 50
+    # F~ = 5: half the alpha-50 seeds stand: alpha* = 50 exactly, bracketed by 25 and 100
+    assert float(table[5.0]["alpha_star"]) == pytest.approx(50.0)
+
+
 def test_alpha_star_bounds():
     rows = [{"alpha": a, "ag": 1.0, "gravity": 0.5, "static_load": 0.0, "largest_cluster_fraction": 0.9,
              "stable": True} for a in (25, 50)]
@@ -238,3 +263,19 @@ def test_phase_diagram_draws_the_points_time_series_and_distributions(tmp_path):
     table = list(csv.DictReader(open(tmp_path / "power_law.csv")))
     fits = [t for t in table if t["field"] == "e"]
     assert fits and all(abs(float(t["gamma"]) - 1.5) < 0.15 for t in fits)
+
+
+def test_sweep_set_reads_each_value_as_its_parameter_type():
+    from rodwarp.cli import _overrides
+    from rodwarp.errors import RodwarpError
+
+    got = _overrides(["rod_model=rigid", "rolling=false", "iterations=6", "step-safety=0.5", "dt=none"])
+    assert got == {"rod_model": "rigid", "rolling": False, "iterations": 6, "step_safety": 0.5, "dt": None}
+    assert type(got["iterations"]) is int and type(got["step_safety"]) is float
+    for bad, msg in (("rod_modl=rigid", "no such simulate parameter"), ("rolling=maybe", "not a valid bool"),
+                     ("iterations=six", "not a valid int"), ("iterations", "needs KEY=VALUE")):
+        with pytest.raises(RodwarpError, match=msg):
+            _overrides([bad])
+    # the overrides reach every point of the grid
+    spec = SweepSpec(alphas=[25.0], freqs=[10.0], seeds=[0, 1], overrides=got)
+    assert all(p["rod_model"] == "rigid" and p["rolling"] is False for p in points(spec))

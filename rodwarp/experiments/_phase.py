@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import math
 from pathlib import Path
 
@@ -137,7 +138,9 @@ def phase_diagram(out) -> list[Path]:
     a/g), ``phase_verdict_alpha.png`` (height kept and persistence against alpha, the verdict's
     thresholds drawn), ``phase_f_ag.png`` (Fig. 4I: f against a/g for each alpha and static load),
     ``alpha_star.csv`` and ``phase_alpha_star.png`` (alpha* against a/g with its uncertainty),
-    and from each point's own files: ``phase_timeseries*.png`` (Fig. 4C-D: Z(t), f(t) and
+    ``phase_alpha_star_load.png`` when the sweep has several static loads (alpha* against F~ at
+    each a/g, with the persistence of every alpha: Fig. 4I's question, does a load move the
+    transition), and from each point's own files: ``phase_timeseries*.png`` (Fig. 4C-D: Z(t), f(t) and
     cv_e(t) per alpha, from its metrics.csv) and ``phase_distributions*.png`` with
     ``power_law.csv`` (Fig. 4E-F: p(e) and p(c) per alpha, pooled over seeds, and their fitted
     power-law tails, from its analysis/fields.zarr); one of each per (a/g, g, F~) group, the
@@ -158,6 +161,8 @@ def phase_diagram(out) -> list[Path]:
     table = alpha_star(rows)
     written.append(_write_table(table, out / "alpha_star.csv"))
     written.append(_alpha_star_figure(rows, table, out / "phase_alpha_star.png"))
+    if len({t["static_load"] for t in table}) > 1:
+        written.append(_alpha_star_load_figure(rows, table, out / "phase_alpha_star_load.png"))
     groups: dict = {}
     for r in rows:
         groups.setdefault((r["ag"], r["gravity"], r["static_load"]), []).append(r)
@@ -454,15 +459,21 @@ def _alpha_star_figure(rows, table: list[dict], path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(5.5, 4))
     amin = min(r["alpha"] for r in rows)
     amax = max(r["alpha"] for r in rows)
-    for j, s in enumerate(sorted({r["static_load"] for r in rows})):
-        sel = [t for t in table if t["static_load"] == s]
+    gravities = sorted({t["gravity"] for t in table})
+    styles = ("o-", "s--", "^:", "D-.")
+    loads = sorted({r["static_load"] for r in rows})
+    # one line per static load and gravity: a/g alone does not make two gravities one curve
+    for (j, s), (m, g) in itertools.product(enumerate(loads), enumerate(gravities)):
+        sel = sorted((t for t in table if t["static_load"] == s and t["gravity"] == g), key=lambda t: t["a_over_g"])
+        if not sel:
+            continue
         col = f"C{j}"
-        lab = f"F~ = {s:g}"
+        lab = f"F~ = {s:g}" + (f", g = {g:g}" if len(gravities) > 1 else "")
         pts_ = [t for t in sel if t["alpha_star"] is not None]
         if pts_:
             yerr = [max(t["err"] or 0, t["boot_std"] or 0) for t in pts_]
-            ax.errorbar([t["a_over_g"] for t in pts_], [t["alpha_star"] for t in pts_], yerr=yerr, fmt="o-",
-                        color=col, capsize=3, label=lab)
+            ax.errorbar([t["a_over_g"] for t in pts_], [t["alpha_star"] for t in pts_], yerr=yerr,
+                        fmt=styles[m % len(styles)], color=col, capsize=3, label=lab)
             lab = None
         below = [t for t in sel if t["alpha_star"] is None and t["bracket_hi"] is not None]
         above = [t for t in sel if t["alpha_star"] is None and t["bracket_lo"] is not None]
@@ -477,3 +488,55 @@ def _alpha_star_figure(rows, table: list[dict], path: Path) -> Path:
     ax.set_yscale("log")
     return _finish(fig, ax, path, xlabel="a/g", ylabel="critical aspect ratio alpha* (half the seeds stable)",
                    ylim=(amin / 1.5, amax * 1.5), title="critical aspect ratio")
+
+
+def _alpha_star_load_figure(rows, table: list[dict], path: Path) -> Path:
+    """alpha* against the static load F~ (left) and the persistence against F~ per alpha (right)."""
+    import matplotlib.pyplot as plt
+
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4))
+    groups = sorted({(t["a_over_g"], t["gravity"]) for t in table})
+    amin = min(r["alpha"] for r in rows)
+    amax = max(r["alpha"] for r in rows)
+    for j, (ag, g) in enumerate(groups):
+        sel = sorted((t for t in table if t["a_over_g"] == ag and t["gravity"] == g), key=lambda t: t["static_load"])
+        pts_ = [t for t in sel if t["alpha_star"] is not None]
+        if pts_:
+            yerr = [max(t["err"] or 0, t["boot_std"] or 0) for t in pts_]
+            ax.errorbar([t["static_load"] for t in pts_], [t["alpha_star"] for t in pts_], yerr=yerr, fmt="o-",
+                        color=f"C{j}", capsize=3, label=f"a/g = {ag:.3g}, g = {g:g}")
+    ax.axhline(100, ls="--", color="0.5", lw=0.8, label="paper: alpha* ~ 100 at a/g ~ 1")
+    ax.set_yscale("log")
+    top = max(amax * 1.5, 150.0)  # the paper's alpha* stays in view
+    ax.set_ylim(amin / 1.5, top)
+    ax.set_xlabel("static load F~ (rod weights)")
+    ax.set_ylabel("alpha* (half the seeds stable)")
+    ax.set_title("critical aspect ratio against static load", fontsize=9)
+    ax.legend(fontsize=7)
+    for k, a in enumerate(sorted({r["alpha"] for r in rows})):
+        sel = [r for r in rows if r["alpha"] == a and r.get("persistence") is not None]
+        if not sel:
+            continue
+        loads = sorted({r["static_load"] for r in sel})
+        mean = [sum(r["persistence"] for r in sel if r["static_load"] == s)
+                / len([r for r in sel if r["static_load"] == s]) for s in loads]
+        bx.scatter([r["static_load"] for r in sel], [r["persistence"] for r in sel], color=f"C{k}", s=12, alpha=0.6)
+        bx.plot(loads, mean, "-", color=f"C{k}", label=f"alpha = {a:g}")
+    all_loads = sorted({r["static_load"] for r in rows})
+    for axis in (ax, bx):
+        axis.set_xscale("symlog", linthresh=0.5)
+        axis.set_xlim(-0.15, 1.5 * max(all_loads))
+        axis.set_xticks(all_loads)
+        axis.set_xticklabels([f"{s:g}" for s in all_loads])
+        axis.minorticks_off()
+    ax.set_yticks([t for t in (10, 20, 30, 50, 100, 200, 300) if amin / 1.5 <= t <= top])
+    ax.set_yticklabels([f"{t:g}" for t in ax.get_yticks()])
+    bx.set_ylim(0, 1.05)
+    bx.set_xlabel("static load F~ (rod weights)")
+    bx.set_ylabel("persistence tau (seeds; line: mean)")
+    bx.set_title("how long each alpha stays entangled under load", fontsize=9)
+    bx.legend(fontsize=7)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=DPI)
+    plt.close(fig)
+    return path

@@ -458,7 +458,12 @@ class Model:
     # ------------------------------------------------------------------ scene scales
     @property
     def min_diameter(self) -> float:
-        return float(2 * self.radius_np.min())
+        """Diameter of the thinnest rod (m)."""
+        # read several times per step; the radii are fixed once the model is built
+        d = getattr(self, "_min_diameter", None)
+        if d is None:
+            d = self._min_diameter = float(2 * self.radius_np.min())
+        return d
 
     def total_mass(self) -> float:
         return float(self.mass_np.sum() + 2.0 * self.cross_mass_np.sum())

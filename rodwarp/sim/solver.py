@@ -55,6 +55,8 @@ class StepInfo:
         0 for a fully converged solve.
     stretch_residual : float
         Largest edge-length error (m) before the last stretch projection.
+    max_overlap : float
+        Deepest rod-rod overlap at the end of the step (m); 0 when no rods touch.
     """
 
     step: int
@@ -66,6 +68,7 @@ class StepInfo:
     stretch_residual: float
     max_speed: float
     theta: float
+    max_overlap: float = 0.0
 
 
 class RodSolver(StepBounds):
@@ -434,6 +437,7 @@ class RodSolver(StepBounds):
                 state_out.x, self.contacts.gap_check, self._scalar[2:3]])
         sc = self._scalar.numpy()
         vmax_out = float(sc[0])
+        depth = float(sc[2]) if n_contacts else 0.0
         if check:
             if sc[1] != 0.0:
                 raise self._blowup(state_in, dt, theta, "non-finite velocity", control)
@@ -441,13 +445,12 @@ class RodSolver(StepBounds):
             if vmax_out > limit:
                 raise self._blowup(state_in, dt, theta, f"speed {vmax_out:.3g} m/s above the limit {limit:.3g} m/s",
                                    control)
-            depth = float(sc[2])
             if depth > self.penetration_limit * m.min_diameter:
                 raise self._blowup(state_in, dt, theta, f"rods overlap by {depth / m.min_diameter:.2f} d", control)
             if self.energy_check_every and state_out.step_index % self.energy_check_every == 0:
                 self._check_energy(state_in, state_out, dt, theta, control)
         info = StepInfo(state_out.step_index, state_out.time, dt, used, n_contacts,
-                        float(res), float(sres), vmax_out, theta)
+                        float(res), float(sres), vmax_out, theta, max(depth, 0.0))
         self.last_info = info
         return info
 
