@@ -160,14 +160,15 @@ def test_outcome_at_the_adaptive_step_matches_a_ten_times_finer_fixed_step():
 
 
 def test_the_step_shrinks_while_rods_overlap():
-    """Above 0.05 d of overlap the safety shrinks in proportion, to a quarter at most."""
+    """Above OVERLAP_TARGET diameters the safety shrinks in proportion, to a quarter at most."""
     model = cabin()
     solver = RodSolver(model)
     control = model.control()
     d = model.min_diameter
+    target = solver.OVERLAP_TARGET * d
     v = 10.0  # the speed bound (2 ms), not gravity's (4.5 ms), sets the step here
     free = solver.adaptive_dt(control, v)
-    assert free == solver.adaptive_dt(control, v, overlap=0.0) == solver.adaptive_dt(control, v, overlap=0.04 * d)
-    assert abs(solver.adaptive_dt(control, v, overlap=0.1 * d) - 0.5 * free) < 1e-12 * free
+    assert free == solver.adaptive_dt(control, v, overlap=0.0) == solver.adaptive_dt(control, v, overlap=0.8 * target)
+    assert abs(solver.adaptive_dt(control, v, overlap=2.0 * target) - 0.5 * free) < 1e-12 * free
     assert abs(solver.adaptive_dt(control, v, overlap=1.0 * d) - 0.25 * free) < 1e-12 * free
     assert abs(free - d / (v + 1e-3)) < 1e-9 * free  # safety 1: one diameter per step

@@ -80,7 +80,7 @@ class ProtocolParams:
                                     "or elastic.")
     step_safety: float = _param(1.0, "Adaptive step: the fastest rod crosses at most this many diameters per step "
                                      "(1: the knee of the effort benchmark; the step also shrinks while rods "
-                                     "overlap by more than 0.05 d; ignored with --dt).")
+                                     "overlap by more than 0.02 d; ignored with --dt).")
     rolling: bool = _param(True, "Rods spin about their axes; --no-rolling locks the spin (friction on the "
                                  "centreline only).")
     save_every: float = _param(0.1, "Metrics and frame interval (s of simulated time).", "save")
