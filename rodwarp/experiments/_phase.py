@@ -517,9 +517,7 @@ def _alpha_star_load_figure(rows, table: list[dict], path: Path) -> Path:
         sel = [r for r in rows if r["alpha"] == a and r.get("persistence") is not None]
         if not sel:
             continue
-        loads = sorted({r["static_load"] for r in sel})
-        mean = [sum(r["persistence"] for r in sel if r["static_load"] == s)
-                / len([r for r in sel if r["static_load"] == s]) for s in loads]
+        loads, mean, _ = _mean_by(sel, "static_load", "persistence")
         bx.scatter([r["static_load"] for r in sel], [r["persistence"] for r in sel], color=f"C{k}", s=12, alpha=0.6)
         bx.plot(loads, mean, "-", color=f"C{k}", label=f"alpha = {a:g}")
     all_loads = sorted({r["static_load"] for r in rows})

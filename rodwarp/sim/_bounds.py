@@ -30,7 +30,8 @@ class StepBounds:
     """The step bounds, default and adaptive steps and the step guard of :class:`RodSolver`.
 
     A mixin: the solver provides ``model``, ``bending``, ``guard_factor``, ``allow_unstable``,
-    ``_eb_dt`` (the cached explicit-bending bound) and ``_control(control)``.
+    ``_eb_dt`` (the cached explicit-bending bound), ``_char_speed`` (a dict: the cached
+    characteristic speed per drive) and ``_control(control)``.
     """
 
     def explicit_bending_dt(self) -> float:
@@ -82,10 +83,9 @@ class StepBounds:
         control = self._control(control)
         # a property of the model and the drive alone, read every step: computed once per drive
         key = (control.drive.peak_speed, None if m.box is None else m.box.tobytes(), tuple(m.gravity))
-        cache = self.__dict__.setdefault("_char_speed", {})
-        if key not in cache:
-            cache[key] = self._characteristic_speed(control)
-        return cache[key]
+        if key not in self._char_speed:
+            self._char_speed[key] = self._characteristic_speed(control)
+        return self._char_speed[key]
 
     def _characteristic_speed(self, control) -> float:
         m = self.model

@@ -172,6 +172,7 @@ class RodSolver(StepBounds):
         self._speed_limit = speed_limit
         self._v_elastic = None
         self._eb_dt = None
+        self._char_speed: dict = {}
         self._last_mech = None
         self.energy_check_every = int(energy_check_every)
         self._default_control = None
