@@ -41,6 +41,53 @@ def max_displacement(x: wp.array(dtype=wp.vec3d), x_ref: wp.array(dtype=wp.vec3d
     wp.atomic_max(out, 0, wp.length(x[i] - x_ref[i]))
 
 
+@wp.func
+def within_reach(
+    sa: int,
+    sb: int,
+    mid: wp.array(dtype=wp.vec3),
+    seg_vertex: wp.array(dtype=wp.int32),
+    vertex_rod: wp.array(dtype=wp.int32),
+    rod_radius: wp.array(dtype=wp.float64),
+    arc: wp.array(dtype=wp.float64),
+    x: wp.array(dtype=wp.vec3d),
+    r2: float,
+    margin: wp.float64,
+):
+    """Whether segments sa and sb belong in the Verlet list: capsule gap below ``margin``.
+
+    Two segments of one rod less than a diameter of arc length apart never form a contact:
+    they could touch only if the rod bent to a radius below its own, and with edges shorter
+    than a diameter they overlap in the rod's rest shape (the pair would push the rod apart
+    along its own axis)."""
+    # the grid returns whole cells, most of them out of reach
+    dm = mid[sb] - mid[sa]
+    if wp.dot(dm, dm) > r2:
+        return False
+    ia = seg_vertex[sa]
+    ib = seg_vertex[sb]
+    ra = vertex_rod[ia]
+    rb = vertex_rod[ib]
+    if rb == ra:
+        lo = wp.min(ia, ib)
+        hi = wp.max(ia, ib)
+        # the arc length strictly between the two segments
+        if arc[hi] - arc[lo + 1] < rod_radius[ra] + rod_radius[rb]:
+            return False
+    # the distance between the two infinite lines bounds the segments' from below: a cheap
+    # reject of most pairs of long (rigid) rods, which the midpoint test alone keeps
+    da = x[ia + 1] - x[ia]
+    db = x[ib + 1] - x[ib]
+    c = wp.cross(da, db)
+    cc = wp.dot(c, c)
+    if cc > wp.float64(1.0e-12) * wp.dot(da, da) * wp.dot(db, db):
+        if wp.abs(wp.dot(x[ib] - x[ia], c)) / wp.sqrt(cc) - rod_radius[ra] - rod_radius[rb] > margin:
+            return False
+    # exact capsule gap: only pairs that can come within reach are kept
+    pair = closest_points_segments(x[ia], x[ia + 1], x[ib], x[ib + 1])
+    return pair.dist - rod_radius[ra] - rod_radius[rb] <= margin
+
+
 @wp.kernel
 def find_candidate_pairs(
     grid: wp.uint64,
@@ -58,46 +105,95 @@ def find_candidate_pairs(
 ):
     """Broadphase (Verlet list): every pair sa < sb whose capsule gap is below ``margin``
     (contact margin + skin), found through the hash grid (midpoints within
-    ``query_radius`` = h_max + 2 r_max + margin). The list stays valid until some vertex has
-    moved by half the skin.
-
-    Two segments of one rod less than a diameter of arc length apart never form a contact:
-    they could touch only if the rod bent to a radius below its own, and with edges shorter
-    than a diameter they overlap in the rod's rest shape (the pair would push the rod apart
-    along its own axis)."""
+    ``query_radius`` = h_max + 2 r_max + margin)."""
     sa = wp.tid()
-    ia = seg_vertex[sa]
-    ra = vertex_rod[ia]
-    ma = mid[sa]
     r2 = query_radius * query_radius
-    query = wp.hash_grid_query(grid, ma, query_radius)
+    query = wp.hash_grid_query(grid, mid[sa], query_radius)
     sb = int(0)
     while wp.hash_grid_query_next(query, sb):
         if sb <= sa:
             continue
-        # the grid returns whole cells, most of them out of reach
-        dm = mid[sb] - ma
-        if wp.dot(dm, dm) > r2:
-            continue
-        ib = seg_vertex[sb]
-        rb = vertex_rod[ib]
-        if rb == ra:
-            # sb > sa, so ib > ia: the arc length strictly between the two segments
-            if arc[ib] - arc[ia + 1] < rod_radius[ra] + rod_radius[rb]:
-                continue
-        # the distance between the two infinite lines bounds the segments' from below: a cheap
-        # reject of most pairs of long (rigid) rods, which the midpoint test alone keeps
-        da = x[ia + 1] - x[ia]
-        db = x[ib + 1] - x[ib]
-        c = wp.cross(da, db)
-        cc = wp.dot(c, c)
-        if cc > wp.float64(1.0e-12) * wp.dot(da, da) * wp.dot(db, db):
-            if wp.abs(wp.dot(x[ib] - x[ia], c)) / wp.sqrt(cc) - rod_radius[ra] - rod_radius[rb] > margin:
-                continue
-        # exact capsule gap at build time: only pairs that can come within reach are kept
-        pair = closest_points_segments(x[ia], x[ia + 1], x[ib], x[ib + 1])
-        if pair.dist - rod_radius[ra] - rod_radius[rb] > margin:
-            continue
+        if within_reach(sa, sb, mid, seg_vertex, vertex_rod, rod_radius, arc, x, r2, margin):
+            k = wp.atomic_add(count, 0, 1)
+            if k < capacity:
+                pairs[k] = wp.vec2i(sa, sb)
+
+
+@wp.kernel
+def set_segment_refs(seg_vertex: wp.array(dtype=wp.int32), x: wp.array(dtype=wp.vec3d),
+                     ref: wp.array(dtype=wp.vec3d)):
+    """Every segment's end points at this build: the reference of its displacement."""
+    s = wp.tid()
+    i = seg_vertex[s]
+    ref[2 * s] = x[i]
+    ref[2 * s + 1] = x[i + 1]
+
+
+@wp.kernel
+def stale_segments(
+    seg_vertex: wp.array(dtype=wp.int32),
+    x: wp.array(dtype=wp.vec3d),
+    ref: wp.array(dtype=wp.vec3d),
+    tau: wp.float64,
+    flag: wp.array(dtype=wp.int32),
+    count: wp.array(dtype=wp.int32),
+    stale: wp.array(dtype=wp.int32),
+):
+    """flag[s] = 1 for every segment that has moved by more than ``tau`` since its last
+    refresh (either end point: no point of the segment has moved further), listed in
+    ``stale`` (in any order: the contacts are sorted by key later)."""
+    s = wp.tid()
+    i = seg_vertex[s]
+    d = wp.max(wp.length(x[i] - ref[2 * s]), wp.length(x[i + 1] - ref[2 * s + 1]))
+    if d > tau:
+        flag[s] = 1
         k = wp.atomic_add(count, 0, 1)
-        if k < capacity:
-            pairs[k] = wp.vec2i(sa, sb)
+        stale[k] = s
+    else:
+        flag[s] = 0
+
+
+@wp.kernel
+def drop_pairs_of_flagged(pairs: wp.array(dtype=wp.vec2i), flag: wp.array(dtype=wp.int32),
+                          out: wp.array(dtype=wp.vec2i), count: wp.array(dtype=wp.int32)):
+    """The pairs that involve no flagged segment, compacted (in any order)."""
+    p = pairs[wp.tid()]
+    if flag[p[0]] == 0 and flag[p[1]] == 0:
+        out[wp.atomic_add(count, 0, 1)] = p
+
+
+@wp.kernel
+def find_pairs_of_flagged(
+    grid: wp.uint64,
+    stale: wp.array(dtype=wp.int32),
+    flag: wp.array(dtype=wp.int32),
+    mid: wp.array(dtype=wp.vec3),
+    seg_vertex: wp.array(dtype=wp.int32),
+    vertex_rod: wp.array(dtype=wp.int32),
+    rod_radius: wp.array(dtype=wp.float64),
+    arc: wp.array(dtype=wp.float64),
+    x: wp.array(dtype=wp.vec3d),
+    query_radius: float,
+    margin: wp.float64,
+    capacity: int,
+    count: wp.array(dtype=wp.int32),
+    pairs: wp.array(dtype=wp.vec2i),
+    ref: wp.array(dtype=wp.vec3d),
+):
+    """Partial refresh of the Verlet list: every pair of a flagged segment within ``margin``
+    now (a pair of two flagged segments once, from the lower one), appended as (lower, higher);
+    the flagged segment's reference moves to its present position."""
+    sa = stale[wp.tid()]
+    r2 = query_radius * query_radius
+    query = wp.hash_grid_query(grid, mid[sa], query_radius)
+    sb = int(0)
+    while wp.hash_grid_query_next(query, sb):
+        if sb == sa or (flag[sb] != 0 and sb < sa):
+            continue
+        if within_reach(sa, sb, mid, seg_vertex, vertex_rod, rod_radius, arc, x, r2, margin):
+            k = wp.atomic_add(count, 0, 1)
+            if k < capacity:
+                pairs[k] = wp.vec2i(wp.min(sa, sb), wp.max(sa, sb))
+    i = seg_vertex[sa]
+    ref[2 * sa] = x[i]
+    ref[2 * sa + 1] = x[i + 1]

@@ -53,3 +53,67 @@ def resolve_device(device: str | None) -> str:
             )
         return "cuda:0" if name == "cuda" else name
     raise RodwarpError(f"unknown device '{device}'; use auto, cpu or cuda")
+
+
+class LaunchCache:
+    """Replays recorded kernel launches instead of packing their arguments again.
+
+    ``wp.launch`` spends tens of microseconds per call checking and packing arguments, about
+    as long as a small scene's kernel runs. A step launches the same kernels on the same
+    arrays every time, so the first launch of a kernel with given array and struct arguments
+    is recorded (``record_cmd=True``) and later ones only update what changed: the launch
+    dimension and scalar arguments (by value). Arrays and structs are matched by identity;
+    the cache holds a reference to each, so an identity is never reused while its entry
+    lives, and a struct's fields are read at every launch (Warp copies them at invoke), so
+    changing a cached struct's fields is seen.
+
+    Parameters
+    ----------
+    size : int
+        Most recorded launches kept (least recently used dropped first).
+    """
+
+    def __init__(self, size: int = 512):
+        from collections import OrderedDict
+
+        self.size = int(size)
+        self._cmds: OrderedDict = OrderedDict()
+        self.hits = 0
+        self.misses = 0
+
+    @staticmethod
+    def _scalar_value(a):
+        """A hashable value for a by-value argument, or None for one matched by identity."""
+        import ctypes
+
+        if isinstance(a, (bool, int, float)):
+            return (type(a), a)
+        if isinstance(a, ctypes.Array):  # vectors and matrices
+            return (type(a), tuple(a))
+        if hasattr(a, "value") and not isinstance(a, wp.array) and isinstance(a.value, (bool, int, float)):
+            return (type(a), a.value)  # warp scalars, wp.float64(x)
+        return None
+
+    def launch(self, kernel, dim, device, inputs) -> None:
+        """``wp.launch(kernel, dim=dim, device=device, inputs=inputs)``, replayed when recorded."""
+        values = [self._scalar_value(a) for a in inputs]
+        key = (id(kernel), str(device), tuple(id(a) if v is None else None for a, v in zip(inputs, values)))
+        entry = self._cmds.get(key)
+        if entry is None:
+            self.misses += 1
+            cmd = wp.launch(kernel, dim=dim, device=device, inputs=list(inputs), record_cmd=True)
+            self._cmds[key] = [cmd, tuple(inputs), dim, values]
+            if len(self._cmds) > self.size:
+                self._cmds.popitem(last=False)
+        else:
+            self.hits += 1
+            self._cmds.move_to_end(key)
+            cmd, _, old_dim, old_values = entry
+            if dim != old_dim:
+                cmd.set_dim(dim)
+                entry[2] = dim
+            for i, v in enumerate(values):
+                if v is not None and v != old_values[i]:
+                    cmd.set_param_at_index(i, inputs[i])
+                    old_values[i] = v
+        cmd.launch()

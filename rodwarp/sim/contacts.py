@@ -25,6 +25,7 @@ Three things are called contacts in rodwarp, and this module makes two of them (
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -64,8 +65,15 @@ class ContactPipeline:
         self.pairs = wp.zeros(self.pairs_cap, dtype=wp.vec2i, device=d)
         self.pairs_n = None  # None: the list must be (re)built
         self.pairs_margin = 0.0
-        self._x_build = wp.zeros(model.n_vertices, dtype=wp.vec3d, device=d)
+        self._pairs_tmp = wp.zeros(self.pairs_cap, dtype=wp.vec2i, device=d)
+        self._ref = wp.zeros(2 * max(S, 1), dtype=wp.vec3d, device=d)
+        self._flag = wp.zeros(max(S, 1), dtype=wp.int32, device=d)
+        self._stale = wp.zeros(max(S, 1), dtype=wp.int32, device=d)
+        self._query = 0.0
+        self._grid_dims = None
         self.builds = 0
+        self.refreshes = 0
+        self.refreshed_segments = 0
         self.colors_used = 0
         self.color_ranges: list = []
         self.grow(max(64, 4 * S))
@@ -98,15 +106,22 @@ class ContactPipeline:
         dev = m.device
         S = m.n_segments
         base = m.contact_distance
-        # speculative reach of this step; the pair list is rebuilt when it no longer covers it
+        # speculative reach of this step. Every pair not listed had a gap of at least the list's
+        # margin M when the later of its two segments was last refreshed, and since then each
+        # segment has moved by at most tau (the flagged ones are refreshed now) and the other by
+        # at most 2 tau; so the list holds every pair within M - 3 tau, which must cover the reach.
         need = base + 2.0 * vmax * dt
-        rebuild = self.pairs_n is None or need > self.pairs_margin
+        rebuild = self.pairs_n is None or need > self.pairs_margin - 3.0 * self.tau
         if not rebuild:
-            self._scalar.zero_()
-            self._launch("broadphase", broadphase.max_displacement, dim=m.n_vertices, device=dev,
-                         inputs=[state_in.x, self._x_build, self._scalar])
-            moved = float(self._scalar.numpy()[0])
-            rebuild = 2.0 * moved + need > self.pairs_margin
+            self._count.zero_()
+            self._launch("broadphase", broadphase.stale_segments, dim=S, device=dev, inputs=[
+                m.arrays.seg_vertex, state_in.x, self._ref, wp.float64(self.tau), self._flag, self._count,
+                self._stale])
+            n_stale = int(self._count.numpy()[0])
+            if n_stale > self.PARTIAL_LIMIT * S:
+                rebuild = True
+            elif n_stale:
+                rebuild = not self.refresh_pairs(state_in, n_stale)
         if rebuild:
             self.build_pairs(state_in, need)
         n_pairs = self.pairs_n
@@ -133,34 +148,81 @@ class ContactPipeline:
             state_out.contact_seg, state_out.contact_st, state_out.contact_normal, state_out.contact_gap])
         return n
 
+    #: flagged share of the segments above which the whole pair list is rebuilt instead of
+    #: refreshed (a refresh queries the flagged segments only, but keeps the others' pairs)
+    PARTIAL_LIMIT = 0.3
+
+    @property
+    def tau(self) -> float:
+        """Displacement (m) since its last refresh above which a segment's pairs are found again."""
+        return 0.25 * self.skin
+
+    def _grid_of(self, state) -> None:
+        m = self.model
+        self._launch("broadphase", broadphase.segment_midpoints, dim=m.n_segments, device=m.device,
+                     inputs=[m.arrays.seg_vertex, state.x, self._mid])
+        # a hash grid no finer than the scene needs: its build clears every cell, and a 128^3
+        # grid's 2M cells cost more than hashing a few hundred rods' midpoints
+        ext = m.box[1] - m.box[0] if m.box is not None else np.full(3, 128.0 * self._query)
+        dims = tuple(int(min(128, max(4, math.ceil(e / self._query) + 2))) for e in ext)
+        if self._grid is None or self._grid_dims != dims:
+            self._grid = wp.HashGrid(*dims, device=m.device)
+            self._grid_dims = dims
+        self._time("broadphase", self._grid.build, self._mid, self._query)
+
     def build_pairs(self, state, need: float) -> None:
         """Broadphase: candidate segment pairs within reach + skin (a Verlet list)."""
         m = self.model
         dev = m.device
         S = m.n_segments
-        self._launch("broadphase", broadphase.segment_midpoints, dim=S, device=dev,
-                     inputs=[m.arrays.seg_vertex, state.x, self._mid])
         hmax = float(m.rest_length_np.max())
         rmax = float(m.radius_np.max())
         margin = need + self.skin
-        query = (hmax + 2.0 * rmax + margin) * 1.0001 + 1e-6
-        if self._grid is None:
-            self._grid = wp.HashGrid(128, 128, 128, device=dev)
-        self._time("broadphase", self._grid.build, self._mid, query)
+        self._query = (hmax + 2.0 * rmax + margin) * 1.0001 + 1e-6
+        self._grid_of(state)
         while True:
             self._count.zero_()
             self._launch("broadphase", broadphase.find_candidate_pairs, dim=S, device=dev, inputs=[
                 self._grid.id, self._mid, m.arrays.seg_vertex, m.arrays.vertex_rod, m.arrays.radius, m.arrays.arc,
-                state.x, float(query), wp.float64(margin), self.pairs_cap, self._count, self.pairs])
+                state.x, float(self._query), wp.float64(margin), self.pairs_cap, self._count, self.pairs])
             n = int(self._count.numpy()[0])
             if n <= self.pairs_cap:
                 break
-            self.pairs_cap = 2 * n
-            self.pairs = wp.zeros(self.pairs_cap, dtype=wp.vec2i, device=dev)
+            self._grow_pairs(2 * n)
         self.pairs_n = n
         self.pairs_margin = margin
-        wp.copy(self._x_build, state.x)
+        self._launch("broadphase", broadphase.set_segment_refs, dim=S, device=dev,
+                     inputs=[m.arrays.seg_vertex, state.x, self._ref])
         self.builds += 1
+
+    def _grow_pairs(self, cap: int) -> None:
+        self.pairs_cap = cap
+        self.pairs = wp.zeros(cap, dtype=wp.vec2i, device=self.model.device)
+        self._pairs_tmp = wp.zeros(cap, dtype=wp.vec2i, device=self.model.device)
+
+    def refresh_pairs(self, state, n_stale: int) -> bool:
+        """Partial refresh of the Verlet list: the pairs of the ``n_stale`` flagged segments
+        replaced by those within the list's margin now. Returns False (nothing changed but the
+        flagged segments' references) when the list would outgrow its capacity: rebuild then."""
+        m = self.model
+        dev = m.device
+        self._grid_of(state)
+        self._count.zero_()
+        if self.pairs_n:
+            self._launch("broadphase", broadphase.drop_pairs_of_flagged, dim=self.pairs_n, device=dev,
+                         inputs=[self.pairs, self._flag, self._pairs_tmp, self._count])
+        self._launch("broadphase", broadphase.find_pairs_of_flagged, dim=n_stale, device=dev, inputs=[
+            self._grid.id, self._stale, self._flag, self._mid, m.arrays.seg_vertex, m.arrays.vertex_rod,
+            m.arrays.radius, m.arrays.arc, state.x, float(self._query), wp.float64(self.pairs_margin),
+            self.pairs_cap, self._count, self._pairs_tmp, self._ref])
+        n = int(self._count.numpy()[0])
+        if n > self.pairs_cap:
+            return False
+        self.pairs, self._pairs_tmp = self._pairs_tmp, self.pairs
+        self.pairs_n = n
+        self.refreshes += 1
+        self.refreshed_segments += n_stale
+        return True
 
     def warm_start(self, state_in, state_out, n: int, warm: float) -> None:
         """Last step's impulses of the same keys into ``state_out`` (split along the new normals)."""

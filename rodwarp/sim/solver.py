@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from rodwarp._warp import LaunchCache
 from rodwarp.errors import RodwarpError, SimulationBlowUp
 from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, overlap, solve
 from rodwarp.kernels.structs import ContactFrame, RodFactors, StepParams, WallContacts, Walls
@@ -176,6 +177,10 @@ class RodSolver(StepBounds):
         self._last_mech = None
         self.energy_check_every = int(energy_check_every)
         self._default_control = None
+        self._launches = LaunchCache()
+        # one StepParams for the solver's life, its fields set every step (recorded launches)
+        self._params = StepParams()
+        self._wall_views: dict = {}
         d = model.device
         V = model.n_vertices
         f = self.factors = RodFactors()
@@ -246,13 +251,13 @@ class RodSolver(StepBounds):
         return self._default_control
 
     # ------------------------------------------------------------------ profiling
-    def _launch(self, stage: str, kernel, **kw) -> None:
+    def _launch(self, stage: str, kernel, *, dim, device, inputs) -> None:
         if self.timings is None:
-            wp.launch(kernel, **kw)
+            self._launches.launch(kernel, dim, device, inputs)
             return
         wp.synchronize_device(self.model.device)
         t = time.perf_counter()
-        wp.launch(kernel, **kw)
+        self._launches.launch(kernel, dim, device, inputs)
         wp.synchronize_device(self.model.device)
         self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - t
 
@@ -360,7 +365,7 @@ class RodSolver(StepBounds):
         state_out.contact_count = n_contacts
         contacts = state_out.rod_contacts(n_contacts)
 
-        params = StepParams()
+        params = self._params
         params.dt = fdt
         params.mu = wp.float64(m.mu)
         params.beta = wp.float64(self.baumgarte)
@@ -456,12 +461,17 @@ class RodSolver(StepBounds):
         return info
 
     def _wall_contacts(self, state_out: State) -> WallContacts:
-        wc = WallContacts()
-        wc.gap, wc.impulse, wc.active, wc.n_active = self._wall_gap, state_out.wall_impulse, self._active, \
-            self._n_active
-        wc.span, wc.key, wc.frames, wc.n_frames = self._wall_span, self._wall_key, self._wall_frames, \
-            self._n_wall_frames
-        return wc
+        arrays = (self._wall_gap, state_out.wall_impulse, self._active, self._n_active, self._wall_span,
+                  self._wall_key, self._wall_frames, self._n_wall_frames)
+        cached = self._wall_views.get(id(state_out))
+        if cached is None or any(a is not b for a, b in zip(cached[1], arrays)):
+            wc = WallContacts()
+            wc.gap, wc.impulse, wc.active, wc.n_active, wc.span, wc.key, wc.frames, wc.n_frames = arrays
+            # keyed by the state's identity: the state is held so the key is never reused
+            cached = self._wall_views[id(state_out)] = (wc, arrays, state_out)
+            if len(self._wall_views) > 8:
+                self._wall_views.pop(next(iter(self._wall_views)))
+        return cached[0]
 
     def _project_positions(self, rs_in, state_out, contacts, walls, wc, params, P):
         """Post-stabilisation: overlaps beyond the slop removed from the end-of-step positions

@@ -64,21 +64,33 @@ class State:
 
     # ------------------------------------------------------------------ device bundles
     def rod_state(self):
-        """The :class:`~rodwarp.kernels.structs.RodState` view of this state."""
+        """The :class:`~rodwarp.kernels.structs.RodState` view of this state (one per state,
+        kept while its arrays stay the same, so the solver's recorded launches replay)."""
         from rodwarp.kernels.structs import RodState
 
-        s = RodState()
-        s.x, s.v, s.spin, s.theta, s.director = self.x, self.v, self.spin, self.theta, self.director
-        return s
+        arrays = (self.x, self.v, self.spin, self.theta, self.director)
+        cached = getattr(self, "_rod_state", None)
+        if cached is None or any(a is not b for a, b in zip(cached[1], arrays)):
+            s = RodState()
+            s.x, s.v, s.spin, s.theta, s.director = arrays
+            cached = self._rod_state = (s, arrays)
+        return cached[0]
 
     def rod_contacts(self, count: int | None = None):
-        """The :class:`~rodwarp.kernels.structs.RodContacts` view of this state's contacts."""
+        """The :class:`~rodwarp.kernels.structs.RodContacts` view of this state's contacts
+        (one per state; its count set at every call)."""
         from rodwarp.kernels.structs import RodContacts
 
-        c = RodContacts()
-        c.count = self.contact_count if count is None else count
-        c.seg, c.st, c.normal = self.contact_seg, self.contact_st, self.contact_normal
-        c.gap, c.impulse = self.contact_gap, self.contact_impulse
+        arrays = (self.contact_seg, self.contact_st, self.contact_normal, self.contact_gap, self.contact_impulse)
+        cached = getattr(self, "_rod_contacts", None)
+        if cached is None or any(a is not b for a, b in zip(cached[1], arrays)):
+            c = RodContacts()
+            c.seg, c.st, c.normal, c.gap, c.impulse = arrays
+            cached = self._rod_contacts = (c, arrays)
+        c = cached[0]
+        n = self.contact_count if count is None else count
+        if c.count != n:
+            c.count = n
         return c
 
     # ------------------------------------------------------------------ host access
