@@ -81,22 +81,41 @@ class LaunchCache:
         self.hits = 0
         self.misses = 0
 
-    @staticmethod
-    def _scalar_value(a):
-        """A hashable value for a by-value argument, or None for one matched by identity."""
+    #: how each argument type is matched: 0 by identity, 1 by value, 2 by the tuple of a
+    #: vector's or matrix's entries, 3 by a warp scalar's value (wp.float64(x)), 4 by a NumPy
+    #: scalar's value
+    _kinds: dict = {}
+
+    @classmethod
+    def _kind(cls, a) -> int:
         import ctypes
 
+        import numpy as np
+
         if isinstance(a, (bool, int, float)):
-            return (type(a), a)
-        if isinstance(a, ctypes.Array):  # vectors and matrices
-            return (type(a), tuple(a))
+            return 1
+        if isinstance(a, np.generic):
+            return 4
+        if isinstance(a, ctypes.Array):
+            return 2
         if hasattr(a, "value") and not isinstance(a, wp.array) and isinstance(a.value, (bool, int, float)):
-            return (type(a), a.value)  # warp scalars, wp.float64(x)
-        return None
+            return 3
+        return 0
+
+    def _values(self, inputs) -> list:
+        """A hashable value per by-value argument, None for those matched by identity."""
+        kinds = self._kinds
+        out = []
+        for a in inputs:
+            k = kinds.get(type(a))
+            if k is None:
+                k = kinds[type(a)] = self._kind(a)
+            out.append(None if k == 0 else a if k == 1 else tuple(a) if k == 2 else a.value if k == 3 else a.item())
+        return out
 
     def launch(self, kernel, dim, device, inputs) -> None:
         """``wp.launch(kernel, dim=dim, device=device, inputs=inputs)``, replayed when recorded."""
-        values = [self._scalar_value(a) for a in inputs]
+        values = self._values(inputs)
         key = (id(kernel), str(device), tuple(id(a) if v is None else None for a, v in zip(inputs, values)))
         entry = self._cmds.get(key)
         if entry is None:

@@ -90,9 +90,11 @@ class RodSolver(StepBounds):
         1e-5 m/s: 10 um of drift per second) and no edge length is off by more than 1e-6 of the
         shortest edge; 0 always runs ``iterations`` sweeps. Checked every second sweep.
     bending : {"auto", "implicit", "explicit"}
-        Bending integration. ``auto`` uses symplectic (explicit) bending when the step is
-        below 0.8 of its numerical stability bound 2 / omega_max, which conserves energy, and
-        implicit Euler above it.
+        Bending integration. ``auto`` bends implicitly (implicit Euler) whenever rods can
+        touch something (rod contacts, or a wall in place): symplectic Euler with inelastic
+        contacts pumps energy into bending modes (docs/physics.md). In a contact-free scene it
+        uses symplectic (explicit) bending when the step is below 0.8 of its numerical
+        stability bound 2 / omega_max, which conserves energy, and implicit Euler above it.
         Curved rods always bend implicitly (their bending is coupled to twist).
     coloring : {"auto", "on", "off"}
         Colour rod-rod contacts so that each colour can be solved in parallel without data
@@ -334,12 +336,13 @@ class RodSolver(StepBounds):
             if self._v_elastic is None:
                 e = self.energy(state_in)
                 self._v_elastic = math.sqrt(2.0 * (e["bending"] + e["stretching"] + e["twist"]) / m.total_mass())
-        theta = self.theta_for(dt)
+        P = len(m.planes)
+        touching = state_in.contact_count > 0 or (P > 0 and bool(control.walls_in_place()))
+        theta = self.theta_for(dt, touching)
         fdt = wp.float64(dt)
         V, N = m.n_vertices, m.n_rods
         state_in.ensure_wall_storage()
         state_out.ensure_wall_storage()
-        P = len(m.planes)
         if self._wall_gap.shape[0] != V * max(P, 1):
             self._wall_gap = wp.zeros(V * max(P, 1), dtype=wp.float64, device=dev)
         f = self.factors
