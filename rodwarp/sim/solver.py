@@ -126,8 +126,8 @@ class RodSolver(StepBounds):
     energy_check_every : int
         Steps between energy-jump checks (0 disables them).
     skin : float, optional
-        Extra reach of the broadphase pair list (m); the list is rebuilt when a vertex has
-        moved by half of it. Default d_min + min(h_max, 20 d_min) / 5 (measured knees,
+        Extra reach of the broadphase pair list (m); a segment's pairs are found again when it
+        has moved by a quarter of it, the whole list when 30% of the segments have. Default d_min + min(h_max, 20 d_min) / 5 (measured knees,
         benchmarks).
     """
 
