@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -180,6 +181,7 @@ class RodSolver(StepBounds):
         self.energy_check_every = int(energy_check_every)
         self._default_control = None
         self._launches = LaunchCache()
+        self._warned_explicit = False
         # one StepParams for the solver's life, its fields set every step (recorded launches)
         self._params = StepParams()
         self._wall_views: dict = {}
@@ -339,6 +341,11 @@ class RodSolver(StepBounds):
         P = len(m.planes)
         touching = state_in.contact_count > 0 or (P > 0 and bool(control.walls_in_place()))
         theta = self.theta_for(dt, touching)
+        if theta == 0.0 and touching and not self._warned_explicit:
+            self._warned_explicit = True
+            warnings.warn("explicit (symplectic) bending with contacts: inelastic contacts pump energy into the "
+                          "rods' bending (docs/physics.md, 'Bending integration'); use bending='auto' or 'implicit'",
+                          stacklevel=2)
         fdt = wp.float64(dt)
         V, N = m.n_vertices, m.n_rods
         state_in.ensure_wall_storage()
