@@ -89,47 +89,6 @@ def within_reach(
 
 
 @wp.kernel
-def find_candidate_pairs(
-    grid: wp.uint64,
-    mid: wp.array(dtype=wp.vec3),
-    seg_vertex: wp.array(dtype=wp.int32),
-    vertex_rod: wp.array(dtype=wp.int32),
-    rod_radius: wp.array(dtype=wp.float64),
-    arc: wp.array(dtype=wp.float64),
-    x: wp.array(dtype=wp.vec3d),
-    query_radius: float,
-    margin: wp.float64,
-    capacity: int,
-    count: wp.array(dtype=wp.int32),
-    pairs: wp.array(dtype=wp.vec2i),
-):
-    """Broadphase (Verlet list): every pair sa < sb whose capsule gap is below ``margin``
-    (contact margin + skin), found through the hash grid (midpoints within
-    ``query_radius`` = h_max + 2 r_max + margin)."""
-    sa = wp.tid()
-    r2 = query_radius * query_radius
-    query = wp.hash_grid_query(grid, mid[sa], query_radius)
-    sb = int(0)
-    while wp.hash_grid_query_next(query, sb):
-        if sb <= sa:
-            continue
-        if within_reach(sa, sb, mid, seg_vertex, vertex_rod, rod_radius, arc, x, r2, margin):
-            k = wp.atomic_add(count, 0, 1)
-            if k < capacity:
-                pairs[k] = wp.vec2i(sa, sb)
-
-
-@wp.kernel
-def set_segment_refs(seg_vertex: wp.array(dtype=wp.int32), x: wp.array(dtype=wp.vec3d),
-                     ref: wp.array(dtype=wp.vec3d)):
-    """Every segment's end points at this build: the reference of its displacement."""
-    s = wp.tid()
-    i = seg_vertex[s]
-    ref[2 * s] = x[i]
-    ref[2 * s + 1] = x[i + 1]
-
-
-@wp.kernel
 def stale_segments(
     seg_vertex: wp.array(dtype=wp.int32),
     x: wp.array(dtype=wp.vec3d),
@@ -180,9 +139,11 @@ def find_pairs_of_flagged(
     pairs: wp.array(dtype=wp.vec2i),
     ref: wp.array(dtype=wp.vec3d),
 ):
-    """Partial refresh of the Verlet list: every pair of a flagged segment within ``margin``
-    now (a pair of two flagged segments once, from the lower one), appended as (lower, higher);
-    the flagged segment's reference moves to its present position."""
+    """Broadphase (Verlet list): every pair of a flagged segment whose capsule gap is below
+    ``margin`` (contact margin + skin) now, found through the hash grid (midpoints within
+    ``query_radius`` = h_max + 2 r_max + margin); a pair of two flagged segments once, from
+    the lower one, appended as (lower, higher); the flagged segment's reference moves to its
+    present position. A full build flags every segment; a partial refresh those that moved."""
     sa = stale[wp.tid()]
     r2 = query_radius * query_radius
     query = wp.hash_grid_query(grid, mid[sa], query_radius)

@@ -71,6 +71,7 @@ class ContactPipeline:
         self._stale = wp.zeros(max(S, 1), dtype=wp.int32, device=d)
         self._query = 0.0
         self._grid_dims = None
+        self._all = None
         self.builds = 0
         self.refreshes = 0
         self.refreshed_segments = 0
@@ -180,19 +181,21 @@ class ContactPipeline:
         margin = need + self.skin
         self._query = (hmax + 2.0 * rmax + margin) * 1.0001 + 1e-6
         self._grid_of(state)
+        if self._all is None:
+            self._all = wp.array(np.arange(S, dtype=np.int32), device=dev)
+        self._flag.fill_(1)
         while True:
             self._count.zero_()
-            self._launch("broadphase", broadphase.find_candidate_pairs, dim=S, device=dev, inputs=[
-                self._grid.id, self._mid, m.arrays.seg_vertex, m.arrays.vertex_rod, m.arrays.radius, m.arrays.arc,
-                state.x, float(self._query), wp.float64(margin), self.pairs_cap, self._count, self.pairs])
+            self._launch("broadphase", broadphase.find_pairs_of_flagged, dim=S, device=dev, inputs=[
+                self._grid.id, self._all, self._flag, self._mid, m.arrays.seg_vertex, m.arrays.vertex_rod,
+                m.arrays.radius, m.arrays.arc, state.x, float(self._query), wp.float64(margin), self.pairs_cap,
+                self._count, self.pairs, self._ref])
             n = int(self._count.numpy()[0])
             if n <= self.pairs_cap:
                 break
             self._grow_pairs(2 * n)
         self.pairs_n = n
         self.pairs_margin = margin
-        self._launch("broadphase", broadphase.set_segment_refs, dim=S, device=dev,
-                     inputs=[m.arrays.seg_vertex, state.x, self._ref])
         self.builds += 1
 
     def _grow_pairs(self, cap: int) -> None:
