@@ -35,12 +35,6 @@ def max_speed(v: wp.array(dtype=wp.vec3d), out: wp.array(dtype=wp.float64)):
         wp.atomic_max(out, 0, s)
 
 
-@wp.kernel
-def max_displacement(x: wp.array(dtype=wp.vec3d), x_ref: wp.array(dtype=wp.vec3d), out: wp.array(dtype=wp.float64)):
-    i = wp.tid()
-    wp.atomic_max(out, 0, wp.length(x[i] - x_ref[i]))
-
-
 @wp.func
 def within_reach(
     sa: int,

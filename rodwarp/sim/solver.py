@@ -34,7 +34,7 @@ from rodwarp.kernels.structs import ContactFrame, RodFactors, StepParams, WallCo
 from rodwarp.sim._bounds import StepBounds
 from rodwarp.sim.contacts import ContactPipeline
 from rodwarp.sim.model import Model
-from rodwarp.sim.state import State
+from rodwarp.sim.state import State, cached_view
 
 
 @dataclass
@@ -128,8 +128,8 @@ class RodSolver(StepBounds):
         Steps between energy-jump checks (0 disables them).
     skin : float, optional
         Extra reach of the broadphase pair list (m); a segment's pairs are found again when it
-        has moved by a quarter of it, the whole list when 30% of the segments have. Default d_min + min(h_max, 20 d_min) / 5 (measured knees,
-        benchmarks).
+        has moved by a quarter of it, the whole list when 30% of the segments have. Default
+        d_min + min(h_max, 20 d_min) / 5 (measured knees, benchmarks).
     """
 
     def __init__(
@@ -184,7 +184,6 @@ class RodSolver(StepBounds):
         self._warned_explicit = False
         # one StepParams for the solver's life, its fields set every step (recorded launches)
         self._params = StepParams()
-        self._wall_views: dict = {}
         d = model.device
         V = model.n_vertices
         f = self.factors = RodFactors()
@@ -471,17 +470,11 @@ class RodSolver(StepBounds):
         return info
 
     def _wall_contacts(self, state_out: State) -> WallContacts:
-        arrays = (self._wall_gap, state_out.wall_impulse, self._active, self._n_active, self._wall_span,
-                  self._wall_key, self._wall_frames, self._n_wall_frames)
-        cached = self._wall_views.get(id(state_out))
-        if cached is None or any(a is not b for a, b in zip(cached[1], arrays)):
-            wc = WallContacts()
-            wc.gap, wc.impulse, wc.active, wc.n_active, wc.span, wc.key, wc.frames, wc.n_frames = arrays
-            # keyed by the state's identity: the state is held so the key is never reused
-            cached = self._wall_views[id(state_out)] = (wc, arrays, state_out)
-            if len(self._wall_views) > 8:
-                self._wall_views.pop(next(iter(self._wall_views)))
-        return cached[0]
+        # one view per state (the output state alternates), kept on the state itself
+        return cached_view(state_out.__dict__, "_wall_contacts", WallContacts, gap=self._wall_gap,
+                           impulse=state_out.wall_impulse, active=self._active, n_active=self._n_active,
+                           span=self._wall_span, key=self._wall_key, frames=self._wall_frames,
+                           n_frames=self._n_wall_frames)
 
     def _project_positions(self, rs_in, state_out, contacts, walls, wc, params, P):
         """Post-stabilisation: overlaps beyond the slop removed from the end-of-step positions

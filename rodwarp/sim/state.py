@@ -68,26 +68,16 @@ class State:
         kept while its arrays stay the same, so the solver's recorded launches replay)."""
         from rodwarp.kernels.structs import RodState
 
-        arrays = (self.x, self.v, self.spin, self.theta, self.director)
-        cached = getattr(self, "_rod_state", None)
-        if cached is None or any(a is not b for a, b in zip(cached[1], arrays)):
-            s = RodState()
-            s.x, s.v, s.spin, s.theta, s.director = arrays
-            cached = self._rod_state = (s, arrays)
-        return cached[0]
+        return cached_view(self.__dict__, "_rod_state", RodState, x=self.x, v=self.v, spin=self.spin,
+                           theta=self.theta, director=self.director)
 
     def rod_contacts(self, count: int | None = None):
         """The :class:`~rodwarp.kernels.structs.RodContacts` view of this state's contacts
         (one per state; its count set at every call)."""
         from rodwarp.kernels.structs import RodContacts
 
-        arrays = (self.contact_seg, self.contact_st, self.contact_normal, self.contact_gap, self.contact_impulse)
-        cached = getattr(self, "_rod_contacts", None)
-        if cached is None or any(a is not b for a, b in zip(cached[1], arrays)):
-            c = RodContacts()
-            c.seg, c.st, c.normal, c.gap, c.impulse = arrays
-            cached = self._rod_contacts = (c, arrays)
-        c = cached[0]
+        c = cached_view(self.__dict__, "_rod_contacts", RodContacts, seg=self.contact_seg, st=self.contact_st,
+                        normal=self.contact_normal, gap=self.contact_gap, impulse=self.contact_impulse)
         n = self.contact_count if count is None else count
         if c.count != n:
             c.count = n
@@ -178,3 +168,17 @@ class State:
                 full[:c] = data[name]
                 getattr(self, name).assign(wp.array(full, dtype=dt, device=d))
         self.contact_count = c
+
+
+def cached_view(cache: dict, slot: str, struct_type, /, **arrays):
+    """A Warp struct of ``struct_type`` holding ``arrays``, kept in ``cache[slot]`` and rebuilt
+    only when one of the arrays is another object: kernels launched again on the same struct
+    replay their recorded launch (:class:`rodwarp._warp.LaunchCache`)."""
+    cached = cache.get(slot)
+    values = tuple(arrays.values())
+    if cached is None or any(a is not b for a, b in zip(cached[1], values)):
+        s = struct_type()
+        for name, a in arrays.items():
+            setattr(s, name, a)
+        cached = cache[slot] = (s, values)
+    return cached[0]
