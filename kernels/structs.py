@@ -116,6 +116,7 @@ class ContactFrame:
     k: wp.vec4d  # (n W n, e1 W e1, e1 W e2, e2 W e2)
     coupled: int  # W couples the normal and tangential parts
     target: wp.float64  # lowest normal relative velocity (m/s)
+    Winv: wp.mat33d  # W^-1 (N s / m), for the exact sticking impulse; zero when W is singular
 
 
 @wp.struct
