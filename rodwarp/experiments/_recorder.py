@@ -251,6 +251,7 @@ def plot_metrics(path, rows, summary) -> None:
     fig.suptitle(f"alpha = {summary['alpha']:g}, a/g = {summary['a_over_g']:.3g}: stable = {summary['stable']} "
                  f"(h = {summary['height_kept']:.2f}, f = {summary['largest_cluster_fraction']:.2f}, "
                  f"tau = {summary['persistence']:.2f}; shaded: entangled)", fontsize=10)
-    fig.tight_layout()
+    # fixed margins: tight_layout measured every label's extent and took 0.4 s of the main job
+    fig.subplots_adjust(left=0.08, right=0.98, bottom=0.05, top=0.955, hspace=0.12, wspace=0.22)
     save_figure(fig, path)
     plt.close(fig)

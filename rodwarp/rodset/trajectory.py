@@ -216,5 +216,7 @@ def plot_snapshots(path, frames, offsets, box=None) -> None:
                                    fill=False, ls="--", lw=0.6, color="tab:blue"))
         ax.set_xlabel("x (m)")
     axes[0].set_ylabel("z (m)")
-    fig.tight_layout()
+    # fixed margins: tight_layout measured every label's extent and took 0.4 s of the main job
+    w = 3.2 * len(frames)
+    fig.subplots_adjust(left=0.75 / w, right=1.0 - 0.15 / w, bottom=0.09, top=0.95, wspace=0.08)
     save_figure(fig, path)
