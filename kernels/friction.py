@@ -63,29 +63,33 @@ def coulomb_2d(u1: wp.float64, u2: wp.float64, w11: wp.float64, w12: wp.float64,
     disc's edge with u + W p anti-parallel to p (sliding with maximal dissipation)."""
     if limit <= F0:
         return wp.vec2d(F0, F0)
-    det0 = w11 * w22 - w12 * w12
-    y1 = (w22 * u1 - w12 * u2) / det0
-    y2 = (w11 * u2 - w12 * u1) / det0
-    ny = wp.sqrt(y1 * y1 + y2 * y2)
-    if ny <= limit:
+    # each 2 x 2 solve takes one reciprocal of its determinant, not a division per entry: a
+    # sliding contact runs this Newton loop in every sweep, and divisions set its latency
+    idet = F1 / (w11 * w22 - w12 * w12)
+    y1 = (w22 * u1 - w12 * u2) * idet
+    y2 = (w11 * u2 - w12 * u1) * idet
+    ny2 = y1 * y1 + y2 * y2
+    if ny2 <= limit * limit:
         return wp.vec2d(-y1, -y2)  # sticks: the exact impulse
+    inv_limit = F1 / limit
     gamma = F0
+    m11 = w11
+    m22 = w22
+    ny = wp.sqrt(ny2)
     for it in range(40):
         if ny <= limit * (F1 + wp.float64(1.0e-10)):
             break
-        m11 = w11 + gamma
-        m22 = w22 + gamma
-        det = m11 * m22 - w12 * w12
         # Newton on phi(gamma) = 1 / |y| - 1 / limit; phi' = y^T (W + gamma I)^-1 y / |y|^3
-        z1 = (m22 * y1 - w12 * y2) / det
-        z2 = (m11 * y2 - w12 * y1) / det
-        gamma = gamma + (ny / limit - F1) * ny * ny / (y1 * z1 + y2 * z2)
+        z1 = (m22 * y1 - w12 * y2) * idet
+        z2 = (m11 * y2 - w12 * y1) * idet
+        gamma = gamma + (ny * inv_limit - F1) * ny2 / (y1 * z1 + y2 * z2)
         m11 = w11 + gamma
         m22 = w22 + gamma
-        det = m11 * m22 - w12 * w12
-        y1 = (m22 * u1 - w12 * u2) / det
-        y2 = (m11 * u2 - w12 * u1) / det
-        ny = wp.sqrt(y1 * y1 + y2 * y2)
+        idet = F1 / (m11 * m22 - w12 * w12)
+        y1 = (m22 * u1 - w12 * u2) * idet
+        y2 = (m11 * u2 - w12 * u1) * idet
+        ny2 = y1 * y1 + y2 * y2
+        ny = wp.sqrt(ny2)
     sc = limit / ny
     return wp.vec2d(-y1 * sc, -y2 * sc)
 
