@@ -125,8 +125,8 @@ def solve_local(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.f
     Two cases are settled in closed form before any iteration: a contact that does not
     approach faster than its target without an impulse gets none, and one whose sticking
     impulse W^-1 (target n - u_f) lies inside the friction cone sticks with exactly that
-    impulse (in a resting pile most contacts do; with W coupling the normal and tangential
-    parts, the alternation below would only approach it). The rest slide on the cone's edge.
+    impulse (with W coupling the normal and tangential parts, the alternation below would
+    only approach it). The rest slide on the cone's edge.
     """
     wnn = f.k[0]
     if wnn <= F0:
