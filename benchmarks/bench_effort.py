@@ -6,7 +6,7 @@ setting:
 * Gauss-Seidel sweeps per step (``--iterations``) 5, 7, 10, 20, 40 at the default step safety;
 * the adaptive step's safety (``--step-safety``: the fraction of a diameter the fastest rod
   may cross per step) 0.25, 0.5, 1, 2 at the default sweeps;
-* a reference 10x finer than the default step (safety 0.05) with 40 sweeps, seed 0.
+* a reference 10x finer than the default step (a tenth of the default safety) with 40 sweeps, seed 0.
 
 Outcome at the end: contacts per rod Z, the largest cluster f, the height kept h and the
 persistence tau; cost: the run's wall time (one core per run, two runs at a time). The
