@@ -439,26 +439,10 @@ def project_curved(a: int, b: int, model: RodModel, state: RodState, v: wp.array
 
 
 @wp.func
-def project_rod(r: int, model: RodModel, state: RodState, v: wp.array(dtype=wp.vec3d),
-                spin: wp.array(dtype=wp.float64), factors: RodFactors, dt: wp.float64):
-    """One exact XPBD (Newton) iteration on rod r's own constraints; returns the largest
-    edge-length error (m) found before it.
-
-    Bending (implicit bending only) and twist first, then the edge lengths, each block
-    solved directly with the factors prepared for this step.
-    """
-    a = model.rod_start[r]
-    b = model.rod_start[r + 1]
-    inv_dt = F1 / dt
-    inv_dt2 = inv_dt * inv_dt
-    if b - a >= 3:
-        if model.curved[r] != 0:
-            project_curved(a, b, model, state, v, spin, factors, dt, inv_dt, inv_dt2)
-        else:
-            if factors.implicit_bending != 0:
-                project_straight_bending(r, a, b, model, state, v, factors, dt, inv_dt)
-            project_straight_twist(a, b, model, state, spin, factors, dt, inv_dt, inv_dt2)
-
+def project_stretch(a: int, b: int, model: RodModel, state: RodState, v: wp.array(dtype=wp.vec3d),
+                    factors: RodFactors, dt: wp.float64, inv_dt: wp.float64, inv_dt2: wp.float64):
+    """One exact XPBD (Newton) iteration on the edge lengths of the rod on vertices [a, b);
+    returns the largest edge-length error (m) found before it."""
     worst = F0
     for j in range(a, b - 1):
         e = (state.x[j + 1] + v[j + 1] * dt) - (state.x[j] + v[j] * dt)
@@ -477,12 +461,66 @@ def project_rod(r: int, model: RodModel, state: RodState, v: wp.array(dtype=wp.v
     return worst
 
 
+@wp.func
+def project_rod(r: int, model: RodModel, state: RodState, v: wp.array(dtype=wp.vec3d),
+                spin: wp.array(dtype=wp.float64), factors: RodFactors, dt: wp.float64):
+    """One exact XPBD (Newton) iteration on rod r's own constraints; returns the largest
+    edge-length error (m) found before it.
+
+    Bending (implicit bending only) and twist first, then the edge lengths, each block
+    solved directly with the factors prepared for this step. Rigid rods are skipped: inside
+    the sweeps they move as bodies (no bending, no twist, and no contact changes the length
+    of their one edge), and :func:`project_rigid_length` sets their length after the sweeps.
+    """
+    if model.rigid[r] != 0:
+        return F0
+    a = model.rod_start[r]
+    b = model.rod_start[r + 1]
+    inv_dt = F1 / dt
+    inv_dt2 = inv_dt * inv_dt
+    if b - a >= 3:
+        if model.curved[r] != 0:
+            project_curved(a, b, model, state, v, spin, factors, dt, inv_dt, inv_dt2)
+        else:
+            if factors.implicit_bending != 0:
+                project_straight_bending(r, a, b, model, state, v, factors, dt, inv_dt)
+            project_straight_twist(a, b, model, state, spin, factors, dt, inv_dt, inv_dt2)
+    return project_stretch(a, b, model, state, v, factors, dt, inv_dt, inv_dt2)
+
+
+@wp.func
+def project_rigid_length(r: int, model: RodModel, state: RodState, v: wp.array(dtype=wp.vec3d),
+                         factors: RodFactors, dt: wp.float64, tolerance: wp.float64):
+    """Rigid rod r's edge length after the sweeps (its velocities back at its vertices):
+    Newton iterations on the one edge until its error is below ``tolerance`` (m; at most
+    eight). Along the start-of-step axis the correction changes neither the centre-of-mass
+    velocity nor the angular velocity, so it leaves every contact's velocity as the sweeps
+    left it. Returns the error before the last iteration (m); 0 for elastic rods."""
+    if model.rigid[r] == 0:
+        return F0
+    a = model.rod_start[r]
+    inv_dt = F1 / dt
+    err = F0
+    for it in range(8):
+        err = project_stretch(a, a + 2, model, state, v, factors, dt, inv_dt, inv_dt * inv_dt)
+        if err < tolerance:
+            break
+    return err
+
+
 @wp.kernel
 def rod_projection(model: RodModel, state: RodState, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64),
                    factors: RodFactors, dt: wp.float64, residual: wp.array(dtype=wp.float64)):
     """One thread per rod: ``project_rod``. Rods share no vertex, so no races."""
     r = wp.tid()
     wp.atomic_max(residual, 0, project_rod(r, model, state, v, spin, factors, dt))
+
+
+@wp.kernel
+def rigid_length_projection(model: RodModel, state: RodState, v: wp.array(dtype=wp.vec3d), factors: RodFactors,
+                            dt: wp.float64, tolerance: wp.float64, residual: wp.array(dtype=wp.float64)):
+    """One thread per rod: ``project_rigid_length``."""
+    wp.atomic_max(residual, 0, project_rigid_length(wp.tid(), model, state, v, factors, dt, tolerance))
 
 
 # ----------------------------------------------------------------------------- energy, integration

@@ -72,9 +72,18 @@ def coulomb_2d(u1: wp.float64, u2: wp.float64, w11: wp.float64, w12: wp.float64,
     if ny2 <= limit * limit:
         return wp.vec2d(-y1, -y2)  # sticks: the exact impulse
     inv_limit = F1 / limit
-    gamma = F0
-    m11 = w11
-    m22 = w22
+    # start from a lower bound of the root, |u| / limit - lambda_max(W): Newton on the
+    # concave phi then climbs to the root without overshooting, in a few steps
+    half_tr = HALF * (w11 + w22)
+    hd = HALF * (w11 - w22)
+    gamma = wp.max(F0, wp.sqrt(u1 * u1 + u2 * u2) * inv_limit - half_tr - wp.sqrt(hd * hd + w12 * w12))
+    m11 = w11 + gamma
+    m22 = w22 + gamma
+    if gamma > F0:
+        idet = F1 / (m11 * m22 - w12 * w12)
+        y1 = (m22 * u1 - w12 * u2) * idet
+        y2 = (m11 * u2 - w12 * u1) * idet
+        ny2 = y1 * y1 + y2 * y2
     ny = wp.sqrt(ny2)
     for it in range(40):
         if ny <= limit * (F1 + wp.float64(1.0e-10)):
@@ -170,77 +179,133 @@ def point_weights(w0: wp.float64, w1: wp.float64, c: wp.float64, s: wp.float64):
 @wp.func
 def contact_side(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d), i: int,
                  s: wp.float64, off: wp.vec3d):
-    """The side of a contact at x(s) + off on the edge starting at vertex i."""
+    """The side of a contact at x(s) + off on the edge starting at vertex i, and the mobility
+    of that point (m / (N s))."""
     c = ContactSide()
     c.i = i
     c.s = s
     t = tangent[i]
-    c.t = t
     r = model.vertex_rod[i]
-    c.ispin = model.inv_inertia[i]
-    c.length = model.rest_length[i]
     c.rigid = model.rigid[r]
     if c.rigid != 0:
-        xc = (x[i] + x[i + 1]) * HALF
-        c.arm0 = x[i] - xc
-        c.arm1 = x[i + 1] - xc
-        c.lever = c.arm0 + (x[i + 1] - x[i]) * s + off
+        c.lever = (x[i] - x[i + 1]) * HALF + (x[i + 1] - x[i]) * s + off
         ip = model.rod_inv_iperp[r]
-        c.iinv = wp.diag(wp.vec3d(ip, ip, ip)) + wp.outer(t, t) * (c.ispin - ip)
+        iinv = wp.diag(wp.vec3d(ip, ip, ip)) + wp.outer(t, t) * (model.inv_inertia[i] - ip)
         c.im = model.rod_inv_mass[r]
         R = wp.skew(c.lever)
-        c.W = wp.diag(wp.vec3d(c.im, c.im, c.im)) - R * c.iinv * R
-    else:
-        q0, q1, w = point_weights(model.inv_mass[i], model.inv_mass[i + 1], model.cross_inv_mass[i], s)
-        c.q0 = q0
-        c.q1 = q1
-        c.g = wp.cross(t, off)
-        c.W = wp.diag(wp.vec3d(w, w, w)) + wp.outer(c.g, c.g) * c.ispin
-    return c
+        c.turn = iinv * R
+        return c, wp.diag(wp.vec3d(c.im, c.im, c.im)) - R * c.turn
+    q0, q1, w = point_weights(model.inv_mass[i], model.inv_mass[i + 1], model.cross_inv_mass[i], s)
+    c.q0 = q0
+    c.q1 = q1
+    c.ispin = model.inv_inertia[i]
+    c.lever = wp.cross(t, off)
+    return c, wp.diag(wp.vec3d(w, w, w)) + wp.outer(c.lever, c.lever) * c.ispin
 
 
 @wp.func
 def side_velocity(c: ContactSide, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
-    """Velocity of the side's material point (m/s)."""
+    """Velocity of the side's material point (m/s), inside the sweeps (a rigid rod's velocity
+    held as a body's: centre of mass at its first vertex, angular velocity at its second)."""
     i = c.i
     if c.rigid != 0:
-        # rigid body: v_c + omega x lever, omega = rotation across the axis + spin about it
-        w = wp.cross(c.t, v[i + 1] - v[i]) / c.length + c.t * spin[i]
-        return (v[i] + v[i + 1]) * HALF + wp.cross(w, c.lever)
-    return v[i] * (F1 - c.s) + v[i + 1] * c.s + c.g * spin[i]
-
-
-@wp.func
-def side_response(c: ContactSide, P: wp.vec3d):
-    """Velocity changes of the side's two vertices and of its edge's spin for impulse P at its
-    point (a rigid-body velocity change for rigid rods)."""
-    if c.rigid != 0:
-        dvc = P * c.im
-        dw = c.iinv * wp.cross(c.lever, P)
-        ws = wp.dot(dw, c.t)
-        wperp = dw - c.t * ws
-        return dvc + wp.cross(wperp, c.arm0), dvc + wp.cross(wperp, c.arm1), ws
-    return P * c.q0, P * c.q1, wp.dot(P, c.g) * c.ispin
+        return v[i] + wp.cross(v[i + 1], c.lever)
+    return v[i] * (F1 - c.s) + v[i + 1] * c.s + c.lever * spin[i]
 
 
 @wp.func
 def side_apply(c: ContactSide, P: wp.vec3d, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
-    """Apply impulse P at the side's point."""
-    dv0, dv1, ds = side_response(c, P)
-    v[c.i] = v[c.i] + dv0
-    v[c.i + 1] = v[c.i + 1] + dv1
-    spin[c.i] = spin[c.i] + ds
+    """Apply impulse P at the side's point, inside the sweeps (rigid rods as bodies)."""
+    i = c.i
+    if c.rigid != 0:
+        v[i] = v[i] + P * c.im
+        v[i + 1] = v[i + 1] + c.turn * P
+    else:
+        v[i] = v[i] + P * c.q0
+        v[i + 1] = v[i + 1] + P * c.q1
+        spin[i] = spin[i] + wp.dot(P, c.lever) * c.ispin
     return 0
 
 
 @wp.func
-def side_apply_atomic(c: ContactSide, P: wp.vec3d, v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
-    """``side_apply`` with atomic adds, for launches whose threads may share a rod."""
-    dv0, dv1, ds = side_response(c, P)
+def side_response(c: ContactSide, P: wp.vec3d, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d)):
+    """Velocity changes of the side's two vertices and of its edge's spin for impulse P at its
+    point, outside the sweeps (a rigid rod moved as a rigid body: translation, rotation across
+    the axis on the two vertices about their midpoint at ``x``, spin about it)."""
+    if c.rigid != 0:
+        i = c.i
+        t = tangent[i]
+        dvc = P * c.im
+        dw = c.turn * P
+        ws = wp.dot(dw, t)
+        turn = wp.cross(dw - t * ws, (x[i] - x[i + 1]) * HALF)
+        return dvc + turn, dvc - turn, ws
+    return P * c.q0, P * c.q1, wp.dot(P, c.lever) * c.ispin
+
+
+@wp.func
+def side_apply_atomic(c: ContactSide, P: wp.vec3d, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d),
+                      v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
+    """Apply impulse P at the side's point to the vertex velocities (outside the sweeps), with
+    atomic adds for launches whose threads may share a rod."""
+    dv0, dv1, ds = side_response(c, P, x, tangent)
     wp.atomic_add(v, c.i, dv0)
     wp.atomic_add(v, c.i + 1, dv1)
     wp.atomic_add(spin, c.i, ds)
     return 0
+
+
+@wp.func
+def rigid_to_body(r: int, model: RodModel, tangent: wp.array(dtype=wp.vec3d), v: wp.array(dtype=wp.vec3d),
+                  spin: wp.array(dtype=wp.float64), axial: wp.array(dtype=wp.float64)):
+    """Rigid rod r's vertex velocities and spin as a body's for the sweeps: centre-of-mass
+    velocity into its first vertex's slot, angular velocity (across the axis from the ends'
+    relative velocity, plus the spin about it) into its second; the ends' relative velocity
+    along the axis, which a rigid motion does not hold, kept in ``axial``. A contact then
+    reads and changes a rigid rod in a few products (no division, no split of the turn)."""
+    if model.rigid[r] == 0:
+        return 0
+    i = model.rod_start[r]
+    t = tangent[i]
+    d = v[i + 1] - v[i]
+    axial[i] = wp.dot(d, t)
+    v[i] = (v[i] + v[i + 1]) * HALF
+    v[i + 1] = wp.cross(t, d) / model.rest_length[i] + t * spin[i]
+    return 0
+
+
+@wp.func
+def rigid_from_body(r: int, model: RodModel, tangent: wp.array(dtype=wp.vec3d), v: wp.array(dtype=wp.vec3d),
+                    spin: wp.array(dtype=wp.float64), axial: wp.array(dtype=wp.float64)):
+    """The inverse of :func:`rigid_to_body`: vertex velocities and spin again."""
+    if model.rigid[r] == 0:
+        return 0
+    i = model.rod_start[r]
+    t = tangent[i]
+    w = v[i + 1]
+    half = (wp.cross(w, t) * model.rest_length[i] + t * axial[i]) * HALF
+    vc = v[i]
+    v[i] = vc - half
+    v[i + 1] = vc + half
+    if model.inv_inertia[i] > F0:
+        spin[i] = wp.dot(w, t)
+    else:
+        spin[i] = F0  # locked spin (no rolling) stays exactly zero
+    return 0
+
+
+@wp.kernel
+def rigid_bodies_to_sweeps(model: RodModel, tangent: wp.array(dtype=wp.vec3d), v: wp.array(dtype=wp.vec3d),
+                           spin: wp.array(dtype=wp.float64), axial: wp.array(dtype=wp.float64)):
+    """One thread per rod: :func:`rigid_to_body` (before the sweeps of a parallel device)."""
+    rigid_to_body(wp.tid(), model, tangent, v, spin, axial)
+
+
+@wp.kernel
+def rigid_bodies_from_sweeps(model: RodModel, tangent: wp.array(dtype=wp.vec3d), v: wp.array(dtype=wp.vec3d),
+                             spin: wp.array(dtype=wp.float64), axial: wp.array(dtype=wp.float64)):
+    """One thread per rod: :func:`rigid_from_body` (after the sweeps of a parallel device)."""
+    rigid_from_body(wp.tid(), model, tangent, v, spin, axial)
 
 
 @wp.func
@@ -250,9 +315,9 @@ def rod_contact_sides(k: int, model: RodModel, x: wp.array(dtype=wp.vec3d), cont
     ia = model.seg_vertex[sp[0]]
     ib = model.seg_vertex[sp[1]]
     n = contacts.normal[k]
-    a = contact_side(model, x, tangent, ia, contacts.st[k][0], n * (-model.radius[model.vertex_rod[ia]]))
-    b = contact_side(model, x, tangent, ib, contacts.st[k][1], n * model.radius[model.vertex_rod[ib]])
-    return a, b
+    a, Wa = contact_side(model, x, tangent, ia, contacts.st[k][0], n * (-model.radius[model.vertex_rod[ia]]))
+    b, Wb = contact_side(model, x, tangent, ib, contacts.st[k][1], n * model.radius[model.vertex_rod[ib]])
+    return a, b, Wa + Wb
 
 
 @wp.func
@@ -261,11 +326,13 @@ def relaxed(P_new: wp.vec3d, P: wp.vec3d, n: wp.vec3d, mu: wp.float64, relax: wp
     if relax == F1:
         return P_new
     R = P + (P_new - P) * relax
-    pn = wp.max(wp.dot(R, n), F0)
-    pt = R - n * wp.dot(R, n)
-    lt = wp.length(pt)
-    if lt > mu * pn and lt > F0:
-        pt = pt * (mu * pn / lt)
+    rn = wp.dot(R, n)
+    pn = wp.max(rn, F0)
+    pt = R - n * rn
+    lt2 = wp.dot(pt, pt)
+    limit = mu * pn
+    if lt2 > limit * limit:
+        pt = pt * (limit / wp.sqrt(lt2))
     return n * pn + pt
 
 
@@ -282,8 +349,8 @@ def prepare_rod_contacts(
     k = wp.tid()
     if k >= contacts.count:
         return
-    a, b = rod_contact_sides(k, model, x, contacts, tangent)
-    f = local_frame(a.W + b.W, contacts.normal[k], approach_target(contacts.gap[k], params))
+    a, b, W = rod_contact_sides(k, model, x, contacts, tangent)
+    f = local_frame(W, contacts.normal[k], approach_target(contacts.gap[k], params))
     f.a = a
     f.b = b
     frames[k] = f
@@ -315,8 +382,9 @@ def solve_rod_contact(
     spin: wp.array(dtype=wp.float64),
 ):
     """Exact local solve of rod-rod contact k (its frame, accumulated impulse and normal);
-    returns the velocity change it caused (m/s). Takes the arrays it reads rather than the model and contact bundles:
-    the innermost call of every sweep, so nothing else is copied."""
+    returns the square of the velocity change it caused (m^2/s^2: the sweep's largest is
+    rooted once, not every contact's). Takes the arrays it reads rather than the model and
+    contact bundles: the innermost call of every sweep, so nothing else is copied."""
     f = frames[k]
     P = impulse[k]
     n = normal[k]
@@ -325,7 +393,8 @@ def solve_rod_contact(
     side_apply(f.a, dP, v, spin)
     side_apply(f.b, -dP, v, spin)
     impulse[k] = P_new
-    return wp.length(f.W * dP)
+    du = f.W * dP
+    return wp.dot(du, du)
 
 
 @wp.kernel
@@ -340,7 +409,8 @@ def solve_rod_contacts(
     spin: wp.array(dtype=wp.float64),
     residual: wp.array(dtype=wp.float64),
 ):
-    """One thread per contact of one colour (GPU) or of all contacts in order (CPU)."""
+    """One thread per contact of one colour (GPU) or of all contacts in order (CPU); the
+    residual as the square of the largest velocity change (m^2/s^2)."""
     k = wp.tid()
     if use_ids != 0:
         k = ids[k]
@@ -351,6 +421,8 @@ def solve_rod_contacts(
 def apply_rod_impulses(
     contacts: RodContacts,
     frames: wp.array(dtype=ContactFrame),
+    x: wp.array(dtype=wp.vec3d),
+    tangent: wp.array(dtype=wp.vec3d),
     v: wp.array(dtype=wp.vec3d),
     spin: wp.array(dtype=wp.float64),
 ):
@@ -359,8 +431,8 @@ def apply_rod_impulses(
     if k >= contacts.count:
         return
     P = contacts.impulse[k]
-    side_apply_atomic(frames[k].a, P, v, spin)
-    side_apply_atomic(frames[k].b, -P, v, spin)
+    side_apply_atomic(frames[k].a, P, x, tangent, v, spin)
+    side_apply_atomic(frames[k].b, -P, x, tangent, v, spin)
 
 
 # ----------------------------------------------------------------------------- walls
@@ -398,8 +470,8 @@ def wall_frame(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(d
     p = k - i * walls.n
     e, se = vertex_edge(model, i)
     n = walls.normal[p]
-    c = contact_side(model, x, tangent, e, se, n * (-model.radius[model.vertex_rod[i]]))
-    f = local_frame(c.W, n, approach_target(contacts.gap[k], params))
+    c, W = contact_side(model, x, tangent, e, se, n * (-model.radius[model.vertex_rod[i]]))
+    f = local_frame(W, n, approach_target(contacts.gap[k], params))
     f.a = c
     return f
 
@@ -440,7 +512,8 @@ def prepare_wall_contacts(
                 pn = wp.max(wp.dot(P, n), F0)
                 P = n * pn + (P - n * wp.dot(P, n))
                 contacts.impulse[k] = P
-                side_apply(contact_side(model, x, tangent, e, se, n * (-rr)), P, v, spin)
+                c, W = contact_side(model, x, tangent, e, se, n * (-rr))
+                side_apply_atomic(c, P, x, tangent, v, spin)
                 count += 1
             else:
                 contacts.gap[k] = FAR
@@ -491,7 +564,8 @@ def solve_rod_walls(
     spin: wp.array(dtype=wp.float64),
 ):
     """Every wall contact of active rod q in turn (same exact local solve as rod-rod
-    contacts, frames prepared once per step); returns the largest velocity change caused (m/s)."""
+    contacts, frames prepared once per step); returns the square of the largest velocity
+    change caused (m^2/s^2)."""
     worst = F0
     sp = contacts.span[q]
     for j in range(sp[0], sp[0] + sp[1]):
@@ -503,7 +577,8 @@ def solve_rod_walls(
         dP = P_new - P
         side_apply(f.a, dP, v, spin)
         contacts.impulse[k] = P_new
-        worst = wp.max(worst, wp.length(f.W * dP))
+        du = f.W * dP
+        worst = wp.max(worst, wp.dot(du, du))
     return worst
 
 
@@ -516,7 +591,7 @@ def solve_wall_contacts(
     spin: wp.array(dtype=wp.float64),
     residual: wp.array(dtype=wp.float64),
 ):
-    """One thread per rod that touches a wall (``active`` lists them)."""
+    """One thread per rod that touches a wall (``active`` lists them); the residual squared."""
     wp.atomic_max(residual, 0, solve_rod_walls(wp.tid(), walls, params, contacts, v, spin))
 
 

@@ -29,10 +29,12 @@ def side_point(c: ContactSide, x: wp.array(dtype=wp.vec3d)):
 
 
 @wp.func
-def side_shift(c: ContactSide, D: wp.vec3d, x: wp.array(dtype=wp.vec3d)):
+def side_shift(c: ContactSide, D: wp.vec3d, x0: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d),
+               x: wp.array(dtype=wp.vec3d)):
     """Move the side's rod by the 'position impulse' D through its mobility (a rigid rod as a
-    small rigid motion, an elastic one at the edge's two vertices); velocities are untouched."""
-    dx0, dx1, _turn = side_response(c, D)  # the spin's share turns a round rod onto itself: no shift
+    small rigid motion about its start-of-step centre ``x0``, an elastic one at the edge's two
+    vertices); velocities are untouched."""
+    dx0, dx1, _turn = side_response(c, D, x0, tangent)  # the spin's share turns a round rod onto itself: no shift
     x[c.i] = x[c.i] + dx0
     x[c.i + 1] = x[c.i + 1] + dx1
     return 0
@@ -40,7 +42,8 @@ def side_shift(c: ContactSide, D: wp.vec3d, x: wp.array(dtype=wp.vec3d)):
 
 @wp.func
 def project_rod_contact(k: int, model: RodModel, contacts: RodContacts, frames: wp.array(dtype=ContactFrame),
-                        params: StepParams, x: wp.array(dtype=wp.vec3d)):
+                        params: StepParams, x0: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d),
+                        x: wp.array(dtype=wp.vec3d)):
     """Remove the part of contact k's overlap beyond the slop at the end-of-step positions
     (along its normal, with its mobility); returns the overlap it found (m)."""
     f = frames[k]
@@ -52,8 +55,8 @@ def project_rod_contact(k: int, model: RodModel, contacts: RodContacts, frames: 
     if excess <= F0 or f.k[0] <= F0:
         return wp.max(-gap, F0)
     D = n * (params.beta * excess / f.k[0])
-    side_shift(f.a, D, x)
-    side_shift(f.b, -D, x)
+    side_shift(f.a, D, x0, tangent, x)
+    side_shift(f.b, -D, x0, tangent, x)
     return -gap
 
 
@@ -77,10 +80,10 @@ def project_rod_walls(r: int, model: RodModel, x0: wp.array(dtype=wp.vec3d), tan
             if excess <= F0:
                 continue
             worst = wp.max(worst, -gap)
-            c = contact_side(model, x0, tangent, e, se, n * (-rr))
-            wnn = wp.dot(n, c.W * n)
+            c, W = contact_side(model, x0, tangent, e, se, n * (-rr))
+            wnn = wp.dot(n, W * n)
             if wnn > F0:
-                side_shift(c, n * (params.beta * excess / wnn), x)
+                side_shift(c, n * (params.beta * excess / wnn), x0, tangent, x)
     return worst
 
 
@@ -96,7 +99,7 @@ def project_positions_sequential(sweeps: int, model: RodModel, x0: wp.array(dtyp
     for it in range(sweeps):
         worst = F0
         for k in range(contacts.count):
-            worst = wp.max(worst, project_rod_contact(k, model, contacts, frames, params, x))
+            worst = wp.max(worst, project_rod_contact(k, model, contacts, frames, params, x0, tangent, x))
         for q in range(na):
             worst = wp.max(worst, project_rod_walls(wall_contacts.active[q], model, x0, tangent, walls, params, x))
     out[0] = worst
@@ -104,12 +107,13 @@ def project_positions_sequential(sweeps: int, model: RodModel, x0: wp.array(dtyp
 
 @wp.kernel
 def project_rod_contacts(ids: wp.array(dtype=wp.int32), use_ids: int, model: RodModel, contacts: RodContacts,
-                         frames: wp.array(dtype=ContactFrame), params: StepParams, x: wp.array(dtype=wp.vec3d)):
+                         frames: wp.array(dtype=ContactFrame), params: StepParams, x0: wp.array(dtype=wp.vec3d),
+                         tangent: wp.array(dtype=wp.vec3d), x: wp.array(dtype=wp.vec3d)):
     """One thread per contact of one colour (GPU)."""
     k = wp.tid()
     if use_ids != 0:
         k = ids[k]
-    project_rod_contact(k, model, contacts, frames, params, x)
+    project_rod_contact(k, model, contacts, frames, params, x0, tangent, x)
 
 
 @wp.kernel

@@ -8,8 +8,8 @@ Python launch overhead of three launches per sweep, which dominates for small sc
 
 import warp as wp
 
-from rodwarp.kernels.elastics import project_rod
-from rodwarp.kernels.friction import solve_rod_contact, solve_rod_walls
+from rodwarp.kernels.elastics import project_rigid_length, project_rod
+from rodwarp.kernels.friction import rigid_from_body, rigid_to_body, solve_rod_contact, solve_rod_walls
 from rodwarp.kernels.structs import (ContactFrame, RodContacts, RodFactors, RodModel, RodState, StepParams,
                                      WallContacts, Walls)
 
@@ -35,11 +35,16 @@ def gauss_seidel_sequential(
     spin: wp.array(dtype=wp.float64),
     out: wp.array(dtype=wp.float64),
 ):
-    """Launch with dim = 1. out = [contact residual (m/s), stretch residual (m), sweeps]."""
-    cres = F0
+    """Launch with dim = 1. out = [contact residual (m/s), stretch residual (m), sweeps].
+
+    Rigid rods move as bodies inside the sweeps (``rigid_to_body``) and get their length
+    after them (``project_rigid_length``)."""
+    cres = F0  # the square of the largest velocity change of a sweep (m^2/s^2)
     sres = F0
     used = int(0)
     na = wall_contacts.n_active[0]
+    for r in range(model.n_rods):
+        rigid_to_body(r, model, factors.tangent, v, spin, factors.axial)
     for it in range(iterations):
         cres = F0
         sres = F0
@@ -51,8 +56,11 @@ def gauss_seidel_sequential(
             sres = wp.max(sres, project_rod(r, model, state, v, spin, factors, params.dt))
         used = it + 1
         if tolerance > F0 and it % 2 == 1:
-            if cres < tolerance and sres < length_tolerance:
+            if cres < tolerance * tolerance and sres < length_tolerance:
                 break
-    out[0] = cres
+    for r in range(model.n_rods):
+        rigid_from_body(r, model, factors.tangent, v, spin, factors.axial)
+        sres = wp.max(sres, project_rigid_length(r, model, state, v, factors, params.dt, length_tolerance))
+    out[0] = wp.sqrt(cres)
     out[1] = sres
     out[2] = wp.float64(used)

@@ -86,23 +86,24 @@ class RodContacts:
 
 @wp.struct
 class ContactSide:
-    """One rod's side of a contact: where the impulse acts and how the rod responds."""
+    """One rod's side of a contact: where the impulse acts and how the rod responds.
+
+    Inside the Gauss-Seidel sweeps a rigid rod's velocity is held as a rigid body's, the
+    centre-of-mass velocity in its first vertex's slot and the angular velocity (spin
+    included) in its second (:func:`rodwarp.kernels.friction.rigid_to_body`), so a rigid side
+    needs only its lever and its turn; an elastic side acts on the edge's two vertices and
+    its spin.
+    """
 
     i: int  # first vertex of the edge
     rigid: int
     s: wp.float64  # parameter on the edge
     q0: wp.float64  # elastic: velocity change of the edge's ends per unit impulse
     q1: wp.float64
-    t: wp.vec3d  # edge tangent at the start of the step
-    g: wp.vec3d  # elastic: t x (surface offset), the spin's lever
-    lever: wp.vec3d  # rigid: from the centre of mass to the point
-    arm0: wp.vec3d  # rigid: from the centre of mass to the two vertices
-    arm1: wp.vec3d
-    iinv: wp.mat33d  # rigid: inverse inertia tensor
+    ispin: wp.float64  # elastic: inverse axial inertia of the edge
     im: wp.float64  # rigid: 1 / m
-    ispin: wp.float64  # inverse axial inertia of the edge
-    length: wp.float64  # rest length of the edge (m)
-    W: wp.mat33d  # mobility of the point (m / (N s))
+    lever: wp.vec3d  # rigid: from the centre of mass to the point; elastic: t x (surface offset), the spin's lever
+    turn: wp.mat33d  # rigid: I^-1 [lever]x, the angular velocity change per unit impulse (1 / (kg m))
 
 
 @wp.struct
@@ -111,7 +112,7 @@ class ContactFrame:
 
     a: ContactSide
     b: ContactSide
-    W: wp.mat33d  # mobility of the contact (both sides)
+    W: wp.mat33d  # mobility of the contact (both sides, m / (N s))
     e1: wp.vec3d  # tangent basis (e2 = n x e1)
     k: wp.vec4d  # (n W n, e1 W e1, e1 W e2, e2 W e2)
     coupled: int  # W couples the normal and tangential parts
@@ -151,6 +152,9 @@ class RodFactors:
     soff: wp.array(dtype=wp.float64)
     slam: wp.array(dtype=wp.float64)
     srhs: wp.array(dtype=wp.float64)
+    # rigid rods inside the sweeps: (v_1 - v_0) . t, the part of the ends' relative velocity
+    # a rigid body's velocity does not hold (stretching, set by the length constraint alone)
+    axial: wp.array(dtype=wp.float64)
     # twist (tridiagonal per rod, straight rods)
     tangent: wp.array(dtype=wp.vec3d)  # edge tangent at the start of the step
     ref_twist: wp.array(dtype=wp.float64)  # interior vertex: reference twist at the start of the step

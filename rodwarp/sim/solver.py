@@ -191,7 +191,7 @@ class RodSolver(StepBounds):
         for name, dtype in (("bcoef", wp.vec4d), ("btarget", wp.vec3d), ("bdiag", wp.float64), ("boff1", wp.float64),
                             ("boff2", wp.float64), ("blam", wp.vec3d), ("brhs", wp.vec3d), ("bdl", wp.vec3d),
                             ("sdir", wp.vec3d), ("sdiag", wp.float64), ("soff", wp.float64), ("slam", wp.float64),
-                            ("srhs", wp.float64), ("tangent", wp.vec3d), ("ref_twist", wp.float64),
+                            ("srhs", wp.float64), ("axial", wp.float64), ("tangent", wp.vec3d), ("ref_twist", wp.float64),
                             ("tdiag", wp.float64), ("toff", wp.float64), ("tlam", wp.float64), ("trhs", wp.float64),
                             ("gcouple", wp.vec3d), ("clam", wp.vec4d), ("crhs", wp.vec4d), ("cdl", wp.vec4d)):
             setattr(f, name, wp.zeros(V, dtype=dtype, device=d))
@@ -391,7 +391,7 @@ class RodSolver(StepBounds):
                 m.arrays, state_in.x, contacts, f.tangent, params, self._frames])
             self.contacts.warm_start(state_in, state_out, n_contacts, self.warm_start)
             self._launch("friction", friction.apply_rod_impulses, dim=n_contacts, device=dev, inputs=[
-                contacts, self._frames, state_out.v, state_out.spin])
+                contacts, self._frames, state_in.x, f.tangent, state_out.v, state_out.spin])
             if self.coloring:
                 self.contacts.color(state_out, n_contacts)
 
@@ -494,10 +494,12 @@ class RodSolver(StepBounds):
                 if self.coloring:
                     for c0, c1 in self.contacts.color_ranges:
                         self._launch("friction", overlap.project_rod_contacts, dim=c1 - c0, device=dev,
-                                     inputs=[ids[c0:c1], 1, m.arrays, contacts, self._frames, params, state_out.x])
+                                     inputs=[ids[c0:c1], 1, m.arrays, contacts, self._frames, params, rs_in.x,
+                                             f.tangent, state_out.x])
                 else:
                     self._launch("friction", overlap.project_rod_contacts, dim=contacts.count, device=dev,
-                                 inputs=[ids, 0, m.arrays, contacts, self._frames, params, state_out.x])
+                                 inputs=[ids, 0, m.arrays, contacts, self._frames, params, rs_in.x, f.tangent,
+                                         state_out.x])
             if n_active:
                 self._launch("friction", overlap.project_wall_contacts, dim=n_active, device=dev, inputs=[
                     m.arrays, rs_in.x, f.tangent, walls, wc, params, state_out.x])
@@ -511,6 +513,8 @@ class RodSolver(StepBounds):
         n_contacts = contacts.count
         ids = self.contacts.color_ids
         used = 0
+        self._launch("friction", friction.rigid_bodies_to_sweeps, dim=m.n_rods, device=dev, inputs=[
+            m.arrays, f.tangent, state_out.v, state_out.spin, f.axial])
         for it in range(self.iterations):
             measure = it == self.iterations - 1 or (self.tolerance > 0 and it % 2 == 1)
             if measure:
@@ -532,10 +536,15 @@ class RodSolver(StepBounds):
                 m.arrays, rs_in, state_out.v, state_out.spin, f, params.dt, self._sresidual])
             used = it + 1
             if measure and self.tolerance > 0 and it < self.iterations - 1:
-                if (self._residual.numpy()[0] < self.tolerance
+                if (self._residual.numpy()[0] < self.tolerance ** 2
                         and self._sresidual.numpy()[0] < self.length_tolerance):
                     break
-        return float(self._residual.numpy()[0]), float(self._sresidual.numpy()[0]), used
+        self._launch("friction", friction.rigid_bodies_from_sweeps, dim=m.n_rods, device=dev, inputs=[
+            m.arrays, f.tangent, state_out.v, state_out.spin, f.axial])
+        self._launch("elastics", elastics.rigid_length_projection, dim=m.n_rods, device=dev, inputs=[
+            m.arrays, rs_in, state_out.v, f, params.dt, wp.float64(self.length_tolerance), self._sresidual])
+        # the contact residual is kept squared on the device
+        return math.sqrt(float(self._residual.numpy()[0])), float(self._sresidual.numpy()[0]), used
 
     def _check_energy(self, state_in: State, state_out: State, dt: float, theta: float, control) -> None:
         """Energy-jump test: kinetic + elastic energy may not grow 4x between checks beyond
@@ -586,14 +595,17 @@ class RodSolver(StepBounds):
         contacts, params, walls = self._last_solve
         m = self.model
         out = wp.zeros(1, dtype=wp.float64, device=m.device)
+        # the contacts read rigid rods as bodies, as inside the sweeps
+        v, spin = wp.clone(state_out.v), wp.clone(state_out.spin)
+        wp.launch(friction.rigid_bodies_to_sweeps, dim=m.n_rods, device=m.device, inputs=[
+            m.arrays, self.factors.tangent, v, spin, wp.zeros_like(self.factors.axial)])
         if contacts.count:
             wp.launch(friction.rod_contact_residual, dim=contacts.count, device=m.device, inputs=[
-                contacts.count, self._frames, contacts.impulse, contacts.normal, params, state_out.v, state_out.spin,
-                out])
+                contacts.count, self._frames, contacts.impulse, contacts.normal, params, v, spin, out])
         n = int(self._n_wall_frames.numpy()[0])
         if n:
             wp.launch(friction.wall_contact_residual, dim=n, device=m.device, inputs=[
-                walls, self._wall_contacts(state_out), state_out.v, state_out.spin, out])
+                walls, self._wall_contacts(state_out), v, spin, out])
         return float(out.numpy()[0])
 
     def energy(self, state: State) -> dict:
