@@ -117,7 +117,9 @@ def pentadiagonal_factor(
 ):
     """In-place LDL^T of the SPD pentadiagonal matrix on rows [a, b).
 
-    diag -> D, off1 (row i with i+1) -> L[i+1, i], off2 (row i with i+2) -> L[i+2, i].
+    diag -> 1 / D (the solves multiply by it: a division in every sweep's chain of
+    substitutions costs more than the rest of the row), off1 (row i with i+1) -> L[i+1, i],
+    off2 (row i with i+2) -> L[i+2, i].
     """
     for i in range(a, b):
         d = diag[i]
@@ -135,6 +137,8 @@ def pentadiagonal_factor(
             off1[i] = t / d
         if i + 2 < b:
             off2[i] = off2[i] / d
+    for i in range(a, b):
+        diag[i] = F1 / diag[i]
     return 0
 
 
@@ -142,14 +146,14 @@ def pentadiagonal_factor(
 def pentadiagonal_substitute(
     a: int,
     b: int,
-    diag: wp.array(dtype=wp.float64),
+    dinv: wp.array(dtype=wp.float64),
     off1: wp.array(dtype=wp.float64),
     off2: wp.array(dtype=wp.float64),
     rhs: wp.array(dtype=wp.vec3d),
     out: wp.array(dtype=wp.vec3d),
 ):
-    """Solve with the factors of ``pentadiagonal_factor`` for three right-hand sides
-    (rhs is overwritten by the forward substitution)."""
+    """Solve with the factors of ``pentadiagonal_factor`` (``dinv`` = 1 / D) for three
+    right-hand sides (rhs is overwritten by the forward substitution)."""
     for i in range(a, b):
         z = rhs[i]
         if i - 1 >= a:
@@ -159,7 +163,7 @@ def pentadiagonal_substitute(
         rhs[i] = z
     for k in range(b - a):
         i = b - 1 - k
-        y = rhs[i] / diag[i]
+        y = rhs[i] * dinv[i]
         if i + 1 < b:
             y = y - out[i + 1] * off1[i]
         if i + 2 < b:
@@ -189,7 +193,7 @@ def bending_factor(model: RodModel, dt: wp.float64, factors: RodFactors):
         wq = model.inv_mass[i + 1]
         at = inv_dt2 / (EI * wl)
         factors.bcoef[i] = wp.vec4d(cm, c0, cp, at)
-        factors.bdiag[i] = cm * cm * model.inv_mass[i - 1] + c0 * c0 * w0 + cp * cp * wq + at
+        factors.bdinv[i] = cm * cm * model.inv_mass[i - 1] + c0 * c0 * w0 + cp * cp * wq + at
         factors.boff1[i] = F0
         factors.boff2[i] = F0
         if i + 1 < b - 1:
@@ -198,7 +202,7 @@ def bending_factor(model: RodModel, dt: wp.float64, factors: RodFactors):
         if i + 2 < b - 1:
             em, e0, ep, wl2 = bend_coeffs(model.rest_length, i + 2)
             factors.boff2[i] = cp * em * wq
-    pentadiagonal_factor(a + 1, b - 1, factors.bdiag, factors.boff1, factors.boff2)
+    pentadiagonal_factor(a + 1, b - 1, factors.bdinv, factors.boff1, factors.boff2)
 
 
 @wp.kernel
@@ -222,6 +226,7 @@ def stretch_twist_factor(model: RodModel, x: wp.array(dtype=wp.vec3d), dt: wp.fl
         if l0 > F0:
             nj = e0 / l0
         factors.sdir[j] = nj
+    off_prev = F0
     for j in range(a, b - 1):
         d = model.inv_mass[j] + model.inv_mass[j + 1] - wp.float64(2.0) * model.cross_inv_mass[j] + \
             model.compliance[j] * inv_dt2
@@ -233,20 +238,23 @@ def stretch_twist_factor(model: RodModel, x: wp.array(dtype=wp.vec3d), dt: wp.fl
             d = F1
             off = F0
         if j > a:
-            d = d - factors.soff[j - 1] * factors.soff[j - 1] / factors.sdiag[j - 1]
-        factors.sdiag[j] = d
-        factors.soff[j] = off
+            d = d - off_prev * factors.sl[j - 1]
+        factors.sdinv[j] = F1 / d
+        factors.sl[j] = off / d
+        off_prev = off
     if model.curved[r] != 0:
         return
+    off_prev = F0
     for i in range(a + 1, b - 1):
         d = model.inv_inertia[i - 1] + model.inv_inertia[i] + model.twist_compliance[i] * inv_dt2
         off = F0
         if i + 1 < b - 1:
             off = -model.inv_inertia[i]
         if i > a + 1:
-            d = d - factors.toff[i - 1] * factors.toff[i - 1] / factors.tdiag[i - 1]
-        factors.tdiag[i] = d
-        factors.toff[i] = off
+            d = d - off_prev * factors.tl[i - 1]
+        factors.tdinv[i] = F1 / d
+        factors.tl[i] = off / d
+        off_prev = off
 
 
 @wp.func
@@ -334,7 +342,7 @@ def project_straight_bending(r: int, a: int, b: int, model: RodModel, state: Rod
         Cb = (state.x[i - 1] + v[i - 1] * dt) * c[0] + (state.x[i] + v[i] * dt) * c[1] + \
             (state.x[i + 1] + v[i + 1] * dt) * c[2]
         factors.brhs[i] = -(Cb - factors.btarget[i]) - factors.blam[i] * c[3]
-    pentadiagonal_substitute(a + 1, b - 1, factors.bdiag, factors.boff1, factors.boff2, factors.brhs, factors.bdl)
+    pentadiagonal_substitute(a + 1, b - 1, factors.bdinv, factors.boff1, factors.boff2, factors.brhs, factors.bdl)
     for i in range(a + 1, b - 1):
         c = factors.bcoef[i]
         dlb = factors.bdl[i]
@@ -355,25 +363,25 @@ def twist_residual(model: RodModel, state: RodState, spin: wp.array(dtype=wp.flo
 
 
 @wp.func
-def eliminated(r: wp.float64, diag: wp.array(dtype=wp.float64), off: wp.array(dtype=wp.float64),
-               rhs: wp.array(dtype=wp.float64), i: int, lo: int):
-    """Forward elimination of row i's right-hand side r in a symmetric tridiagonal system whose
-    rows lo..i-1 are factored already (``diag`` holds the pivots)."""
+def eliminated(r: wp.float64, l: wp.array(dtype=wp.float64), rhs: wp.array(dtype=wp.float64), i: int, lo: int):
+    """Forward elimination of row i's right-hand side r in a symmetric tridiagonal system
+    factored as L D L^T (``l`` = L[i+1, i]) whose rows lo..i-1 are eliminated already."""
     if i > lo:
-        return r - off[i - 1] / diag[i - 1] * rhs[i - 1]
+        return r - l[i - 1] * rhs[i - 1]
     return r
 
 
 @wp.func
-def back_substitute(diag: wp.array(dtype=wp.float64), off: wp.array(dtype=wp.float64),
+def back_substitute(dinv: wp.array(dtype=wp.float64), l: wp.array(dtype=wp.float64),
                     rhs: wp.array(dtype=wp.float64), lo: int, hi: int):
-    """Back substitution of the factored tridiagonal rows lo..hi-1: ``rhs`` becomes the solution."""
+    """Back substitution of the eliminated tridiagonal rows lo..hi-1 (``dinv`` = 1 / D):
+    ``rhs`` becomes the solution."""
     for k in range(hi - lo):
         i = hi - 1 - k
-        val = rhs[i]
+        val = rhs[i] * dinv[i]
         if i + 1 < hi:
-            val = val - off[i] * rhs[i + 1]
-        rhs[i] = val / diag[i]
+            val = val - l[i] * rhs[i + 1]
+        rhs[i] = val
     return 0
 
 
@@ -382,8 +390,8 @@ def project_straight_twist(a: int, b: int, model: RodModel, state: RodState, spi
                            factors: RodFactors, dt: wp.float64, inv_dt: wp.float64, inv_dt2: wp.float64):
     for i in range(a + 1, b - 1):
         rj = -twist_residual(model, state, spin, factors, dt, i) - model.twist_compliance[i] * inv_dt2 * factors.tlam[i]
-        factors.trhs[i] = eliminated(rj, factors.tdiag, factors.toff, factors.trhs, i, a + 1)
-    back_substitute(factors.tdiag, factors.toff, factors.trhs, a + 1, b - 1)
+        factors.trhs[i] = eliminated(rj, factors.tl, factors.trhs, i, a + 1)
+    back_substitute(factors.tdinv, factors.tl, factors.trhs, a + 1, b - 1)
     for i in range(a + 1, b - 1):
         dl = factors.trhs[i]
         factors.tlam[i] = factors.tlam[i] + dl
@@ -449,8 +457,8 @@ def project_stretch(a: int, b: int, model: RodModel, state: RodState, v: wp.arra
         cval = wp.length(e) - model.rest_length[j]
         worst = wp.max(worst, wp.abs(cval))
         rj = -cval - model.compliance[j] * inv_dt2 * factors.slam[j]
-        factors.srhs[j] = eliminated(rj, factors.sdiag, factors.soff, factors.srhs, j, a)
-    back_substitute(factors.sdiag, factors.soff, factors.srhs, a, b - 1)
+        factors.srhs[j] = eliminated(rj, factors.sl, factors.srhs, j, a)
+    back_substitute(factors.sdinv, factors.sl, factors.srhs, a, b - 1)
     for j in range(a, b - 1):
         dl = factors.srhs[j]
         factors.slam[j] = factors.slam[j] + dl

@@ -140,16 +140,16 @@ class RodFactors:
     # straight rods: bending (scalar pentadiagonal, three right-hand sides)
     bcoef: wp.array(dtype=wp.vec4d)  # stencil (c-, c0, c+) and compliance / dt^2
     btarget: wp.array(dtype=wp.vec3d)  # rest curvature vector in the current frame
-    bdiag: wp.array(dtype=wp.float64)
-    boff1: wp.array(dtype=wp.float64)
-    boff2: wp.array(dtype=wp.float64)
+    bdinv: wp.array(dtype=wp.float64)  # LDL^T: 1 / D_i (reciprocals: the sweeps multiply, never divide)
+    boff1: wp.array(dtype=wp.float64)  # L[i+1, i]
+    boff2: wp.array(dtype=wp.float64)  # L[i+2, i]
     blam: wp.array(dtype=wp.vec3d)
     brhs: wp.array(dtype=wp.vec3d)
     bdl: wp.array(dtype=wp.vec3d)
     # stretching (tridiagonal per rod)
     sdir: wp.array(dtype=wp.vec3d)
-    sdiag: wp.array(dtype=wp.float64)
-    soff: wp.array(dtype=wp.float64)
+    sdinv: wp.array(dtype=wp.float64)  # LDL^T of the tridiagonal system: 1 / D_j
+    sl: wp.array(dtype=wp.float64)  # L[j+1, j]
     slam: wp.array(dtype=wp.float64)
     srhs: wp.array(dtype=wp.float64)
     # rigid rods inside the sweeps: (v_1 - v_0) . t, the part of the ends' relative velocity
@@ -158,8 +158,8 @@ class RodFactors:
     # twist (tridiagonal per rod, straight rods)
     tangent: wp.array(dtype=wp.vec3d)  # edge tangent at the start of the step
     ref_twist: wp.array(dtype=wp.float64)  # interior vertex: reference twist at the start of the step
-    tdiag: wp.array(dtype=wp.float64)
-    toff: wp.array(dtype=wp.float64)
+    tdinv: wp.array(dtype=wp.float64)  # 1 / D_i
+    tl: wp.array(dtype=wp.float64)  # L[i+1, i]
     tlam: wp.array(dtype=wp.float64)
     trhs: wp.array(dtype=wp.float64)
     # curved rods: bending and twist as one block-pentadiagonal system of 4 x 4 blocks

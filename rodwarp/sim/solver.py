@@ -188,11 +188,11 @@ class RodSolver(StepBounds):
         V = model.n_vertices
         f = self.factors = RodFactors()
         f.implicit_bending = 1
-        for name, dtype in (("bcoef", wp.vec4d), ("btarget", wp.vec3d), ("bdiag", wp.float64), ("boff1", wp.float64),
+        for name, dtype in (("bcoef", wp.vec4d), ("btarget", wp.vec3d), ("bdinv", wp.float64), ("boff1", wp.float64),
                             ("boff2", wp.float64), ("blam", wp.vec3d), ("brhs", wp.vec3d), ("bdl", wp.vec3d),
-                            ("sdir", wp.vec3d), ("sdiag", wp.float64), ("soff", wp.float64), ("slam", wp.float64),
+                            ("sdir", wp.vec3d), ("sdinv", wp.float64), ("sl", wp.float64), ("slam", wp.float64),
                             ("srhs", wp.float64), ("axial", wp.float64), ("tangent", wp.vec3d), ("ref_twist", wp.float64),
-                            ("tdiag", wp.float64), ("toff", wp.float64), ("tlam", wp.float64), ("trhs", wp.float64),
+                            ("tdinv", wp.float64), ("tl", wp.float64), ("tlam", wp.float64), ("trhs", wp.float64),
                             ("gcouple", wp.vec3d), ("clam", wp.vec4d), ("crhs", wp.vec4d), ("cdl", wp.vec4d)):
             setattr(f, name, wp.zeros(V, dtype=dtype, device=d))
         Vc = V if model.curved else 1
