@@ -58,11 +58,13 @@ def approach_target(gap: wp.float64, params: StepParams):
 
 @wp.func
 def coulomb_2d(u1: wp.float64, u2: wp.float64, w11: wp.float64, w12: wp.float64, w22: wp.float64,
-               limit: wp.float64):
+               limit: wp.float64, gamma0: wp.float64):
     """Tangential impulse (p1, p2) with u + W p = 0 when |p| <= limit (sticking), else on the
-    disc's edge with u + W p anti-parallel to p (sliding with maximal dissipation)."""
+    disc's edge with u + W p anti-parallel to p (sliding with maximal dissipation), and the
+    sliding multiplier gamma (0 when it sticks). ``gamma0``: a guess of gamma (the same
+    contact's in the last sweep), where Newton starts when it is above the lower bound."""
     if limit <= F0:
-        return wp.vec2d(F0, F0)
+        return wp.vec3d(F0, F0, F0)
     # each 2 x 2 solve takes one reciprocal of its determinant, not a division per entry: a
     # sliding contact runs this Newton loop in every sweep, and divisions set its latency
     idet = F1 / (w11 * w22 - w12 * w12)
@@ -70,13 +72,15 @@ def coulomb_2d(u1: wp.float64, u2: wp.float64, w11: wp.float64, w12: wp.float64,
     y2 = (w11 * u2 - w12 * u1) * idet
     ny2 = y1 * y1 + y2 * y2
     if ny2 <= limit * limit:
-        return wp.vec2d(-y1, -y2)  # sticks: the exact impulse
+        return wp.vec3d(-y1, -y2, F0)  # sticks: the exact impulse
     inv_limit = F1 / limit
-    # start from a lower bound of the root, |u| / limit - lambda_max(W): Newton on the
-    # concave phi then climbs to the root without overshooting, in a few steps
+    # a lower bound of the root, |u| / limit - lambda_max(W): phi below is concave, so Newton
+    # climbs from there to the root without overshooting; from a guess above the root its
+    # first step lands below it (kept above the bound), then it climbs
     half_tr = HALF * (w11 + w22)
     hd = HALF * (w11 - w22)
-    gamma = wp.max(F0, wp.sqrt(u1 * u1 + u2 * u2) * inv_limit - half_tr - wp.sqrt(hd * hd + w12 * w12))
+    lower = wp.max(F0, wp.sqrt(u1 * u1 + u2 * u2) * inv_limit - half_tr - wp.sqrt(hd * hd + w12 * w12))
+    gamma = wp.max(lower, gamma0)
     m11 = w11 + gamma
     m22 = w22 + gamma
     if gamma > F0:
@@ -86,12 +90,12 @@ def coulomb_2d(u1: wp.float64, u2: wp.float64, w11: wp.float64, w12: wp.float64,
         ny2 = y1 * y1 + y2 * y2
     ny = wp.sqrt(ny2)
     for it in range(40):
-        if ny <= limit * (F1 + wp.float64(1.0e-10)):
+        if wp.abs(ny * inv_limit - F1) <= wp.float64(1.0e-10):
             break
         # Newton on phi(gamma) = 1 / |y| - 1 / limit; phi' = y^T (W + gamma I)^-1 y / |y|^3
         z1 = (m22 * y1 - w12 * y2) * idet
         z2 = (m11 * y2 - w12 * y1) * idet
-        gamma = gamma + (ny * inv_limit - F1) * ny2 / (y1 * z1 + y2 * z2)
+        gamma = wp.max(lower, gamma + (ny * inv_limit - F1) * ny2 / (y1 * z1 + y2 * z2))
         m11 = w11 + gamma
         m22 = w22 + gamma
         idet = F1 / (m11 * m22 - w12 * w12)
@@ -100,7 +104,7 @@ def coulomb_2d(u1: wp.float64, u2: wp.float64, w11: wp.float64, w12: wp.float64,
         ny2 = y1 * y1 + y2 * y2
         ny = wp.sqrt(ny2)
     sc = limit / ny
-    return wp.vec2d(-y1 * sc, -y2 * sc)
+    return wp.vec3d(-y1 * sc, -y2 * sc, gamma)
 
 
 @wp.func
@@ -129,7 +133,8 @@ def local_frame(W: wp.mat33d, n: wp.vec3d, target: wp.float64):
 @wp.func
 def solve_local(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.float64):
     """The exact impulse of one contact: u the contact velocity with the current impulse P
-    applied, ``f`` its :func:`local_frame`; returns the new impulse.
+    applied, ``f`` its :func:`local_frame`; returns the new impulse and the sliding
+    multiplier gamma (0 unless it slides; kept in the frame as the next sweep's guess).
 
     Two cases are settled in closed form before any iteration: a contact that does not
     approach faster than its target without an impulse gets none, and one whose sticking
@@ -139,32 +144,34 @@ def solve_local(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.f
     """
     wnn = f.k[0]
     if wnn <= F0:
-        return P
+        return P, f.gamma
     W = f.W
     uf = u - W * P  # the velocity this contact's impulse acts on
     if wp.dot(uf, n) >= f.target:
-        return wp.vec3d(F0, F0, F0)  # separating or resting without load: no impulse
+        return wp.vec3d(F0, F0, F0), F0  # separating or resting without load: no impulse
     Ps = f.Winv * (n * f.target - uf)
     psn = wp.dot(Ps, n)
     if psn > F0:
         pst = Ps - n * psn
         if wp.dot(pst, pst) <= mu * mu * psn * psn:
-            return Ps  # sticks: the exact impulse
+            return Ps, F0  # sticks: the exact impulse
     e1 = f.e1
     e2 = wp.cross(n, e1)
     pn = wp.dot(P, n)
     pt = P - n * pn
+    gamma = f.gamma
     for it in range(2):
         pn_new = wp.max(F0, (f.target - wp.dot(uf + W * pt, n)) / wnn)
         c = uf + (W * n) * pn_new
-        q = coulomb_2d(wp.dot(c, e1), wp.dot(c, e2), f.k[1], f.k[2], f.k[3], mu * pn_new)
+        q = coulomb_2d(wp.dot(c, e1), wp.dot(c, e2), f.k[1], f.k[2], f.k[3], mu * pn_new, gamma)
+        gamma = q[2]
         pt_new = e1 * q[0] + e2 * q[1]
         change = wp.abs(pn_new - pn) + wp.length(pt_new - pt)
         pn = pn_new
         pt = pt_new
         if f.coupled == 0 or change <= wp.float64(1.0e-9) * (pn + wp.length(pt)):
             break
-    return n * pn + pt
+    return n * pn + pt, gamma
 
 
 @wp.func
@@ -388,7 +395,9 @@ def solve_rod_contact(
     f = frames[k]
     P = impulse[k]
     n = normal[k]
-    P_new = relaxed(rod_contact_exact(f, P, n, params.mu, v, spin), P, n, params.mu, params.relax)
+    P_exact, gamma = rod_contact_exact(f, P, n, params.mu, v, spin)
+    frames[k].gamma = gamma
+    P_new = relaxed(P_exact, P, n, params.mu, params.relax)
     dP = P_new - P
     side_apply(f.a, dP, v, spin)
     side_apply(f.b, -dP, v, spin)
@@ -573,7 +582,9 @@ def solve_rod_walls(
         p = k % walls.n
         f = contacts.frames[j]
         P = contacts.impulse[k]
-        P_new = relaxed(wall_contact_exact(f, P, walls, p, v, spin), P, walls.normal[p], walls.mu[p], params.relax)
+        P_exact, gamma = wall_contact_exact(f, P, walls, p, v, spin)
+        contacts.frames[j].gamma = gamma
+        P_new = relaxed(P_exact, P, walls.normal[p], walls.mu[p], params.relax)
         dP = P_new - P
         side_apply(f.a, dP, v, spin)
         contacts.impulse[k] = P_new
@@ -700,7 +711,8 @@ def rod_contact_residual(
         return
     f = frames[k]
     P = impulse[k]
-    wp.atomic_max(residual, 0, wp.length(f.W * (rod_contact_exact(f, P, normal[k], params.mu, v, spin) - P)))
+    P_exact, gamma = rod_contact_exact(f, P, normal[k], params.mu, v, spin)
+    wp.atomic_max(residual, 0, wp.length(f.W * (P_exact - P)))
 
 
 @wp.kernel
@@ -718,4 +730,5 @@ def wall_contact_residual(
     k = contacts.key[j]
     f = contacts.frames[j]
     P = contacts.impulse[k]
-    wp.atomic_max(residual, 0, wp.length(f.W * (wall_contact_exact(f, P, walls, k % walls.n, v, spin) - P)))
+    P_exact, gamma = wall_contact_exact(f, P, walls, k % walls.n, v, spin)
+    wp.atomic_max(residual, 0, wp.length(f.W * (P_exact - P)))

@@ -118,6 +118,7 @@ class ContactFrame:
     coupled: int  # W couples the normal and tangential parts
     target: wp.float64  # lowest normal relative velocity (m/s)
     Winv: wp.mat33d  # W^-1 (N s / m), for the exact sticking impulse; zero when W is singular
+    gamma: wp.float64  # the sliding solve's multiplier in the last sweep (m/s per N s), its next guess
 
 
 @wp.struct
