@@ -41,7 +41,8 @@ class Trajectory:
             pos = self.group.create_array("positions", shape=(n_frames_max, V, 3), chunks=(1, V, 3), dtype="f8",
                                           fill_value=np.nan, dimension_names=("frame", "vertex", "xyz"))
             pos.attrs.update({"units": "m", "coordinates": "time rod", "long_name": "vertex position"})
-            t = self.group.create_array("time", shape=(n_frames_max,), chunks=(max(n_frames_max, 1),), dtype="f8",
+            # one chunk per frame, like positions: a frame's time is written without reading the rest
+            t = self.group.create_array("time", shape=(n_frames_max,), chunks=(1,), dtype="f8",
                                         fill_value=np.nan, dimension_names=("frame",))
             t.attrs.update({"units": "s", "long_name": "simulated time"})
             rod = self.group.create_array("rod", data=np.repeat(np.arange(len(offsets) - 1, dtype=np.int32),
@@ -62,9 +63,7 @@ class Trajectory:
         """Write frame ``index`` and only then count it as complete."""
         try:
             self.group["positions"][index] = positions
-            times = self.group["time"][:]
-            times[index] = t
-            self.group["time"][:] = times
+            self.group["time"][index] = t
             self.group.attrs["n_frames"] = index + 1
         except OSError as e:
             raise OSError(e.errno, e.strerror or str(e), str(self.path)) from None

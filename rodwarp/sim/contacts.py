@@ -141,13 +141,29 @@ class ContactPipeline:
             state_out.allocate_contacts(2 * n)
         if n == 0:
             return 0
-        self._launch("narrowphase", narrowphase.iota, dim=n, device=dev, inputs=[self._order])
-        self._time("narrowphase", wp.utils.radix_sort_pairs, self._raw_key, self._order, n)
+        self._time("narrowphase", self._sort, n)
         wp.copy(state_out.contact_key, self._raw_key, count=n)
         self._launch("narrowphase", narrowphase.gather_contacts, dim=n, device=dev, inputs=[
             self._order, n, self._raw_seg, self._raw_st, self._raw_normal, self._raw_gap,
             state_out.contact_seg, state_out.contact_st, state_out.contact_normal, state_out.contact_gap])
         return n
+
+    def _sort(self, n: int) -> None:
+        """Contact points ordered by key: ``_raw_key`` sorted, ``_order`` the permutation.
+
+        On the CPU the arrays are host memory and NumPy's stable sort (timsort) does it in
+        place: from step to step the pair list keeps its order, so the keys arrive nearly
+        sorted, which timsort finishes in about one pass (2000 keys: a few microseconds
+        against 0.13 ms for Warp's radix sort). Both sorts are stable and the keys unique, so
+        the order, and the trajectory, are the same."""
+        if self.model.device == "cpu":
+            keys = self._raw_key.numpy()[:n]
+            perm = np.argsort(keys, kind="stable")
+            keys[:] = keys[perm]
+            self._order.numpy()[:n] = perm
+            return
+        self._launch("narrowphase", narrowphase.iota, dim=n, device=self.model.device, inputs=[self._order])
+        wp.utils.radix_sort_pairs(self._raw_key, self._order, n)
 
     #: flagged share of the segments above which the whole pair list is rebuilt instead of
     #: refreshed (a refresh queries the flagged segments only, but keeps the others' pairs)
