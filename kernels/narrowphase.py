@@ -340,15 +340,24 @@ def contact_overlap(
     gap_out: wp.array(dtype=wp.float64),
     out: wp.array(dtype=wp.float64),
 ):
-    """Capsule gap of every detected pair at positions ``x``; out[0] = deepest overlap (m)."""
+    """Capsule gap of every detected segment pair at positions ``x`` into ``gap_out`` (per
+    contact point); out[0] = deepest overlap (m). With an empty ``gap_out`` (the step's
+    check) a line contact's extra points, which follow their pair's first (contacts are
+    sorted by key), are skipped: one pair, one gap."""
     k = wp.tid()
     if k >= count:
         return
-    ia = seg_vertex[seg[k][0]]
-    ib = seg_vertex[seg[k][1]]
+    sp = seg[k]
+    keep = gap_out.shape[0] > 0
+    if k > 0 and not keep:
+        if seg[k - 1] == sp:
+            return
+    ia = seg_vertex[sp[0]]
+    ib = seg_vertex[sp[1]]
     pair = closest_points_segments(x[ia], x[ia + 1], x[ib], x[ib + 1])
     g = pair.dist - rod_radius[vertex_rod[ia]] - rod_radius[vertex_rod[ib]]
-    gap_out[k] = g
+    if keep:
+        gap_out[k] = g
     wp.atomic_max(out, 0, -g)
 
 

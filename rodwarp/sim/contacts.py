@@ -91,7 +91,6 @@ class ContactPipeline:
         self._color = wp.zeros(cap, dtype=wp.int32, device=d)
         self.color_ids = wp.zeros(2 * cap, dtype=wp.int32, device=d)
         self._color_keys = wp.zeros(2 * cap, dtype=wp.int32, device=d)
-        self.gap_check = wp.zeros(cap, dtype=wp.float64, device=d)
 
     def _time(self, stage, fn, *args):
         tm = self._timings()

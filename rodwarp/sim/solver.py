@@ -217,6 +217,7 @@ class RodSolver(StepBounds):
         self._wall_key = wp.zeros(max(16, 2 * model.n_rods), dtype=wp.int32, device=d)
         self._wall_frames = wp.empty(max(16, 2 * model.n_rods), dtype=ContactFrame, device=d)
         self._solve_out = wp.zeros(3, dtype=wp.float64, device=d)
+        self._no_gaps = wp.zeros(0, dtype=wp.float64, device=d)  # the step's overlap check keeps no per-contact gaps
         self._last_solve = None
         self._proj_out = wp.zeros(1, dtype=wp.float64, device=d)
         self.position_sweeps = int(position_sweeps)
@@ -449,7 +450,7 @@ class RodSolver(StepBounds):
         if n_contacts:
             self._launch("checks", narrowphase.contact_overlap, dim=n_contacts, device=dev, inputs=[
                 n_contacts, state_out.contact_seg, m.arrays.seg_vertex, m.arrays.vertex_rod, m.arrays.radius,
-                state_out.x, self.contacts.gap_check, self._scalar[2:3]])
+                state_out.x, self._no_gaps, self._scalar[2:3]])
         sc = self._scalar.numpy()
         vmax_out = float(sc[0])
         depth = float(sc[2]) if n_contacts else 0.0
