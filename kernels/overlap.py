@@ -88,13 +88,16 @@ def project_rod_walls(r: int, model: RodModel, x0: wp.array(dtype=wp.vec3d), tan
 
 
 @wp.kernel
-def project_positions_sequential(sweeps: int, model: RodModel, x0: wp.array(dtype=wp.vec3d), contacts: RodContacts,
-                                 frames: wp.array(dtype=ContactFrame), tangent: wp.array(dtype=wp.vec3d),
-                                 walls: Walls, wall_contacts: WallContacts, params: StepParams,
-                                 x: wp.array(dtype=wp.vec3d), out: wp.array(dtype=wp.float64)):
-    """Post-stabilisation on a sequential device (dim = 1): ``sweeps`` Gauss-Seidel passes over
-    the rod-rod contacts and the rods near walls; out[0] = the deepest overlap before the last."""
+def project_positions_sequential(sweeps: int, tolerance: wp.float64, model: RodModel, x0: wp.array(dtype=wp.vec3d),
+                                 contacts: RodContacts, frames: wp.array(dtype=ContactFrame),
+                                 tangent: wp.array(dtype=wp.vec3d), walls: Walls, wall_contacts: WallContacts,
+                                 params: StepParams, x: wp.array(dtype=wp.vec3d), out: wp.array(dtype=wp.float64)):
+    """Post-stabilisation on a sequential device (dim = 1): at most ``sweeps`` Gauss-Seidel
+    passes over the rod-rod contacts and the rods near walls, stopping after a pass that found
+    no overlap deeper than ``tolerance`` (m); out[0] = the deepest overlap the last pass found,
+    out[1] = the passes run."""
     worst = F0
+    used = int(0)
     na = wall_contacts.n_active[0]
     for it in range(sweeps):
         worst = F0
@@ -102,7 +105,11 @@ def project_positions_sequential(sweeps: int, model: RodModel, x0: wp.array(dtyp
             worst = wp.max(worst, project_rod_contact(k, model, contacts, frames, params, x0, tangent, x))
         for q in range(na):
             worst = wp.max(worst, project_rod_walls(wall_contacts.active[q], model, x0, tangent, walls, params, x))
+        used = it + 1
+        if worst <= tolerance:
+            break
     out[0] = worst
+    out[1] = wp.float64(used)
 
 
 @wp.kernel

@@ -172,3 +172,25 @@ def test_the_step_shrinks_while_rods_overlap():
     assert abs(solver.adaptive_dt(control, v, overlap=2.0 * target) - 0.5 * free) < 1e-12 * free
     assert abs(solver.adaptive_dt(control, v, overlap=1.0 * d) - 0.25 * free) < 1e-12 * free
     assert abs(free - d / (v + 1e-3)) < 1e-9 * free  # safety 1: one diameter per step
+
+
+@pytest.mark.parametrize("sweeps, tolerance, passes", [(1, 0.0, 1), (16, 0.015, 4), (16, 0.0, 16)])
+def test_post_stabilisation_removes_an_overlap_and_stops_at_its_tolerance(sweeps, tolerance, passes):
+    """Two free rigid rods crossed at their centres, overlapping by 0.2 d, no gravity: each
+    pass removes 0.8 of the overlap beyond the slop (a pure translation of both rods), so
+    after k passes it is slop + (0.2 d - slop) 0.2^k; the passes stop after the first that
+    found no overlap deeper than the tolerance (0.2, 0.048, 0.0176, then 0.0115 d <= 0.015 d:
+    four passes)."""
+    r, d = 0.01, 0.02
+    pts = np.concatenate([straight_rod((0, 0, 0), (1, 0, 0), 1.0, r, 2),
+                          straight_rod((0, 0, d - 0.2 * d), (0, 1, 0), 1.0, r, 2)])
+    rods = RodSet(pts, [0, 2, 4], [r, r])
+    model = Model(rods, STEEL, gravity=(0, 0, 0), mu=0.2, rod_model="rigid")
+    solver = RodSolver(model, position_sweeps=sweeps, position_tolerance=tolerance)
+    a, b = model.state(), State(model)
+    info = solver.step(a, b, model.control(), 1e-4)
+    slop = solver.slop * d
+    expected = slop + (0.2 * d - slop) * 0.2 ** passes
+    assert abs(info.max_overlap - expected) < 1e-6 * d
+    assert info.position_passes == passes
+    np.testing.assert_array_equal(b.v.numpy(), 0.0)  # positions moved, velocities untouched
