@@ -99,7 +99,7 @@ _SIMULATE_OPTIONS = ("alpha", "freq", "amplitude", "gravity", "duration", "entan
                      "entangle_amplitude", "static_load", "n_rods", "length", "vertices", "box", "mu", "young",
                      "density", "dt", "iterations", "step_safety", "rod_model", "rolling", "save_every",
                      "checkpoint_every", "fields_every", "resume", "overwrite", "entangle", "seed", "device", "out", "initial",
-                     "quiet")
+                     "entangled_from", "quiet")
 
 app = typer.Typer(add_completion=False, no_args_is_help=False,
                   help="Simulate and analyse packings of elastic rods (NVIDIA Warp).",
@@ -192,6 +192,10 @@ def simulate(
     out: Optional[Path] = typer.Option(None, help="Output directory (default runs/alpha{A}_freq{F}_g{G}_seed{S}, "
                                                   "plus every other parameter that differs from its default)."),
     initial: Optional[Path] = _sim("initial"),
+    entangled_from: Optional[Path] = typer.Option(
+        None, help="Start the stability test from the entangled packing of this earlier run folder (its "
+                   "entangled.npz): same parameters but for --freq, --amplitude and --duration; the result equals "
+                   "a run of its own entangling, bit for bit on the CPU."),
     quiet: bool = typer.Option(False, help="No progress bar."),
     **fields,
 ):
@@ -205,7 +209,8 @@ def simulate(
     params.validate()
     outdir = out or Path("runs") / default_run_name(params)
     try:
-        summary = run_protocol(params, outdir, progress=not quiet, resume=resume, overwrite=overwrite)
+        summary = run_protocol(params, outdir, progress=not quiet, resume=resume, overwrite=overwrite,
+                               entangled_from=entangled_from)
     except (RodwarpError, SimulationBlowUp, OSError) as e:
         mark_failed(outdir, e)
         raise

@@ -309,8 +309,84 @@ def _resume_point(params: ProtocolParams, ckdir: Path):
     return ck
 
 
+#: the file a run writes when its entangling stage ends: the checkpoint at the stage boundary,
+#: kept (the rolling checkpoints are not), from which other stability tests of the same
+#: entangled packing start (``entangled_from``)
+ENTANGLED = "entangled.npz"
+#: the stability test's own parameters: a run may take its entangled packing from a run that
+#: differs from it in these alone (and in the device)
+TEST_FIELDS = ("freq", "amplitude", "duration")
+
+
+def _comparable(parameters: dict) -> dict:
+    """The parameters that fix the packing and its entangling (JSON round trip, so tuples
+    compare equal to the lists a checkpoint holds)."""
+    return {k: v for k, v in json.loads(json.dumps(parameters)).items() if k not in (*TEST_FIELDS, "device")}
+
+
+def _entangled_point(params: ProtocolParams, donor: Path, outdir: Path):
+    """``(arrays, meta)`` of ``donor``'s end-of-entangling checkpoint, refused (one line) when
+    it is missing, unreadable, or of another packing or entangling than ``params``."""
+    from rodwarp.rodset.trajectory import read_checkpoint_file
+
+    if _stages(params)[0].name != "entangle":
+        raise RodwarpError("--entangled-from: this run has no entangling stage (entangle duration 0, or --initial "
+                           "without --entangle); drop --entangled-from")
+    if donor.resolve() == outdir.resolve():
+        raise RodwarpError(f"--entangled-from {donor} is this run's own --out; give the folder of another run")
+    path = donor / ENTANGLED
+    if not path.is_file():
+        raise RodwarpError(f"--entangled-from {donor}: no {ENTANGLED} there (a simulate run writes it when its "
+                           f"entangling stage ends); run that simulation first or drop --entangled-from")
+    try:
+        arrays, meta = read_checkpoint_file(path)
+        if meta["stage"] != 1 or meta["mid_stage"]:
+            raise ValueError("not an end-of-entangling checkpoint")
+    except Exception as e:  # noqa: BLE001 - a damaged or foreign file: one line, not a traceback
+        raise RodwarpError(f"--entangled-from {donor}: {ENTANGLED} is unreadable ({type(e).__name__}: {e}); "
+                           "run that simulation again") from None
+    mine, theirs = _comparable(asdict(params)), _comparable(meta["parameters"])
+    diff = sorted(k for k in set(mine) | set(theirs) if mine.get(k) != theirs.get(k))
+    if diff:
+        raise RodwarpError(f"--entangled-from {donor}: that run's packing or entangling differs from this one "
+                           f"({', '.join(diff)}); only {', '.join(TEST_FIELDS)} may differ")
+    for name in ("initial.npz", "trajectory.zarr"):
+        if not (donor / name).exists():
+            raise RodwarpError(f"--entangled-from {donor}: its {name} is missing; run that simulation again")
+    return arrays, meta
+
+
+def _copy_file(src: Path, dst: Path) -> None:
+    """Copy ``src`` to ``dst`` atomically (write, then rename)."""
+    import shutil
+
+    from rodwarp.rodset.files import atomic_path
+
+    with atomic_path(dst) as tmp:
+        shutil.copyfile(src, tmp)
+
+
+def _take_entangling(donor: Path, outdir: Path, meta: dict, n_frames: int, rods) -> None:
+    """Copy ``donor``'s outputs of the entangling stage into ``outdir``: its VTK frames and the
+    trajectory frames up to the stage boundary (a fresh trajectory of this run's length)."""
+    import zarr
+
+    from rodwarp.rodset.trajectory import Trajectory
+
+    n = int(meta["frame"])
+    src = zarr.open_group(str(donor / "trajectory.zarr"), mode="r")
+    if int(src.attrs.get("n_frames", 0)) < n:
+        raise RodwarpError(f"--entangled-from {donor}: its trajectory holds {src.attrs.get('n_frames', 0)} of the "
+                           f"{n} frames of its entangling stage; run that simulation again")
+    for _, fname in meta["vtk"]:
+        _copy_file(donor / fname, outdir / fname)
+    traj = Trajectory(outdir / "trajectory.zarr", n_frames, rods.offsets, rods.radii)
+    for k in range(n):
+        traj.write(k, float(src["time"][k]), np.asarray(src["positions"][k]))
+
+
 def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resume: bool = False,
-                 overwrite: bool = False, thresholds=None) -> dict:
+                 overwrite: bool = False, thresholds=None, entangled_from=None) -> dict:
     """Run the whole experiment and write its outputs to ``outdir``.
 
     Writes ``summary.json`` (every parameter, seed, versions, device, dt, steps, wall time and
@@ -327,6 +403,14 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
 
     ``thresholds`` (:class:`rodwarp.experiments.Thresholds`, default the measured ones) set the
     stability verdict; summary.json records them with the rule.
+
+    When the entangling stage ends the run writes ``entangled.npz``, the checkpoint at the
+    stage boundary. ``entangled_from`` (a run folder holding one, of the same parameters but
+    for the test's ``freq``, ``amplitude`` and ``duration``) starts this run's stability test
+    from that state instead of packing and entangling again: its outputs of the entangling
+    stage are copied, and the run ends, bit for bit on the CPU, where a run of its own
+    entangling ends (docs/protocol.md, "One entangled packing, several tests"). summary.json
+    records the donor under ``entangled_from``; ``wall_time_s`` is this run's own time.
 
     Returns
     -------
@@ -346,6 +430,9 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     params.validate()
     thresholds = thresholds or vd.DEFAULT_THRESHOLDS
     outdir = Path(outdir)
+    donor = Path(entangled_from) if entangled_from is not None and not resume else None
+    # the donor is checked before the folder is taken: a refused branch leaves --out untouched
+    branch = _entangled_point(params, donor, outdir) if donor is not None else None
     run = rundir.claim(outdir, "simulate", asdict(params), rundir.SIMULATE_OUTPUTS, resume=resume,
                        overwrite=overwrite, resumable=any((outdir / "checkpoints").glob("ckpt_*.npz")),
                        need_bytes=output_bytes(params))
@@ -353,8 +440,17 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     t_wall = time.perf_counter()
     ckdir = outdir / "checkpoints"
     ck = None
+    donor_rec = None
     if resume:
         ck = _resume_point(params, ckdir)
+        rods = load(outdir / "initial.npz")
+        donor_rec = _read_donor_record(outdir)
+    elif branch is not None:
+        ck = branch
+        for name in ("initial.npz", ENTANGLED):
+            _copy_file(donor / name, outdir / name)
+        donor_rec = _donor_record(donor, ck[1])
+        write_json(outdir / ENTANGLED_FROM, donor_rec)
         rods = load(outdir / "initial.npz")
     elif params.initial:
         rods = params._input_rods  # loaded, in metres, and checked by validate()
@@ -364,7 +460,8 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     if not resume:
         for old in ckdir.glob("ckpt_*.npz"):
             old.unlink()
-        rods.save(outdir / "initial.npz")
+        if branch is None:
+            rods.save(outdir / "initial.npz")
     orient = orientation_statistics(rods)
     rule = rod_model_rule(params)
     if rule["rod_model"] == "rigid" and params.rod_model == "auto" and not _straight(rods):
@@ -392,6 +489,8 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
             control = stage_control(model, stage.name, stage.amplitude, stage.freq, loop.stage_t0[stage.name])
         state.load_numpy({k[6:]: v for k, v in arrays.items() if k.startswith("state_")})
     n_frames = 1 + sum(int(math.ceil(s.duration / params.save_every)) + 1 for s in stages)
+    if branch is not None:
+        _take_entangling(donor, outdir, ck[1], n_frames, sim_rods)
     rec = Recorder(outdir, model, solver, sim_rods, n_frames, checkpoint=ck,
                    done=[s.name for s in stages[:loop.start_stage]], fields_every=params.fields_every)
 
@@ -412,13 +511,34 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     summary = _summary(params, model, rec.rows, loop, vd.judge_rows(rec.rows, loop.pile_ref.time, thresholds),
                        c, centroid_height(model, state, 0.0 if floor is None else floor), rule,
                        {"device": device, "wall_time_s": wall, "resumed": bool(resume), "initial_orientation": orient,
-                        "fields_wall_s": rec.fields_wall_s})
+                        "fields_wall_s": rec.fields_wall_s,
+                        "entangled_from": donor_rec})
     rec.write_metrics()
     write_json(outdir / "summary.json", summary)
     plot_metrics(outdir / "metrics.png", rec.rows, summary)
     rec.finish()
     run.complete()
     return summary
+
+
+def _donor_record(donor: Path, meta: dict) -> dict:
+    """summary.json's ``entangled_from``: the run whose entangled packing this run's test took."""
+    from rodwarp.rodset import rundir
+
+    m = rundir._read_manifest(donor) or {}
+    return {"run": str(donor.resolve()), "run_id": m.get("run_id"), "time": meta["rows"][-1]["time"],
+            "steps": meta["steps"], "entangle_wall_s": meta["dts"].get("entangle", {}).get("wall_s")}
+
+
+def _read_donor_record(outdir: Path):
+    """A resumed run's ``entangled_from``, as its first process recorded it (None if it had none)."""
+    path = outdir / ENTANGLED_FROM
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+#: where a branched run keeps its ``entangled_from`` record until summary.json is written (a
+#: resumed branch reports its donor too)
+ENTANGLED_FROM = "entangled_from.json"
 
 
 def _step_stages(params, model, solver, stages, state, other, control, loop, rec, longest: float, progress: bool):
@@ -462,7 +582,7 @@ def _step_stages(params, model, solver, stages, state, other, control, loop, rec
             update(name, state.time - t_s0, dur)
             if si == 0 and j0 == 0 and not loop.mid_stage:
                 rec.sample(name, state, None, control, loop)
-            t0 = time.perf_counter()
+            t0 = t_mark = time.perf_counter()
             steps0 = loop.steps
             j = j0 + 1
             while j <= n_samples:
@@ -502,14 +622,27 @@ def _step_stages(params, model, solver, stages, state, other, control, loop, rec
                     update(name, state.time - t_s0, dur, note=f"{rate:.0f} steps/s")
                 if state.time >= loop.next_ck - 1e-12 and j <= n_samples:
                     loop.next_ck += params.checkpoint_every
+                    t_mark = _add_wall(st, t_mark)
                     rec.checkpoint(state, loop, si, j - 1, True, parameters)
             loop.dts[name]["mean"] = loop.dts[name]["sum"] / max(loop.dts[name]["steps"], 1)
             if name == "entangle":
                 rec.snapshot(AFTER_ENTANGLING, state.positions())
             if si + 1 < len(stages):
                 loop.next_ck = state.time + params.checkpoint_every
-                rec.checkpoint(state, loop, si + 1, 0, False, parameters)
+                _add_wall(loop.dts[name], t_mark)
+                rec.checkpoint(state, loop, si + 1, 0, False, parameters,
+                               keep_as=rec.outdir / ENTANGLED if name == "entangle" else None)
+            else:
+                _add_wall(loop.dts[name], t_mark)
     return state, control
+
+
+def _add_wall(st: dict, since: float) -> float:
+    """Add the wall time since ``since`` to a stage's record (``wall_s``: this stage's time in
+    the processes that ran it, so a resumed stage counts both parts); returns now."""
+    now = time.perf_counter()
+    st["wall_s"] = st.get("wall_s", 0.0) + (now - since)
+    return now
 
 
 def _last(rows, key):
@@ -539,7 +672,8 @@ def _summary(params, model, rows, loop, verdict, contacts, centroid_height, rule
         "max_penetration_over_d": max(r["max_penetration_over_d"] for r in rows),
         "rod_model": rule["rod_model"], "rod_model_rule": rule,
         "seed": params.seed, "device": run["device"], "dt": loop.dts, "steps": loop.steps,
-        "wall_time_s": run["wall_time_s"], "resumed": run["resumed"], "initial_orientation": run["initial_orientation"],
+        "wall_time_s": run["wall_time_s"], "resumed": run["resumed"], "entangled_from": run.get("entangled_from"),
+        "initial_orientation": run["initial_orientation"],
         # time spent on the fields series (this process; a resumed run counts its own part)
         "fields_wall_s": run["fields_wall_s"], "cv_e_final": _last(rows, "cv_e"),
         "parameters": asdict(params), "versions": versions(),

@@ -156,7 +156,8 @@ class Recorder:
         """Keep the positions ``x`` (V, 3) m for ``snapshots.png`` under ``title``."""
         self.snapshots.append((title, x))
 
-    def checkpoint(self, state, loop, stage: int, j: int, mid_stage: bool, parameters: dict) -> None:
+    def checkpoint(self, state, loop, stage: int, j: int, mid_stage: bool, parameters: dict,
+                   keep_as=None) -> None:
         """Write a checkpoint: the engine state, the samples so far and the loop's position.
 
         Parameters
@@ -166,8 +167,11 @@ class Recorder:
             whether the stage is under way (else it starts afresh).
         parameters : dict
             Every parameter of the run (a resume must repeat them).
+        keep_as : path-like, optional
+            Also write the same checkpoint to this file, which the rolling checkpoints never
+            remove (the state when entangling ends: ``entangled.npz``).
         """
-        from rodwarp.rodset.trajectory import save_checkpoint
+        from rodwarp.rodset.trajectory import save_checkpoint, write_checkpoint_file
 
         arrays = {f"state_{key}": val for key, val in state.to_numpy().items()}
         for title, x in self.snapshots:
@@ -179,6 +183,8 @@ class Recorder:
                 "parameters": json.loads(json.dumps(parameters)), "stepper": loop.stepper, "dts": loop.dts,
                 "next_ck": loop.next_ck}
         save_checkpoint(self.outdir / "checkpoints", loop.steps, arrays, meta)
+        if keep_as is not None:
+            write_checkpoint_file(keep_as, arrays, meta)
         self.write_metrics()
 
     def write_metrics(self) -> None:

@@ -36,7 +36,8 @@ FORMAT = "rodwarp-run"
 
 #: what ``rodwarp simulate`` writes in its folder (``analysis`` is a later analyze run of it)
 SIMULATE_OUTPUTS = ("summary.json", "metrics.csv", "metrics.png", "trajectory.zarr", "trajectory.pvd", "vtk",
-                    "initial.npz", "final.npz", "snapshots.png", "checkpoints", "analysis")
+                    "initial.npz", "entangled.npz", "entangled_from.json", "final.npz", "snapshots.png",
+                    "checkpoints", "analysis")
 #: what ``rodwarp analyze`` writes in its folder
 ANALYZE_OUTPUTS = ("fields.zarr", "summary.json", "rods.npz", "histograms.png", "slices.png", "zprofiles.png",
                    "tangles.png", "distributions.png")

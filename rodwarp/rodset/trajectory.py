@@ -157,14 +157,28 @@ def write_pvd(path, entries) -> None:
                      f' </Collection>\n</VTKFile>\n')
 
 
+def write_checkpoint_file(path, arrays: dict, meta: dict) -> Path:
+    """Write one checkpoint file ``path`` (npz: the arrays plus JSON ``meta``) atomically."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, meta=np.array(json.dumps(meta)), **arrays)
+    return path
+
+
+def read_checkpoint_file(path):
+    """``(arrays, meta)`` of the checkpoint file ``path`` (written by :func:`write_checkpoint_file`)."""
+    with np.load(path, allow_pickle=False) as z:
+        meta = json.loads(str(z["meta"]))
+        arrays = {k: z[k] for k in z.files if k != "meta"}
+    return arrays, meta
+
+
 def save_checkpoint(directory, step: int, arrays: dict, meta: dict, keep: int = 2) -> Path:
     """Write ``ckpt_<step>.npz`` atomically (arrays plus JSON ``meta``); keep the newest ``keep``."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    path = directory / f"ckpt_{step:010d}.npz"
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, meta=np.array(json.dumps(meta)), **arrays)
+    path = write_checkpoint_file(directory / f"ckpt_{step:010d}.npz", arrays, meta)
     for old in sorted(directory.glob("ckpt_*.npz"))[:-keep]:
         old.unlink(missing_ok=True)
     return path
@@ -174,10 +188,7 @@ def latest_checkpoint(directory):
     """(arrays, meta) of the newest readable checkpoint in ``directory``, or None."""
     for path in sorted(Path(directory).glob("ckpt_*.npz"), reverse=True):
         try:
-            with np.load(path, allow_pickle=False) as z:
-                meta = json.loads(str(z["meta"]))
-                arrays = {k: z[k] for k in z.files if k != "meta"}
-            return arrays, meta
+            return read_checkpoint_file(path)
         except Exception:
             continue  # a torn file cannot exist (atomic writes), but skip anything unreadable
     return None
