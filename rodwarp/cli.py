@@ -416,6 +416,7 @@ def sweep(
     scheduler: Optional[str] = typer.Option(None, help="Existing Dask scheduler tcp://HOST:8786 (default: a local cluster on 127.0.0.1)."),
     workers: Optional[int] = typer.Option(None, help="Local worker processes (default: the number of cores)."),
     device: str = _swp("device"),
+    share_entangling: bool = _swp("share_entangling"),
     figures: bool = typer.Option(True, help="Draw the phase diagram at the end."),
     quiet: bool = typer.Option(False, help="No progress bar."),
     set_: Optional[list[str]] = typer.Option(None, "--set", help="Any other simulate parameter for every point, "
@@ -432,7 +433,7 @@ def sweep(
     spec = SweepSpec(alphas=_floats(alpha, "--alpha"), freqs=_floats(freq, "--freq"),
                      gravities=_floats(gravity, "--gravity"), static_loads=_floats(static_load, "--static-load"),
                      seeds=list(range(seeds)), entangle_duration=entangle_duration, duration=duration,
-                     amplitude=amplitude, device=device,
+                     amplitude=amplitude, device=device, share_entangling=share_entangling,
                      # only when changed: rows of sweeps run before this option still match their points
                      overrides={**({} if save_every == _P["save_every"][0] else {"save_every": save_every}),
                                 **_overrides(set_ or [])})

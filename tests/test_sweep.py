@@ -279,3 +279,27 @@ def test_sweep_set_reads_each_value_as_its_parameter_type():
     # the overrides reach every point of the grid
     spec = SweepSpec(alphas=[25.0], freqs=[10.0], seeds=[0, 1], overrides=got)
     assert all(p["rod_model"] == "rigid" and p["rolling"] is False for p in points(spec))
+
+
+def test_shared_entangling_gives_the_rows_of_separate_runs(tmp_path):
+    """Points that differ only in the test frequency share their donor's entangled packing:
+    the same results as each point entangling on its own, the donor named in the row."""
+    from rodwarp.experiments import entangling_groups
+
+    spec = _spec(alphas=[20], freqs=[1, 10, 30], gravities=[0.5, 2])
+    groups = entangling_groups(points(spec))
+    assert [[p["freq"] for p in g] for g in groups] == [[1.0, 10.0, 30.0]] * 2
+    assert {p["gravity"] for p in groups[0]} == {0.5} and {p["gravity"] for p in groups[1]} == {2.0}
+
+    shared = {r["id"]: r for r in read_results(run_sweep(spec, tmp_path / "shared", workers=2, progress=False))}
+    spec_own = _spec(alphas=[20], freqs=[1, 10, 30], gravities=[0.5, 2], share_entangling=False)
+    own = {r["id"]: r for r in read_results(run_sweep(spec_own, tmp_path / "own", workers=2, progress=False))}
+    assert shared.keys() == own.keys() and len(own) == 6
+    for pid, r in shared.items():
+        assert r["status"] == "ok" and own[pid]["status"] == "ok"
+        for k in ("largest_cluster_fraction", "height_kept", "persistence", "contacts_per_rod", "cv_e", "stable",
+                  "max_penetration_over_d"):
+            assert r[k] == own[pid][k], (pid, k)
+        assert own[pid]["entangled_from"] == ""
+        donor = f"alpha20_freq1_g{float(r['gravity']):g}_F0_seed0"
+        assert r["entangled_from"] == ("" if pid == donor else donor)

@@ -45,6 +45,7 @@ _WHERE = {
     # sweeps and the phase diagram
     "SweepSpec": "_sweep", "GRID_KEYS": "_sweep", "FIXED_KEYS": "_sweep", "RESULT_KEYS": "_sweep",
     "point_id": "_sweep", "points": "_sweep", "run_point": "_sweep", "check_points": "_sweep",
+    "entangling_groups": "_sweep",
     "read_results": "_sweep", "write_results": "_sweep", "run_sweep": "_sweep",
     "phase_diagram": "_phase", "alpha_star": "_phase",
     # checks of the options

@@ -40,7 +40,7 @@ FIXED_KEYS = ("amplitude", "entangle_duration", "duration")
 #: result columns, after the parameter columns
 RESULT_KEYS = ("a_over_g", "F_tilde", "n_rods", "largest_cluster_fraction", "height_kept", "persistence",
                "rods_left", "contacts_per_rod", "cv_e", "mean_e", "std_e", "stable", "max_penetration_over_d",
-               "device", "wall_s", "worker", "status")
+               "device", "wall_s", "entangled_from", "worker", "status")
 #: ProtocolParams fields a sweep sets itself (not allowed in ``overrides``)
 _OWN = set(GRID_KEYS) | set(FIXED_KEYS) | {"device", "initial"}
 
@@ -77,6 +77,10 @@ class SweepSpec:
     overrides: dict = field(default_factory=dict)
     analyze: dict = field(default_factory=dict)
     device: str = field(default="auto", metadata={"help": "Warp device of each point (auto: the worker's GPU if any)."})
+    share_entangling: bool = field(default=True, metadata={
+        "help": "Points that differ only in the test's frequency share one entangled packing: the first runs the "
+                "whole protocol, the others start their test from its entangled.npz (the same results, bit for "
+                "bit on the CPU, without entangling again)."})
 
     def validate(self) -> None:
         """Refuse (one line) an empty grid, unknown or sweep-owned overrides, unknown analyze options."""
@@ -139,6 +143,22 @@ def points(spec: SweepSpec) -> list[dict]:
     return out
 
 
+def entangling_groups(pts: list[dict]) -> list[list[dict]]:
+    """The points grouped by their entangled packing: every parameter but the test's frequency
+    (the amplitude and durations are the sweep's own, common to all points).
+
+    Groups come in the order of their first point (largest alpha first); within a group the
+    lowest frequency comes first: it runs the whole protocol (its test is the cheapest, at
+    least 40 steps per drive period), and the others start their test from its entangled
+    packing (:func:`run_point` with ``entangled_from``).
+    """
+    groups: dict = {}
+    for p in pts:
+        key = tuple(sorted((k, repr(v)) for k, v in p.items() if k not in ("id", "freq") and not k.startswith("_")))
+        groups.setdefault(key, []).append(p)
+    return [sorted(g, key=lambda q: float(q["freq"])) for g in groups.values()]
+
+
 def _worker_name() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
 
@@ -156,12 +176,30 @@ def _empty_row(point: dict) -> dict:
     return row
 
 
-def run_point(point: dict, outdir: str) -> dict:
+def _donor_ready(donor_dir, donor_row) -> bool:
+    """The donor's entangled packing can be used: its run succeeded (when its row is known)
+    and its folder holds ``entangled.npz``."""
+    from rodwarp.experiments._protocol import ENTANGLED
+
+    if donor_dir is None:
+        return False
+    if donor_row is not None and donor_row.get("status") != "ok":
+        return False
+    return (Path(donor_dir) / ENTANGLED).is_file()
+
+
+def run_point(point: dict, outdir: str, entangled_from: str | None = None, donor_row: dict | None = None) -> dict:
     """Run one point: simulate into ``outdir`` then analyze its final packing (no figures).
 
     Never raises: a failure is returned as a row whose ``status`` is the error's one-line
     message. The row holds every parameter of the point and the results (see ``RESULT_KEYS``).
     A checkpoint left in ``outdir`` by an interrupted run is resumed.
+
+    ``entangled_from`` is the folder of a point of the same entangled packing (another test
+    frequency; ``donor_row`` its result row, which a Dask sweep passes so that this point runs
+    only after it): this point's test then starts from that run's ``entangled.npz``. When the
+    donor failed or holds none, the point runs its own entangling; the row's
+    ``entangled_from`` says which (the donor's folder name, or empty).
     """
     t0 = time.perf_counter()
     row = _empty_row(point)
@@ -176,14 +214,18 @@ def run_point(point: dict, outdir: str) -> dict:
         out = Path(outdir)
         resume = (out / "checkpoints").is_dir() and any((out / "checkpoints").glob("ckpt_*.npz")) \
             and (out / "initial.npz").exists()
+        donor = entangled_from if not resume and _donor_ready(entangled_from, donor_row) else None
         try:
             # the point's folder belongs to the sweep: a fresh run replaces whatever it holds
-            summary = run_protocol(params, out, progress=False, resume=resume, overwrite=not resume)
+            summary = run_protocol(params, out, progress=False, resume=resume, overwrite=not resume,
+                                   entangled_from=donor)
         except RodwarpError:
-            if not resume:
+            if not (resume or donor):
                 raise
-            # a checkpoint of other parameters, or of a finished run
+            # a checkpoint of other parameters, or of a finished run; or a donor that does not fit
             summary = run_protocol(params, out, progress=False, resume=False, overwrite=True)
+        rec = summary.get("entangled_from")
+        row["entangled_from"] = Path(rec["run"]).name if rec else ""
         opts = _point_analysis(point)
         dev = summary.get("device", "cpu")
         if opts.device == "cpu" and "device" not in point.get("_analyze", {}) and str(dev).startswith("cuda"):
@@ -297,6 +339,34 @@ def _local_cluster(n_workers: int):
     _stop_http(dask_scheduler=cluster.scheduler)
     client.run(_stop_http)
     return cluster, client
+
+
+def _submit(client, spec: SweepSpec, pts: list[dict], todo: list[dict], out: Path) -> dict:
+    """Submit every point of ``todo`` to ``client``; ``{future: point}``.
+
+    With ``spec.share_entangling`` each group of :func:`entangling_groups` is submitted in
+    turn, its donor first and the others after it: an unfinished donor's future is an
+    argument of the others, so Dask runs them once it is done (and in parallel); a donor
+    finished in an earlier sweep is used directly. Dask runs the ready tasks in the order
+    they were submitted, so a group's other points come before the next groups' donors.
+    """
+    folder = lambda p: str((out / "points" / p["id"]).resolve())  # noqa: E731
+    key = lambda p: f"rodwarp-{p['id']}-{time.time_ns()}"  # noqa: E731
+    pending = {p["id"] for p in todo}
+    futs = {}
+    groups = entangling_groups(pts) if spec.share_entangling else [[p] for p in pts]
+    for group in groups:
+        donor, donor_fut = group[0], None
+        for p in group:
+            if p["id"] not in pending:
+                continue
+            if p is donor or len(group) == 1:
+                fut = client.submit(run_point, p, folder(p), pure=False, key=key(p))
+                donor_fut = fut
+            else:
+                fut = client.submit(run_point, p, folder(p), folder(donor), donor_fut, pure=False, key=key(p))
+            futs[fut] = p
+    return futs
 
 
 # --------------------------------------------------------------------------------------- CSV
@@ -438,11 +508,7 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
         else:
             cluster, client = _local_cluster(workers or os.cpu_count() or 1)
         try:
-            futs = {}
-            for p in todo:
-                fut = client.submit(run_point, p, str((out / "points" / p["id"]).resolve()), pure=False,
-                                    key=f"rodwarp-{p['id']}-{time.time_ns()}")
-                futs[fut] = p
+            futs = _submit(client, spec, pts, todo, out)
             with progress_bar(progress, "points", remaining=True, note=True) as update:
                 n_done = len(done)
                 update("sweep", n_done, len(pts))
