@@ -303,3 +303,37 @@ def test_shared_entangling_gives_the_rows_of_separate_runs(tmp_path):
         assert own[pid]["entangled_from"] == ""
         donor = f"alpha20_freq1_g{float(r['gravity']):g}_F0_seed0"
         assert r["entangled_from"] == ("" if pid == donor else donor)
+
+
+def test_submission_order_and_dependencies(tmp_path):
+    """Largest alpha first, each donor before its group's other points, which get the donor's
+    future as an argument; Dask priorities follow that order (ties would be broken by Dask)."""
+    from pathlib import Path
+
+    from rodwarp.experiments._sweep import _submit
+
+    class Client:
+        def __init__(self):
+            self.calls = []
+
+        def submit(self, fn, *args, priority=None, **kw):
+            fut = f"fut-{args[0]['id']}"
+            self.calls.append((args[0]["id"], priority, args[2:]))
+            return fut
+
+    spec = _spec(alphas=[20, 30], freqs=[1, 10])
+    pts = points(spec)
+    c = Client()
+    futs = _submit(c, spec, pts, pts, Path(tmp_path))
+    ids = [i for i, _, _ in c.calls]
+    assert ids == ["alpha30_freq1_g0.5_F0_seed0", "alpha30_freq10_g0.5_F0_seed0",
+                   "alpha20_freq1_g0.5_F0_seed0", "alpha20_freq10_g0.5_F0_seed0"]
+    prio = [p for _, p, _ in c.calls]
+    assert prio == sorted(prio, reverse=True) and len(set(prio)) == 4
+    assert c.calls[0][2] == () and c.calls[1][2][1] == "fut-alpha30_freq1_g0.5_F0_seed0"
+    assert c.calls[1][2][0].endswith("points/alpha30_freq1_g0.5_F0_seed0")
+    assert len(futs) == 4
+    # a finished donor: its group's other point uses its folder, with no future to wait for
+    c = Client()
+    _submit(c, spec, pts, [p for p in pts if p["id"] != "alpha30_freq1_g0.5_F0_seed0"], Path(tmp_path))
+    assert c.calls[0][0] == "alpha30_freq10_g0.5_F0_seed0" and c.calls[0][2][1] is None

@@ -347,24 +347,30 @@ def _submit(client, spec: SweepSpec, pts: list[dict], todo: list[dict], out: Pat
     With ``spec.share_entangling`` each group of :func:`entangling_groups` is submitted in
     turn, its donor first and the others after it: an unfinished donor's future is an
     argument of the others, so Dask runs them once it is done (and in parallel); a donor
-    finished in an earlier sweep is used directly. Dask runs the ready tasks in the order
-    they were submitted, so a group's other points come before the next groups' donors.
+    finished in an earlier sweep is used directly. Each task's Dask priority is its place in
+    that order (submissions within ``fifo_timeout`` of each other would otherwise tie, and
+    Dask broke the tie its own way: a one-worker sweep ran alpha 50 before alpha 200), so a
+    free worker takes the first ready point: largest alpha first, a group's other points
+    before the next groups' donors.
     """
     folder = lambda p: str((out / "points" / p["id"]).resolve())  # noqa: E731
     key = lambda p: f"rodwarp-{p['id']}-{time.time_ns()}"  # noqa: E731
     pending = {p["id"] for p in todo}
     futs = {}
     groups = entangling_groups(pts) if spec.share_entangling else [[p] for p in pts]
+    rank = len(pts)
     for group in groups:
         donor, donor_fut = group[0], None
         for p in group:
             if p["id"] not in pending:
                 continue
+            rank -= 1
             if p is donor or len(group) == 1:
-                fut = client.submit(run_point, p, folder(p), pure=False, key=key(p))
+                fut = client.submit(run_point, p, folder(p), pure=False, key=key(p), priority=rank)
                 donor_fut = fut
             else:
-                fut = client.submit(run_point, p, folder(p), folder(donor), donor_fut, pure=False, key=key(p))
+                fut = client.submit(run_point, p, folder(p), folder(donor), donor_fut, pure=False, key=key(p),
+                                    priority=rank)
             futs[fut] = p
     return futs
 
