@@ -182,14 +182,27 @@ def test_stale_run_refused_then_overwritten_cleanly(tmp_path):
         ln.split('file="vtk/')[1].split('"')[0] for ln in pvd.splitlines() if 'file="' in ln)
 
 
-def test_failed_run_is_recorded_and_named(tmp_path):
+def test_failed_run_is_recorded_and_named(tmp_path, monkeypatch):
+    # a run that failed after writing outputs keeps them and its cause; the rerun is refused
+    # (--overwrite replaces it; --resume is not offered without a checkpoint). A failed start
+    # that wrote nothing does not block the rerun: tests/test_ownership.py
+    from rodwarp.errors import RodwarpError
+    from rodwarp.experiments import _protocol as protocol
+
+    def stop(*a, **k):
+        raise RodwarpError("stopped for the test after the initial packing")
+
     out = tmp_path / "run"
-    res = runner.invoke(app, [*SHORT, "--alpha", "3", "--out", str(out)])  # 12 fat rods do not fit the box
-    assert res.exit_code == 2 and "placed only" in _err(res)
+    with monkeypatch.context() as mp:
+        mp.setattr(protocol, "_default_dt", stop)
+        res = runner.invoke(app, [*SHORT, "--out", str(out)])
+    assert res.exit_code == 2 and "stopped for the test" in _err(res)
     m = _manifest(out)
-    assert m["status"] == "failed" and "placed only" in m["error"]
+    assert m["status"] == "failed" and "stopped for the test" in m["error"] and (out / "initial.npz").exists()
     res = runner.invoke(app, [*SHORT, "--out", str(out)])
-    assert res.exit_code == 2 and "holds a failed simulate run" in _err(res)
+    line = _err(res)
+    assert res.exit_code == 2 and "holds a failed simulate run" in line and "stopped for the test" in line
+    assert "--resume" not in line
     # a refused claim leaves the other run's record alone
     assert _manifest(out)["run_id"] == m["run_id"]
 

@@ -253,7 +253,7 @@ def parse_voxel_size_text(text) -> tuple[float, float, float] | None:
 
 def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: float | None = None, out=None,
                 chunk: int | None = None, contact_tolerance: float = 1.0, figures: bool = True,
-                progress: bool = False, params=None) -> dict:
+                progress: bool = False, params=None, overwrite: bool = False) -> dict:
     """Read a CT stack, segment it and write every output (the ``rodwarp segment`` command).
 
     Parameters
@@ -266,7 +266,8 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
         OME-Zarr, :func:`rodwarp.ct.read_voxel_size`).
     units : str, optional
         Unit of ``voxel_size``, ``diameter`` and every output length; default ``mm`` (or, with
-        the voxel size from metadata, ``mm`` for voxels of 0.1 mm and more, else ``um``).
+        the voxel size from metadata, the unit the ImageJ metadata states it in when m, mm or
+        um, else ``mm`` for voxels of 0.1 mm and more and ``um`` below).
     diameter : float, optional
         Rod diameter in ``units``; estimated from the image when absent.
     chunk : int, optional
@@ -275,6 +276,9 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
         Largest surface gap counted as a contact, in (working) voxels.
     params : SegmentParams, optional
         Every other knob of the segmenter.
+    overwrite : bool
+        Write into ``out`` even when it holds another command's run (:mod:`rodwarp.rodset.rundir`;
+        an earlier segmentation there is always replaced).
     """
     import time
     from dataclasses import asdict, replace
@@ -282,6 +286,7 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     from rodwarp.ct._volume_io import open_volume_lazy, read_voxel_size
     from rodwarp.ct._params import SegmentParams
     from rodwarp.ct._segment import segment_volume
+    from rodwarp.rodset import rundir
 
     t0 = time.perf_counter()
     if units is not None and units not in UNITS:
@@ -294,6 +299,9 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     if isinstance(voxel_size, (int, float)) and not (np.isfinite(voxel_size) and voxel_size > 0):
         raise RodwarpError(f"--voxel-size must be a positive number, got {voxel_size:g}")
     vs = parse_voxel_size_text(voxel_size)
+    outdir = Path(out) if out is not None else default_out(stack)
+    # the folder's owner is checked before the (long) work: a refusal costs nothing and touches nothing
+    rundir.check(outdir, "segment", {}, rundir.SEGMENT_OUTPUTS, overwrite=overwrite, replace_same_kind=True)
     volume = open_volume_lazy(stack)
     source = "--voxel-size"
     if vs is None:
@@ -303,7 +311,10 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
                                f"(one value, or three for z,y,x) and --units")
         sizes_m, source = md
         if units is None:
-            units = "mm" if min(sizes_m) >= 1e-4 else "um"
+            from rodwarp.ct._volume_io import read_voxel_unit
+
+            # the unit the file states its voxel in (phantom writes the rods' own), else by size
+            units = read_voxel_unit(stack) or ("mm" if min(sizes_m) >= 1e-4 else "um")
         if units == "voxel":
             vs = tuple(v / min(sizes_m) for v in sizes_m)
         else:
@@ -317,7 +328,6 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
                 contact_tolerance=contact_tolerance)
     with progress_bar(progress) as update:
         result = segment_volume(volume, p, progress=update, voxel_size=vs)
-    outdir = Path(out) if out is not None else default_out(stack)
     summary = {
         "input": str(stack),
         "shape_zyx": list(volume.shape),
@@ -331,10 +341,16 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     }
     spacing = result.spacing if units != "voxel" else 1.0
     grid = (h / vs[2], h / vs[1], h / vs[0])
+    # taken only now, with the results in hand: an earlier segmentation stays whole until then,
+    # and a kill while the outputs are written leaves this folder marked incomplete
+    run = rundir.claim(outdir, "segment", {"input": str(stack.resolve()), "voxel_size_zyx": list(vs), "units": units,
+                                           "voxel_size_source": source, **asdict(p)},
+                       rundir.SEGMENT_OUTPUTS, overwrite=overwrite, replace_same_kind=True)
     s = write_outputs(outdir, result, volume, voxel_size=spacing, units=units, summary=summary, figures=figures,
                       grid_scale=grid)
     s["wall_time_s"] = time.perf_counter() - t0
     write_json(outdir / "summary.json", s)
+    run.complete()
     return s
 
 

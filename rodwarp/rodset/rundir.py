@@ -1,15 +1,26 @@
-"""Output folders owned by one run: a manifest written first and completed last.
+"""Output folders owned by one command run: a manifest written first and completed last.
 
 ``rodwarp-run.json`` in an output folder says which run the folder belongs to: the command
-kind (``simulate``, ``analyze``), a run id, every parameter, the outputs the run writes, and
-``complete`` (false while the run is going, true once its last output is written). Rules:
+(``simulate``, ``analyze``, ``segment``, ``sweep``), a run id, every parameter, the outputs
+the run writes, and ``complete`` (false while the run is going, true once its last output is
+written). One rule for every command that writes a folder:
 
+* the manifest's ``outputs`` are bare names from the command's own fixed list
+  (:data:`OUTPUTS`); a manifest naming anything else (an absolute path, ``..``, a
+  subfolder, a name no command writes, an unknown command) makes the folder *refused*,
+  whatever the options: rodwarp deletes only names it wrote itself, inside the folder;
 * a new run in a folder holding another run (a manifest, or outputs of a run from before
   manifests) is refused unless ``overwrite``, which first takes the folder over (a new
   incomplete manifest) and then removes the old run's outputs, so old and new never mix;
 * ``resume`` continues only the folder's own unfinished run of the same parameters;
-* an analysis replaces an earlier analysis in its folder (it is a pure function of its
-  input and options, recorded in the manifest), but never another kind of run;
+* ``replace_same_kind`` (analyze, segment): a run replaces an earlier run of its own command
+  (a pure function of its input and options, recorded in the manifest), never another's;
+* ``append`` (sweep): a run continues the folder's run of the same command and parameters
+  (a sweep adds points of the same protocol), and is refused, naming the parameters that
+  differ, when the parameters differ;
+* a run that failed or was killed before writing any output (a failed start: no GPU, a
+  packing that cannot be placed, a full disk) leaves nothing that blocks the corrected rerun:
+  the next run of the same command takes the folder without ``overwrite``;
 * hidden temporary files left by a killed writer (``.NAME.*.tmp``, ``.NAME.old``) are removed
   when a run takes the folder;
 * location problems (the path is a file, a read-only or full file system, too little free
@@ -18,6 +29,7 @@ kind (``simulate``, ``analyze``), a run id, every parameter, the outputs the run
 
 from __future__ import annotations
 
+import fnmatch
 import json
 import os
 import shutil
@@ -41,10 +53,46 @@ SIMULATE_OUTPUTS = ("summary.json", "metrics.csv", "metrics.png", "trajectory.za
 #: what ``rodwarp analyze`` writes in its folder
 ANALYZE_OUTPUTS = ("fields.zarr", "summary.json", "rods.npz", "histograms.png", "slices.png", "zprofiles.png",
                    "tangles.png", "distributions.png")
+#: what ``rodwarp segment`` writes in its folder (``analysis`` is a later analyze run of it)
+SEGMENT_OUTPUTS = ("rods.npz", "rods.csv", "contacts.csv", "summary.json", "qa_slices.png", "qa_projection.png",
+                   "analysis")
+#: what ``rodwarp sweep`` writes in its folder, with the files of ``rodwarp phase-diagram``
+#: (names with ``*`` are patterns of bare names: one figure per group of points)
+SWEEP_OUTPUTS = ("sweep.json", "results.csv", "points", "alpha_star.csv", "power_law.csv", "phase_*.png")
+#: each command's outputs: the only names a manifest of that command may list
+OUTPUTS = {"simulate": SIMULATE_OUTPUTS, "analyze": ANALYZE_OUTPUTS, "segment": SEGMENT_OUTPUTS,
+           "sweep": SWEEP_OUTPUTS}
 #: outputs only a simulation writes (an analysis never replaces a folder holding them)
 _SIMULATION_ONLY = ("final.npz", "trajectory.zarr", "metrics.csv", "checkpoints")
 #: subfolders whose hidden temporary files are cleaned too
 _TEMP_DIRS = ("", "vtk", "checkpoints")
+
+
+def _is_bare(name) -> bool:
+    """A plain file or folder name: no separator, not absolute, not ``.`` or ``..``."""
+    return (isinstance(name, str) and name not in ("", ".", "..") and "/" not in name and "\\" not in name
+            and "\0" not in name and not os.path.isabs(name))
+
+
+def allowed_output(kind: str, name) -> bool:
+    """``name`` is a bare name that a ``kind`` run writes in its folder (:data:`OUTPUTS`)."""
+    return _is_bare(name) and any(fnmatch.fnmatchcase(name, pat) for pat in OUTPUTS.get(kind, ()))
+
+
+def present_outputs(path: Path, outputs) -> list[str]:
+    """The names of ``outputs`` (bare names or ``*`` patterns) that exist in ``path``."""
+    path = Path(path)
+    if not path.is_dir():
+        return []
+    names, entries = set(), None
+    for o in outputs:
+        if any(c in o for c in "*?["):
+            if entries is None:
+                entries = [p.name for p in path.iterdir()]
+            names |= {n for n in entries if not n.startswith(".") and fnmatch.fnmatchcase(n, o)}
+        elif (path / o).exists() or (path / o).is_symlink():
+            names.add(o)
+    return sorted(names)
 
 
 def _read_manifest(path: Path):
@@ -60,10 +108,48 @@ def _read_manifest(path: Path):
         return {"format": FORMAT, "kind": "unknown", "complete": False, "unreadable": True, "outputs": []}
 
 
+def read_manifest(path) -> dict | None:
+    """The manifest of the run folder ``path`` (None without one); see :func:`check_manifest`."""
+    return _read_manifest(Path(path))
+
+
+def check_manifest(path, m: dict | None, name: str = "--out") -> None:
+    """Refuse a folder whose manifest names a command rodwarp does not have, or outputs that are
+    not bare names of that command's own list: such a manifest (hand-edited, corrupted, from
+    someone else) must never steer a deletion. Nothing is touched."""
+    if m is None or m.get("unreadable"):
+        return
+    path = Path(path)
+    kind = m.get("kind")
+    if kind not in OUTPUTS:
+        raise RodwarpError(f"{path / MANIFEST} names an unknown command '{kind}'; rodwarp changes nothing in "
+                           f"{path}: check the folder, or choose another {name}")
+    outputs = m.get("outputs", [])
+    if not isinstance(outputs, list):
+        outputs = [outputs]
+    for o in outputs:
+        if not allowed_output(kind, o):
+            raise RodwarpError(f"{path / MANIFEST} lists {json.dumps(o) if isinstance(o, str) else repr(o)} among "
+                               f"its outputs, which is not a file a {kind} run writes in its folder (a path outside "
+                               f"it, or a hand-edited or corrupted manifest); rodwarp deletes nothing there: check "
+                               f"the folder, or choose another {name}")
+
+
+def _cause(text: str, limit: int = 160) -> str:
+    """``text`` on one line, cut at a word boundary (with an ellipsis) when longer than ``limit``."""
+    text = " ".join(str(text).split())
+    if len(text) <= limit:
+        return text
+    cut = text[:limit].rsplit(" ", 1)[0].rstrip(",;:")
+    return cut + " ..."
+
+
 def _describe(m: dict) -> str:
+    if m.get("unreadable"):
+        return f"an unreadable {MANIFEST}"
     state = "a finished" if m.get("complete") else ("a failed" if m.get("status") == "failed" else "an unfinished")
     when = f", started {m['started']}" if m.get("started") else ""
-    err = f" ({m['error'][:80]})" if m.get("status") == "failed" and m.get("error") else ""
+    err = f" ({_cause(m['error'])})" if m.get("status") == "failed" and m.get("error") else ""
     return f"{state} {m.get('kind', 'unknown')} run{when}{err}"
 
 
@@ -71,6 +157,26 @@ def _param_diff(a: dict, b: dict) -> list[str]:
     a = json.loads(json.dumps(a, default=str))
     b = json.loads(json.dumps(b, default=str))
     return sorted(k for k in set(a) | set(b) if k != "device" and a.get(k) != b.get(k))
+
+
+def _show(v) -> str:
+    return "unset" if v is None else (f"{v:g}" if isinstance(v, float) else json.dumps(v, default=str))
+
+
+def _alive(m: dict) -> bool:
+    """The manifest's process is still running on this host (another run writes the folder)."""
+    if m.get("complete") or m.get("status") != "running" or m.get("host") != socket.gethostname():
+        return False
+    pid = m.get("pid")
+    if not isinstance(pid, int) or pid <= 0 or pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists, owned by someone else
+        return True
+    return True
 
 
 def _remove(p: Path) -> None:
@@ -86,7 +192,7 @@ def clean_temporaries(path: Path) -> list[Path]:
     gone = []
     for sub in _TEMP_DIRS:
         d = path / sub if sub else path
-        if not d.is_dir():
+        if not d.is_dir() or d.is_symlink():
             continue
         for p in d.iterdir():
             if p.name.startswith(".") and (p.name.endswith(".tmp") or p.name.endswith(".old")):
@@ -103,7 +209,8 @@ def mark_failed(path, error: BaseException) -> None:
     """Record in the manifest that this process's run in ``path`` stopped with ``error``.
 
     Does nothing when this process did not take the folder (a refused claim leaves the other
-    run's manifest alone)."""
+    run's manifest alone). A run that wrote none of its outputs keeps its record (the cause),
+    and the next run of the corrected command takes the folder without ``--overwrite``."""
     path = Path(path)
     key = str(path.resolve()) if path.exists() else None
     m = _read_manifest(path) if key else None
@@ -147,11 +254,91 @@ class RunDir:
         self.manifest["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
         self.manifest["present"] = sorted(p.name for p in self.path.iterdir() if not p.name.startswith("."))
         self._write()
+        # finished: a later error in this process (another command's refusal) is not this run's
+        _CLAIMED.pop(str(self.path.resolve()), None)
+
+
+def _decide(path: Path, kind: str, parameters: dict, outputs, *, resume: bool, overwrite: bool, resumable: bool,
+            replace_same_kind: bool, append: bool, legacy: dict | None, name: str):
+    """What a run of ``kind`` may do with ``path``: raise the refusal, or return
+    ``(old manifest or None, present outputs, run id to keep or None, keep outputs)``."""
+    if kind not in OUTPUTS or any(not allowed_output(kind, o) for o in outputs):
+        raise ValueError(f"outputs of a {kind} run must be bare names of OUTPUTS[{kind!r}]")  # a bug, not input
+    output_location(path, name)
+    if resume and overwrite:
+        raise RodwarpError(f"--resume and --overwrite contradict each other: --resume continues the run in "
+                           f"{path}, --overwrite replaces it; pass one")
+    old = _read_manifest(path) if path.is_dir() else None
+    check_manifest(path, old, name)
+    if old is None and legacy is not None:  # a run of this command from before manifests
+        old = {"format": FORMAT, "kind": kind, "complete": True, "parameters": legacy, "legacy": True,
+               "outputs": list(outputs)}
+    if old is not None and _alive(old):
+        raise RodwarpError(f"{path} is being written by a running {old.get('kind')} run (process {old.get('pid')} "
+                           f"on this host); wait for it to finish, or choose another {name}")
+    present = present_outputs(path, outputs)
+    old_present = present_outputs(path, old.get("outputs", [])) if old is not None else []
+    if old is not None and not old.get("complete") and not old.get("unreadable") and not old_present \
+            and not (resume and old.get("kind") == kind) and not resumable:
+        # a failed or killed start that wrote nothing: nothing of it to keep, so it does not
+        # block the corrected command (its manifest is replaced below)
+        old = None
+    if resume:
+        if old is None:
+            if not resumable:
+                raise RodwarpError(f"nothing to resume: {path} holds no unfinished {kind} run (no checkpoint); "
+                                   "run the same command without --resume")
+            return old, present, None, True
+        if old.get("kind") != kind or old.get("unreadable"):
+            raise RodwarpError(f"--resume continues only its own run: {path} holds {_describe(old)}; "
+                               f"choose another {name}")
+        if old.get("complete"):
+            raise RodwarpError(f"nothing to resume: the {kind} run in {path} is finished; pass --overwrite to "
+                               f"run it again, or another {name}")
+        if not resumable:
+            raise RodwarpError(f"nothing to resume: {path} holds {_describe(old)} that left no checkpoint; "
+                               f"run the same command with --overwrite instead of --resume")
+        diff = _param_diff(parameters, old.get("parameters", {}))
+        if diff:
+            raise RodwarpError(f"--resume continues only its own run: the run in {path} has other "
+                               f"parameters ({', '.join(diff)}); repeat its original command with --resume, "
+                               f"or pass --overwrite to replace it")
+        return old, present, old.get("run_id"), True
+    if old is None and not present:
+        return None, present, None, False
+    same = old is not None and old.get("kind") == kind and not old.get("unreadable")
+    if old is None and kind == "analyze":
+        # an analysis from before manifests: its fields, and nothing of a simulation
+        same = "fields.zarr" in present and not any((path / o).exists() for o in _SIMULATION_ONLY)
+    if overwrite:
+        return old, present, None, False
+    if append and same:
+        diff = _param_diff(parameters, old.get("parameters", {}))
+        if diff:
+            was, now = old.get("parameters", {}), json.loads(json.dumps(parameters, default=str))
+            shown = "; ".join(f"{k} {_show(was.get(k))} there, {_show(now.get(k))} here" for k in diff[:4])
+            raise RodwarpError(f"{path} holds a {kind} of another protocol ({shown}); its results cannot be "
+                               f"mixed with these: choose another {name}, or pass --overwrite to replace it")
+        return old, present, old.get("run_id"), True
+    if replace_same_kind and same:
+        return old, present, None, False
+    what = _describe(old) if old is not None else f"outputs of an earlier run ({', '.join(present[:4])})"
+    hint = " --resume to continue it," if (old is not None and not old.get("complete") and resumable
+                                           and old.get("kind") == kind == "simulate") else ""
+    raise RodwarpError(f"{path} holds {what}; pass --overwrite to replace it,{hint} or choose another {name}")
+
+
+def check(path, kind: str, parameters: dict, outputs, *, resume: bool = False, overwrite: bool = False,
+          resumable: bool = False, replace_same_kind: bool = False, append: bool = False,
+          legacy: dict | None = None, name: str = "--out") -> None:
+    """Refuse, before any work, what :func:`claim` would refuse; changes nothing."""
+    _decide(Path(path), kind, parameters, outputs, resume=resume, overwrite=overwrite, resumable=resumable,
+            replace_same_kind=replace_same_kind, append=append, legacy=legacy, name=name)
 
 
 def claim(path, kind: str, parameters: dict, outputs, *, resume: bool = False, overwrite: bool = False,
-          resumable: bool = False, replace_same_kind: bool = False, need_bytes: float = 0.0,
-          name: str = "--out") -> RunDir:
+          resumable: bool = False, replace_same_kind: bool = False, append: bool = False,
+          legacy: dict | None = None, need_bytes: float = 0.0, name: str = "--out") -> RunDir:
     """Take the output folder ``path`` for a run, or refuse with one line saying why.
 
     Parameters
@@ -159,20 +346,27 @@ def claim(path, kind: str, parameters: dict, outputs, *, resume: bool = False, o
     path : path-like
         The output folder (created).
     kind : str
-        ``simulate`` or ``analyze``.
+        The command: a key of :data:`OUTPUTS`.
     parameters : dict
-        Every parameter of the run (JSON-serialisable); compared on ``resume``.
+        Every parameter of the run (JSON-serialisable); compared on ``resume`` and ``append``.
     outputs : sequence of str
-        Names of the files and folders the run writes in ``path``; with ``overwrite`` these
-        (and those of the old manifest) are removed, never anything else.
+        Names of the files and folders the run writes in ``path`` (bare names or patterns of
+        ``OUTPUTS[kind]``); with ``overwrite`` these (and those of the old manifest) are
+        removed, never anything else.
     resume : bool
         Continue the folder's unfinished run of the same kind and parameters.
     overwrite : bool
         Replace whatever run the folder holds.
     resumable : bool
-        The caller found something to resume (checkpoints); for folders from before manifests.
+        The caller found something to resume (checkpoints).
     replace_same_kind : bool
-        Replace an earlier run of the same kind without ``overwrite`` (analyses).
+        Replace an earlier run of the same kind without ``overwrite`` (analyses, segmentations).
+    append : bool
+        Continue the folder's run of the same kind and parameters, keeping its outputs
+        (sweeps adding points); other parameters are refused, naming them.
+    legacy : dict, optional
+        Parameters of a run of this kind from before manifests that the caller found in the
+        folder (a sweep's ``sweep.json``), compared as a manifest's would be.
     need_bytes : float
         Estimated disk space of the run (bytes), checked against the free space.
     name : str
@@ -183,48 +377,13 @@ def claim(path, kind: str, parameters: dict, outputs, *, resume: bool = False, o
     RunDir
     """
     path = Path(path)
-    output_location(path, name)
-    if resume and overwrite:
-        raise RodwarpError("--resume and --overwrite contradict each other: --resume continues the run in "
-                           f"{path}, --overwrite replaces it; pass one")
-    old = _read_manifest(path) if path.is_dir() else None
-    present = [o for o in outputs if (path / o).exists()] if path.is_dir() else []
-    run_id = None
-    if resume:
-        if old is None:
-            if not resumable:
-                raise RodwarpError(f"nothing to resume: {path} holds no unfinished {kind} run (no checkpoint); "
-                                   "run without --resume")
-        elif old.get("kind") != kind or old.get("unreadable"):
-            raise RodwarpError(f"--resume continues only its own run: {path} holds {_describe(old)}; "
-                               f"choose another --out")
-        elif old.get("complete"):
-            raise RodwarpError(f"nothing to resume: the {kind} run in {path} is finished; pass --overwrite to "
-                               "run it again, or another --out")
-        else:
-            diff = _param_diff(parameters, old.get("parameters", {}))
-            if diff:
-                raise RodwarpError(f"--resume continues only its own run: the run in {path} has other "
-                                   f"parameters ({', '.join(diff)}); repeat its original command with --resume, "
-                                   f"or pass --overwrite to replace it")
-            run_id = old.get("run_id")
-    elif old is not None or present:
-        same = old is not None and old.get("kind") == kind and not old.get("unreadable")
-        if old is None and kind == "analyze":
-            # an analysis from before manifests: its fields, and nothing of a simulation
-            same = "fields.zarr" in present and not any((path / o).exists() for o in _SIMULATION_ONLY)
-        if not (overwrite or (replace_same_kind and same)):
-            what = _describe(old) if old is not None else f"outputs of an earlier run ({', '.join(present[:4])})"
-            hint = " --resume to continue it," if old is not None and not old.get("complete") \
-                and old.get("kind") == kind == "simulate" else ""
-            raise RodwarpError(f"{path} holds {what}; pass --overwrite to replace it,{hint} or choose another "
-                               f"{name}")
-    if path.exists() and need_bytes > 0:
+    old, present, run_id, keep = _decide(path, kind, parameters, outputs, resume=resume, overwrite=overwrite,
+                                         resumable=resumable, replace_same_kind=replace_same_kind, append=append,
+                                         legacy=legacy, name=name)
+    if need_bytes > 0:
         # outputs about to be replaced free their space
-        need = need_bytes - sum(_size(path / o) for o in present) if not resume else need_bytes
+        need = need_bytes - (0 if keep else sum(_size(path / o) for o in present))
         disk_fits(path, need, f"this run's output ({name} {path})", "raise --save-every or free space")
-    elif need_bytes > 0:
-        disk_fits(path, need_bytes, f"this run's output ({name} {path})", "raise --save-every or free space")
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -239,6 +398,8 @@ def claim(path, kind: str, parameters: dict, outputs, *, resume: bool = False, o
         "parameters": json.loads(json.dumps(parameters, default=str)),
         "outputs": list(outputs),
     }
+    if run_id and not manifest["started"]:
+        manifest["started"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     from rodwarp import __version__
 
     manifest["rodwarp"] = __version__
@@ -247,9 +408,11 @@ def claim(path, kind: str, parameters: dict, outputs, *, resume: bool = False, o
     # the folder is taken (new incomplete manifest) before the old outputs go, so a kill in
     # between leaves an incomplete run, never old outputs passing for the new run's
     run._write()
-    if not resume:
-        stale = set(present) | set((old or {}).get("outputs", []))
+    if not keep:
+        stale = set(present) | set(present_outputs(path, (old or {}).get("outputs", [])))
         for o in sorted(stale):
+            if not allowed_output(kind, o) and not (old and allowed_output(old.get("kind"), o)):
+                continue  # never reached (checked above); a deletion must be of a name we write
             p = path / o
             if o == "analysis" and p.is_dir() and not (p / MANIFEST).exists() and not (p / "summary.json").exists():
                 continue  # not an analysis folder of ours
