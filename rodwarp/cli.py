@@ -99,7 +99,7 @@ _SIMULATE_OPTIONS = ("alpha", "freq", "amplitude", "gravity", "duration", "entan
                      "entangle_amplitude", "static_load", "n_rods", "length", "vertices", "box", "mu", "young",
                      "density", "dt", "iterations", "step_safety", "rod_model", "rolling", "save_every",
                      "checkpoint_every", "fields_every", "resume", "overwrite", "entangle", "seed", "device", "out", "initial",
-                     "entangled_from", "quiet")
+                     "units", "initial_diameter", "entangled_from", "quiet")
 
 app = typer.Typer(add_completion=False, no_args_is_help=False,
                   help="Simulate and analyse packings of elastic rods (NVIDIA Warp).",
@@ -192,6 +192,7 @@ def simulate(
     out: Optional[Path] = typer.Option(None, help="Output directory (default runs/alpha{A}_freq{F}_g{G}_seed{S}, "
                                                   "plus every other parameter that differs from its default)."),
     initial: Optional[Path] = _sim("initial"),
+    initial_diameter: Optional[float] = typer.Option(None, "--diameter", help=_P["initial_diameter"][1]),
     entangled_from: Optional[Path] = typer.Option(
         None, help="Start the stability test from the entangled packing of this earlier run folder (its "
                    "entangled.npz): same parameters but for --freq, --amplitude and --duration; the result equals "
@@ -204,7 +205,8 @@ def simulate(
     from rodwarp.rodset.rundir import mark_failed
 
     # the options that are ProtocolParams fields, the two taken in another form converted
-    params = ProtocolParams(**fields, box=_parse_box(box), initial=str(initial) if initial else None)
+    params = ProtocolParams(**fields, box=_parse_box(box), initial=str(initial) if initial else None,
+                            initial_diameter=initial_diameter)
     params._explicit = _given(ctx, "alpha", "length", "n_rods", "vertices", "box", "seed")
     params.validate()
     outdir = out or Path("runs") / default_run_name(params)
@@ -277,21 +279,25 @@ def phantom(
                                          "'wires' (a nest-like tangle of curved wires)."),
     shape: tuple[int, int, int] = typer.Option(..., help="Volume shape Z Y X (slices, rows, columns)."),
     voxel_size: float = typer.Option(_PH["voxel_size"],
-                                     help="Voxel edge length in the rods' units (1 for voxel-unit rods)."),
+                                     help="Voxel edge length in the rods' units (--units; 1 for voxel-unit rods). "
+                                          "The TIFF and the truth JSON record it in that unit; the rods must be "
+                                          "at least a voxel thick and fit --shape."),
+    units: Optional[str] = typer.Option(_PH["units"], help="Unit of a CSV rod set (m, mm, um, voxel; default m) "
+                                                           "and of --voxel-size; converts npz/zarr rod sets."),
     out: Path = typer.Option(..., help="Output TIFF (ground truth written beside it)."),
     blur: float = typer.Option(_PH["blur"], help="Gaussian point-spread sigma (voxels)."),
     cnr: float = typer.Option(_PH["cnr"], help="Contrast-to-noise ratio (foreground - background) / noise sigma."),
-    ring: float = typer.Option(_PH["ring"], help="Ring artefact amplitude (fraction of the contrast)."),
+    ring: float = typer.Option(_PH["ring"], help="Ring artefact amplitude (fraction of the contrast, 0 to 1)."),
     cupping: float = typer.Option(_PH["cupping"], help="Cupping: relative intensity drop at the slice edge "
                                                        "(negative: a bright rim, as beam hardening shows)."),
-    streaks: float = typer.Option(_PH["streaks"], help="Metal streak amplitude (fraction of the contrast)."),
+    streaks: float = typer.Option(_PH["streaks"], help="Metal streak amplitude (fraction of the contrast, 0 to 1)."),
     fov: Optional[float] = typer.Option(_PH["fov"], help="Field of view: radius (voxels) of the reconstruction "
                                                          "circle; 0 outside it."),
     dark: bool = typer.Option(_PH["dark"], help="Dark rods on a bright background (grey values swapped)."),
     z_thickness: int = typer.Option(_PH["z_thickness"], help="Slices this many times thicker than the voxels are "
                                                              "wide (anisotropic voxels; the TIFF records the spacing)."),
     n_rods: int = typer.Option(_PH["n_rods"], help="'random', 'arcs', 'wires': number of rods; 'bundles': of bundles."),
-    radius: float = typer.Option(_PH["radius"], help="Scenes: rod radius (voxels)."),
+    radius: float = typer.Option(_PH["radius"], help="Scenes: rod radius (voxels, at least 0.5)."),
     aspect: float = typer.Option(_PH["aspect"], help="'random': aspect ratio length / diameter."),
     touching: float = typer.Option(_PH["touching"], help="'random': fraction of rods touching another."),
     seed: int = typer.Option(_PH["seed"], help="Seed of the noise and of the scenes."),
@@ -301,10 +307,10 @@ def phantom(
 
     check_phantom(rods=rods, shape=shape, voxel_size=voxel_size, out=out, blur=blur, cnr=cnr, ring=ring,
                     cupping=cupping, streaks=streaks, n_rods=n_rods, radius=radius, aspect=aspect,
-                    touching=touching, seed=seed, fov=fov, z_thickness=z_thickness)
+                    touching=touching, seed=seed, fov=fov, z_thickness=z_thickness, units=units)
     rs = make_phantom(rods, shape, out, voxel_size=voxel_size, blur=blur, cnr=cnr, ring=ring, cupping=cupping,
                       streaks=streaks, fov=fov, dark=dark, z_thickness=z_thickness, n_rods=n_rods, radius=radius,
-                      aspect=aspect, touching=touching, seed=seed)
+                      aspect=aspect, touching=touching, seed=seed, units=units)
     typer.echo(f"{rs.n_rods} rods, {len(rs.contacts) if rs.contacts is not None else 0} contacts -> {out}")
 
 

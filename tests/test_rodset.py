@@ -151,7 +151,7 @@ def write(tmp_path, text, name="in.csv"):
 def test_csv_grouping_extra_columns_and_diameter(tmp_path):
     p = write(tmp_path, "label,ROD, x ,y,z,note\n"
                         "a,7,0,0,0,hello\n" "a,7,1,0,0,\n\n" "b,3,0,1,0,x\n" "b,3,0,2,0,y\n" "b,3,0,3,0,z\n")
-    one_line_error(load, p, match="CSV has no radius column; pass --diameter")
+    one_line_error(load, p, match="or pass --diameter")
     rods = load(p, diameter=0.2, units="mm")
     assert rods.n_rods == 2 and rods.units == "mm"
     assert rods.vertex_counts.tolist() == [2, 3]

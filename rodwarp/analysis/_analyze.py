@@ -114,6 +114,11 @@ def _load_rods(path: Path, opts: AnalyzeOptions) -> RodSet:
         rods = load_rods(path, units=opts.units)
     if rods.n_rods == 0:
         raise RodwarpError(f"'{path}' holds no rods: nothing to analyse")
+    from rodwarp.rodset._scale import check_diameter_agrees
+
+    # --diameter stands in for a missing radius column; one that contradicts the file's radii
+    # would silently set R = sqrt(d l) from the wrong thickness
+    check_diameter_agrees(rods, opts.diameter, path)
     return rods
 
 
@@ -179,7 +184,8 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
         fp = resolve_params(obj, radius=opts.radius, spacing=opts.spacing, diameter=opts.diameter,
                             length=opts.length, keep_outside=opts.keep_outside,
                             contact_tolerance=opts.contact_tolerance)
-        check_grid_memory(float(np.prod([len(a) for a in grid_axes(fp)])))
+        check_grid_memory(float(np.prod([len(a) for a in grid_axes(fp)])), rods=obj,
+                          extent=float(np.max(fp.domain[1] - fp.domain[0])))
     # the folder is taken only once the input is known to be good: a bad input leaves an
     # earlier analysis alone
     run = rundir.claim(out, "analyze", {"input": str(Path(src).resolve()), **asdict(opts)}, rundir.ANALYZE_OUTPUTS,

@@ -29,7 +29,14 @@ def check_analyze(o) -> None:
     device_name("--device", o.device)
 
 
-def check_grid_memory(n_voxels: float) -> None:
-    """Refuse an analysis grid whose memory estimate exceeds what is available."""
-    memory_fits(f"the analysis grid ({n_voxels:.3g} voxels)", BASE_BYTES + ANALYZE_BYTES_PER_VOXEL * n_voxels,
-                "raise --spacing or --radius")
+def check_grid_memory(n_voxels: float, rods=None, extent: float | None = None) -> None:
+    """Refuse an analysis grid whose memory estimate exceeds what is available.
+
+    With ``rods`` (and the domain's largest edge ``extent``, in the rods' units) whose sizes
+    are implausible for their declared units, the message points at ``--units`` first.
+    """
+    from rodwarp.rodset._scale import unit_hint
+
+    hint = unit_hint(rods, extent) if rods is not None else None
+    fix = f"check the units first: {hint}; else raise --spacing or --radius" if hint else "raise --spacing or --radius"
+    memory_fits(f"the analysis grid ({n_voxels:.3g} voxels)", BASE_BYTES + ANALYZE_BYTES_PER_VOXEL * n_voxels, fix)

@@ -97,6 +97,14 @@ def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float 
             "lower --radius or pass --keep-outside")
     n_vox = np.prod(np.floor(size / h) + 1)
     if n_vox > 2**31 - 1:
+        from rodwarp.rodset._scale import unit_hint
+
+        # wrong units (a CSV in mm read as m) against a --spacing meant in the right ones is the
+        # usual cause: say so before suggesting a coarser grid
+        hint = unit_hint(rods, float(np.max(size)))
+        if hint:
+            raise RodwarpError(f"the grid would have {n_vox:.3g} voxels at spacing {h:g} {rods.units}: check the "
+                               f"units first: {hint}; else raise --spacing")
         raise RodwarpError(f"the grid would have {n_vox:.3g} voxels; raise --spacing")
     return FieldParams(R, h, d, l, dom, bool(keep_outside), tol)
 

@@ -40,6 +40,7 @@ _WHERE = {
     # volume files
     "read_volume": "_volume_io", "open_volume_lazy": "_volume_io", "write_tiff": "_volume_io",
     "list_slices": "_volume_io", "check_volume": "_volume_io", "read_voxel_size": "_volume_io",
+    "read_voxel_unit": "_volume_io",
     # phantoms
     "render_phantom": "_phantom", "occupancy": "_phantom", "phantom_truth": "_phantom",
     "write_phantom": "_phantom", "truth_paths": "_phantom", "make_phantom": "_phantom",

@@ -14,8 +14,13 @@ PHANTOM_BYTES_PER_VOXEL = 34
 
 
 def check_phantom(*, rods, shape, voxel_size, out, blur, cnr, ring, cupping, streaks, n_rods, radius, aspect,
-                  touching, seed, fov=None, z_thickness=1) -> None:
-    """Checks of ``rodwarp phantom``: values, the volume's memory and disk size, the output path."""
+                  touching, seed, fov=None, z_thickness=1, units=None) -> None:
+    """Checks of ``rodwarp phantom``: values, the volume's memory and disk size, the output path.
+
+    Artefact amplitudes are bounded where they would saturate the 16-bit image (``ring`` and
+    ``streaks`` at most 1 contrast, ``|cupping|`` below 1); a scene's ``radius`` must be at
+    least 0.5 voxel. The rods' scale against the voxel and the volume is checked once they are
+    loaded (:func:`rodwarp.ct.make_phantom`)."""
     if len(shape) != 3:
         fail(f"--shape must be three sizes Z Y X, got {shape}")
     for axis, n in zip("ZYX", shape):
@@ -23,16 +28,20 @@ def check_phantom(*, rods, shape, voxel_size, out, blur, cnr, ring, cupping, str
     number("--voxel-size", voxel_size, gt=0)
     number("--blur", blur, ge=0, unit="voxels")
     number("--cnr", cnr, gt=0)
-    number("--ring", ring, ge=0)
+    # beyond one contrast the artefact outshines the rods and clips at 0 or 65535
+    number("--ring", ring, ge=0, le=1, hint="a fraction of the rod/background contrast")
     number("--cupping", cupping, gt=-1, lt=1, hint="a relative intensity drop (negative: a bright rim)")
     if fov is not None:
         number("--fov", fov, gt=0, unit="voxels")
     integer("--z-thickness", z_thickness, ge=1, le=100)
-    number("--streaks", streaks, ge=0)
+    number("--streaks", streaks, ge=0, le=1, hint="a fraction of the rod/background contrast")
+    if units is not None and units not in ("m", "mm", "um", "voxel"):
+        fail(f"--units must be m, mm, um or voxel (the unit of a CSV rod set and of --voxel-size), got '{units}'")
     integer("--seed", seed, ge=0, le=2**63 - 1)
     if rods in PHANTOM_SCENES:
         integer("--n-rods", n_rods, ge=1, le=10_000_000)
-        number("--radius", radius, gt=0, unit="voxels")
+        # a rod thinner than a voxel renders as noise
+        number("--radius", radius, ge=0.5, unit="voxels", hint="a rod must be at least a voxel thick to show")
         if rods == "random":
             number("--aspect", aspect, gt=1)
             number("--touching", touching, ge=0, le=1)

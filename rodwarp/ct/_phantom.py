@@ -446,15 +446,24 @@ def truth_paths(path_tif) -> tuple[Path, Path]:
 
 
 def write_phantom(path_tif, volume: np.ndarray, rods: RodSet, contacts: Contacts | None = None,
-                  voxel_size: float | None = None, params: dict | None = None, z_thickness: int = 1) -> dict:
+                  voxel_size: float | None = None, params: dict | None = None, z_thickness: int = 1, *,
+                  units: str | None = None) -> dict:
     """Write a phantom TIFF and its ground truth beside it, each atomically.
-
-    The TIFF records its voxel size (ImageJ resolution and spacing): ``voxel_size`` metres
-    for rods in metric units, else 1 um per voxel width (so that the slice spacing of
-    ``z_thickness`` voxel widths is on record); the truth is in voxel widths along every axis.
 
     Writes ``path_tif`` (multi-page, ZYX), ``<stem>_truth.npz`` (the rods in voxel units with
     ``contacts``) and ``<stem>_truth.json`` (``params``, seed and voxel size, shape, counts).
+
+    Parameters
+    ----------
+    voxel_size : float, optional
+        Voxel width in metres (as everywhere in this module). The TIFF records it (ImageJ
+        resolution and spacing, slices ``z_thickness`` widths apart) in ``units``, and the
+        truth JSON states it in ``units`` with ``"units"`` beside it. None (a scene in voxel
+        units): the TIFF records 1 um per voxel width, so that the slice spacing is on record,
+        and the JSON says ``"units": "voxel"``, ``"voxel_size": 1``.
+    units : str, optional
+        ``m``, ``mm`` or ``um``: the unit the voxel size is recorded in; default the rods'
+        unit when metric, else ``m``.
 
     Returns
     -------
@@ -477,21 +486,34 @@ def write_phantom(path_tif, volume: np.ndarray, rods: RodSet, contacts: Contacts
     params = dict(params or {})
     rv.attrs = dict(rv.attrs)
     rv.attrs["phantom"] = json_safe(params)
-    if voxel_size is not None:
-        rv.attrs["voxel_size"] = float(voxel_size)
     npz, js = truth_paths(path_tif)
-    m = 1e-6
-    if rods.units != "voxel" and voxel_size is not None:
-        m = float(voxel_size) * UNITS[rods.units]
-    write_tiff(path_tif, vol, voxel_size=(int(z_thickness) * m, m, m))
+    zt = int(z_thickness)
+    if voxel_size is None:
+        unit, size, m = "voxel", 1.0, 1e-6
+    else:
+        m = float(voxel_size)  # metres per voxel width
+        unit = units or (rods.units if rods.units in ("m", "mm", "um") else "m")
+        if unit not in ("m", "mm", "um"):
+            raise _fail(f"units must be m, mm or um (the unit the voxel size is recorded in), got {unit!r}")
+        size = m / UNITS[unit]
+        rv.attrs["voxel_size"] = size
+        rv.attrs["voxel_size_units"] = unit
+    # the truth JSON is the phantom's manifest: incomplete until its last write, so a kill in
+    # between never leaves the TIFF of one phantom beside the truth of another passing as whole
+    from rodwarp.ct._phantom_owner import PHANTOM_FORMAT, mark_truth
+
+    mark_truth(path_tif, complete=False, tiff=Path(path_tif).name, seed=params.get("seed"))
+    # the TIFF states the voxel in the rods' unit: segment then reports lengths in it by default
+    write_tiff(path_tif, vol, voxel_size=(zt * m, m, m), unit="um" if unit == "voxel" else unit)
     rv.save(npz)
     meta = {"shape": list(vol.shape), "dtype": str(vol.dtype),
-            "voxel_size": None if voxel_size is None else float(voxel_size),
+            "voxel_size": size, "units": unit,
+            "voxel_size_zyx": [zt * size, size, size],
             "seed": params.get("seed"), "n_rods": rv.n_rods, "n_contacts": len(contacts),
-            "voxel_size_zyx_m": [int(z_thickness) * m, m, m],
+            "voxel_size_zyx_m": [zt * m, m, m],
             "truth_rods": npz.name, "coordinates": "voxel units: x = column, y = row, z = slice; "
                                                    "voxel (0,0,0) centred at the origin",
-            "params": params}
+            "params": params, "format": PHANTOM_FORMAT, "complete": True, "status": "complete"}
     write_json(js, meta)
     return {"tiff": Path(path_tif), "truth_rods": npz, "truth_json": js}
 
@@ -507,7 +529,7 @@ SCENES = ("random", "bundles", "arcs", "wires")
 def make_phantom(rods: str, shape, out, *, voxel_size: float = 1.0, blur: float = 1.0, cnr: float = 10.0,
                  ring: float = 0.0, cupping: float = 0.0, streaks: float = 0.0, fov: float | None = None,
                  dark: bool = False, z_thickness: int = 1, n_rods: int = 100, radius: float = 3.0,
-                 aspect: float = 30.0, touching: float = 0.5, seed: int = 0) -> RodSet:
+                 aspect: float = 30.0, touching: float = 0.5, seed: int = 0, units: str | None = None) -> RodSet:
     """Render a rod set, or a named scene, as a 16-bit CT stack with its ground truth (``rodwarp phantom``).
 
     Parameters
@@ -521,7 +543,8 @@ def make_phantom(rods: str, shape, out, *, voxel_size: float = 1.0, blur: float 
     out : path-like
         The TIFF; the truth is written beside it (:func:`write_phantom`).
     voxel_size : float
-        Voxel edge in the rods' units (1 for rods in voxel units).
+        Voxel edge in the rods' units (``units``; 1 for rods in voxel units). The TIFF and the
+        truth JSON record it in that unit (:func:`write_phantom`).
     blur, cnr, ring, cupping, streaks, fov, dark, z_thickness
         Image model, see :func:`render_phantom` (blur and fov in voxels).
     n_rods, radius, aspect, touching
@@ -529,11 +552,21 @@ def make_phantom(rods: str, shape, out, *, voxel_size: float = 1.0, blur: float 
         touching rods (``random``).
     seed : int
         Seed of the noise and of the scenes.
+    units : str, optional
+        Unit of a CSV rod set (m, mm, um, voxel; default m, as a CSV does not record it); an
+        npz/zarr rod set in metric units is converted to it. ``voxel_size`` is in this unit.
 
     Returns
     -------
     RodSet
         The rendered rods in voxel units, with their true contacts.
+
+    Raises
+    ------
+    RodwarpError
+        Rods thinner than one voxel (the message gives the diameter in voxels and a
+        ``--voxel-size`` that puts 4 voxels across), or reaching outside the volume (the
+        message gives their extent in voxels, and a ``--shape`` or ``--voxel-size`` that fits).
     """
     import numpy as np
 
@@ -561,6 +594,15 @@ def make_phantom(rods: str, shape, out, *, voxel_size: float = 1.0, blur: float 
         if p.is_dir() and (p / "final.npz").exists():
             p = p / "final.npz"
         rs = load(p)
+        if units is not None and units != rs.units:
+            if p.suffix.lower() == ".csv":
+                rs = load(p, units=units)  # a CSV does not record its unit: --units names it
+            elif rs.units == "voxel" or units == "voxel":
+                raise _fail(f"{p} records its rods in '{rs.units}'; --units {units} cannot convert to or from voxels "
+                            f"without a scale: drop --units and give --voxel-size in '{rs.units}'")
+            else:
+                rs = rs.to_units(units)  # --voxel-size is in --units
+        src_units = rs.units
         if rs.units == "voxel":
             if voxel_size != 1.0:
                 raise _fail("the rods are in voxel units: drop --voxel-size (it is 1)")
@@ -568,6 +610,7 @@ def make_phantom(rods: str, shape, out, *, voxel_size: float = 1.0, blur: float 
         else:
             vox = voxel_size * UNITS[rs.units]  # metres per voxel
             rs = rs.to_units("voxel", voxel_size=vox)
+        _check_scale(rs, shape, z_thickness, voxel_size, src_units, p)
         rs.contacts = detect_contacts(rs, 0.1 * float(np.mean(rs.diameters)))
     bg, fg = (50000, 20000) if dark else (20000, 50000)
     vol = render_phantom(rs, tuple(shape), blur_sigma=blur, cnr=cnr, ring=ring, cupping=cupping, streaks=streaks,
@@ -575,5 +618,47 @@ def make_phantom(rods: str, shape, out, *, voxel_size: float = 1.0, blur: float 
     params = {"shape": list(shape), "voxel_size": voxel_size, "blur_sigma": blur, "cnr": cnr, "ring": ring,
               "cupping": cupping, "streaks": streaks, "fov": fov, "dark": dark, "z_thickness": z_thickness,
               "seed": seed, "source": rods, "metres_per_voxel": vox if rods not in builders else None}
-    write_phantom(out, vol, rs, rs.contacts, voxel_size, params, z_thickness=z_thickness)
+    if rods in builders or src_units == "voxel":
+        params["units"] = "voxel"
+        write_phantom(out, vol, rs, rs.contacts, None, params, z_thickness=z_thickness)
+    else:
+        params["units"] = src_units  # the unit --voxel-size is in
+        write_phantom(out, vol, rs, rs.contacts, vox, params, z_thickness=z_thickness, units=src_units)
     return rs
+
+
+def _check_scale(rv: RodSet, shape, z_thickness: int, voxel_size: float, units: str, source) -> None:
+    """Refuse rods (``rv``, in voxel units) a CT of ``shape`` cannot show: thinner than one
+    voxel, or reaching outside the volume by more than a voxel. ``voxel_size`` is in ``units``
+    (the rods' own unit), for the suggested fixes."""
+    zt = int(z_thickness)
+    d = 2.0 * float(np.median(rv.radii))
+    metric = units != "voxel"
+    if d < 1.0:
+        if metric:
+            fix = (f"pass --voxel-size {d * voxel_size / 4.0:.3g} (4 voxels across; the rods are "
+                   f"{d * voxel_size:.4g} {units} thick)")
+        else:
+            fix = "give thicker rods (their radii are in voxels)"
+        raise _fail(f"the rods of {source} are {d:.3g} voxels thick at --voxel-size {voxel_size:g} {units}: a CT "
+                    f"cannot resolve them (the image would be noise); {fix}")
+    r = rv.radii[np.repeat(np.arange(rv.n_rods), np.diff(rv.offsets))][:, None]
+    lo = (rv.points - r).min(axis=0)  # x, y, z in voxel widths
+    hi = (rv.points + r).max(axis=0)
+    Z, Y, X = (int(v) for v in shape)
+    # voxel centres run from 0 to N-1 (z: thick slices zt widths apart, centred at k zt)
+    vlo = np.array([-0.5, -0.5, -0.5 * zt])
+    vhi = np.array([X - 0.5, Y - 0.5, (Z - 0.5) * zt])
+    slack = 1.0  # partial-volume voxels at the faces are fine
+    if np.all(lo >= vlo - slack) and np.all(hi <= vhi + slack):
+        return
+    span = " x ".join(f"{a:.4g}..{b:.4g}" for a, b in zip(lo, hi))
+    have = f"--shape {Z} {Y} {X} (Z Y X) holds x, y, z from -0.5 to {vhi[0]:g}, {vhi[1]:g}, {vhi[2]:g} voxel widths"
+    if np.any(lo < vlo - slack):
+        raise _fail(f"the rods of {source} reach outside the volume: they span x, y, z = {span} voxel widths and "
+                    f"{have}; shift the rods to coordinates >= 0 (the first voxel is centred at the origin)")
+    need = np.ceil([(hi[2] + 0.5 * zt) / zt, hi[1] + 0.5, hi[0] + 0.5]).astype(int)
+    fit = max(float(np.max(hi[:2] / vhi[:2])), float(hi[2] / vhi[2]))
+    also = f" or raise --voxel-size to {voxel_size * fit:.3g} {units}" if metric else ""
+    raise _fail(f"the rods of {source} do not fit the volume: they span x, y, z = {span} voxel widths and {have}; "
+                f"enlarge --shape to {need[0]} {need[1]} {need[2]}{also}")

@@ -17,7 +17,8 @@ import numpy as np
 from rodwarp._util import one_line_error as _fail
 from rodwarp.errors import RodwarpError
 
-__all__ = ["read_volume", "open_volume_lazy", "write_tiff", "list_slices", "check_volume", "read_voxel_size"]
+__all__ = ["read_volume", "open_volume_lazy", "write_tiff", "list_slices", "check_volume", "read_voxel_size",
+           "read_voxel_unit"]
 
 _TIFF_SUFFIXES = (".tif", ".tiff")
 
@@ -300,7 +301,7 @@ def open_volume_lazy(path, *, key: str | None = None):
 # writing
 # ----------------------------------------------------------------------------------------------
 
-def write_tiff(path, volume, *, voxel_size=None) -> Path:
+def write_tiff(path, volume, *, voxel_size=None, unit: str = "um") -> Path:
     """Write a ``(z, y, x)`` volume as a multi-page TIFF atomically, with ImageJ metadata (axes ZYX).
 
     Parameters
@@ -312,7 +313,11 @@ def write_tiff(path, volume, *, voxel_size=None) -> Path:
         volumes of 4 GiB or more (written as BigTIFF), get a plain ``{"axes": "ZYX"}`` description.
     voxel_size : float or (dz, dy, dx), optional
         Metres per voxel (one edge, or one per axis), stored as the ImageJ resolution (x, y)
-        and spacing (z) in micrometres.
+        and spacing (z) in ``unit``.
+    unit : str
+        Length unit the metadata is written in: ``m``, ``mm`` or ``um`` (the ImageJ ``unit``;
+        readers, :func:`read_voxel_size` included, convert it back to metres, and
+        :func:`read_voxel_unit` returns it so that lengths can be reported in it).
     """
     import tifffile
 
@@ -331,8 +336,12 @@ def write_tiff(path, volume, *, voxel_size=None) -> Path:
         if voxel_size is not None:
             from rodwarp.ct._prepare import parse_voxel_size
 
-            dz, dy, dx = (v * 1e6 for v in parse_voxel_size(voxel_size))
-            meta.update(unit="um", spacing=dz)
+            from rodwarp.rodset import UNITS
+
+            if unit not in ("m", "mm", "um"):
+                raise _fail(f"write_tiff unit must be m, mm or um, got {unit!r}")
+            dz, dy, dx = (v / UNITS[unit] for v in parse_voxel_size(voxel_size))
+            meta.update(unit=unit, spacing=dz)
             kw["resolution"] = (1.0 / dx, 1.0 / dy)
         kw.update(imagej=True, metadata=meta)
     else:
@@ -446,6 +455,29 @@ def _zarr_voxel_size(path: Path, key: str | None):
             return None
         out.append(float(scale[i]) * k)
     return tuple(out), "OME-Zarr scale"
+
+
+def read_voxel_unit(path) -> str | None:
+    """The length unit (``m``, ``mm`` or ``um``) a TIFF's ImageJ metadata states its voxel
+    size in, or None (another unit, no ImageJ metadata, not a TIFF, unreadable).
+
+    ``rodwarp phantom`` writes its voxel size in the rods' units; ``rodwarp segment`` reports
+    in this unit by default, so the round trip keeps the rods' units.
+    """
+    import tifffile
+
+    try:
+        p = _resolve(path)
+        if _is_zarr(p):
+            return None
+        if p.is_dir():
+            p = _folder_files(p)[0]
+        with tifffile.TiffFile(p) as tf:
+            unit = (tf.imagej_metadata or {}).get("unit")
+    except Exception:  # noqa: BLE001 - metadata is optional: unreadable metadata means none
+        return None
+    k = _metres(unit)
+    return {1.0: "m", 1e-3: "mm", 1e-6: "um"}.get(k) if k is not None else None
 
 
 def read_voxel_size(path, *, key: str | None = None):

@@ -88,6 +88,10 @@ def check_protocol(p) -> None:
     device_name("--device", p.device)
     if p.entangle and not p.initial:
         fail("--entangle only applies with --initial (a random packing is always entangled first); drop it")
+    for name, opt in (("units", "--units"), ("initial_diameter", "--diameter")):
+        if getattr(p, name, None) is not None and not p.initial:
+            fail(f"{opt} only applies with --initial (it describes the input rod set; a random packing is in "
+                 f"metres with d = --length / --alpha); drop it")
     if p.initial:
         given = sorted(k for k in NOT_WITH_INITIAL if k in explicit or (k == "n_rods" and p.n_rods is not None))
         if given:
@@ -172,10 +176,15 @@ def output_bytes(p) -> float:
 def check_input_rods(p, explicit=()):
     """Load and check the --initial rod set; set ``p.alpha`` and ``p.length`` from it.
 
-    Refuses an empty set, non-metric units, rods overlapping deeper than
-    :data:`MAX_INPUT_OVERLAP` diameters (naming the deepest pair), an --alpha or --length
-    that contradicts the input, and a set too large for memory. The rods (in metres) are kept
-    on ``p`` for the run.
+    A CSV is read in ``p.units`` (default m) with ``p.initial_diameter`` for a missing radius
+    column (none is guessed); npz/zarr files record their own unit. Refuses an empty set,
+    voxel units, a ``--units`` that contradicts an npz/zarr's recorded unit, a ``--diameter``
+    that contradicts the file's radii, a mean rod length outside
+    :data:`rodwarp.rodset._scale.PLAUSIBLE_LENGTH_M` (1e-5 to 100 m: most likely the wrong
+    unit, the message names the measured length and the likely ``--units``), rods
+    overlapping deeper than :data:`MAX_INPUT_OVERLAP` diameters (naming the deepest pair), an
+    --alpha or --length that contradicts the input, and a set too large for memory. The rods
+    (converted to metres) are kept on ``p`` for the run.
 
     Returns
     -------
@@ -190,14 +199,34 @@ def check_input_rods(p, explicit=()):
     if not path.exists():
         fail(f"initial rod set not found: {path}; check the --initial path")
     cached = getattr(p, "_input_rods", None)
-    if cached is not None and getattr(p, "_input_key", None) == (str(path), p.alpha, p.length):
+    key = (str(path), p.alpha, p.length, p.units, p.initial_diameter)
+    if cached is not None and getattr(p, "_input_key", None) == key:
         return cached
-    rods = load(path, diameter=p.length / p.alpha)
+    from rodwarp.rodset._scale import PLAUSIBLE_LENGTH_M, check_diameter_agrees, unit_hint
+
+    if p.units is not None and p.units not in ("m", "mm", "um"):
+        if p.units == "voxel":
+            fail("--units voxel: simulate runs in metres and a voxel has no size; convert the rods first "
+                 "(RodSet.to_units('m', voxel_size=...)) or give the CSV's unit m, mm or um")
+        fail(f"--units must be m, mm or um (the unit of the --initial CSV), got '{p.units}'")
+    if p.initial_diameter is not None:
+        number("--diameter", p.initial_diameter, gt=0, hint=f"the rod diameter in --units {p.units or 'm'}")
+    csv = path.suffix.lower() == ".csv"
+    # a CSV without a radius column is refused unless --diameter gives it: no diameter is guessed
+    rods = load(path, diameter=p.initial_diameter, units=p.units) if csv else load(path)
     if rods.n_rods == 0:
         fail(f"--initial {path} holds no rods; nothing to simulate")
     if rods.units not in UNITS or rods.units == "voxel":
         fail(f"--initial {path} is in '{rods.units}' units; convert it to metres first "
              f"(RodSet.to_units('m', voxel_size=...))")
+    if not csv and p.units is not None and p.units != rods.units:
+        fail(f"--units {p.units}: {path} records its unit ('{rods.units}'); drop --units (it names a CSV's unit)")
+    check_diameter_agrees(rods, p.initial_diameter, path)
+    # rods of 1000 m are a CSV in mm read as metres far more often than real rods
+    hint = unit_hint(rods)
+    if hint:
+        lo, hi = PLAUSIBLE_LENGTH_M
+        fail(f"--initial {path}: {hint} (simulate takes rods {lo:g} to {hi:g} m long)")
     if rods.units != "m":
         rods = rods.to_units("m")
     memory_fits(f"--initial {path} ({rods.n_rods} rods, {rods.n_vertices} vertices)",
@@ -226,7 +255,7 @@ def check_input_rods(p, explicit=()):
     p.alpha = alpha
     p.length = length
     p._input_rods = rods
-    p._input_key = (str(path), p.alpha, p.length)
+    p._input_key = (str(path), p.alpha, p.length, p.units, p.initial_diameter)
     return rods
 
 

@@ -91,6 +91,11 @@ class ProtocolParams:
     seed: int = _param(0, "Random seed of the packing.")
     device: str = _param("auto", "auto, cpu or cuda.")
     initial: str | None = _param(None, "Start from this rod set (npz, zarr or CSV) instead of a random packing.")
+    # a CSV does not record its unit: without this it is read as metres (the simulation runs in SI)
+    units: str | None = _param(None, "Length unit of a CSV --initial rod set: m (the default), mm or um; "
+                                     "converted to metres. An npz/zarr records its own.")
+    initial_diameter: float | None = _param(None, "Rod diameter (in --units) for a CSV --initial rod set without a "
+                                                  "radius column.", "d")
     entangle: bool = _param(False, "With --initial: run the entangling stage too.")
 
     def validate(self) -> None:
@@ -300,10 +305,12 @@ def _resume_point(params: ProtocolParams, ckdir: Path):
     if ck is None:
         raise RodwarpError(f"nothing to resume: no checkpoint in {ckdir}; run without --resume")
     saved = ck[1]["parameters"]
-    mine = {k: v for k, v in asdict(params).items() if k != "device"}
-    theirs = {k: v for k, v in saved.items() if k != "device"}
+    # a parameter left at None equals one absent from an older checkpoint (fields added since)
+    mine = {k: v for k, v in asdict(params).items() if k != "device" and v is not None}
+    theirs = {k: v for k, v in saved.items() if k != "device" and v is not None}
     if json.loads(json.dumps(mine)) != theirs:
-        diff = sorted(k for k in mine if json.loads(json.dumps(mine[k])) != theirs.get(k))
+        m = json.loads(json.dumps(mine))
+        diff = sorted(k for k in set(m) | set(theirs) if m.get(k) != theirs.get(k))
         raise RodwarpError(f"--resume with different parameters than the checkpoint ({', '.join(diff)}); "
                            f"repeat the original command with --resume")
     return ck
@@ -321,7 +328,9 @@ TEST_FIELDS = ("freq", "amplitude", "duration")
 def _comparable(parameters: dict) -> dict:
     """The parameters that fix the packing and its entangling (JSON round trip, so tuples
     compare equal to the lists a checkpoint holds)."""
-    return {k: v for k, v in json.loads(json.dumps(parameters)).items() if k not in (*TEST_FIELDS, "device")}
+    # None equals absent: a donor written before a field was added still matches
+    return {k: v for k, v in json.loads(json.dumps(parameters)).items()
+            if k not in (*TEST_FIELDS, "device") and v is not None}
 
 
 def _entangled_point(params: ProtocolParams, donor: Path, outdir: Path):

@@ -251,7 +251,8 @@ def _load_csv(path: Path, radius: float | None, units: str) -> RodSet:
         if cols.count(c) > 1:
             raise _fail(f"{name} line 1: column {c!r} appears {cols.count(c)} times; keep one")
     if "radius" not in cols and radius is None:
-        raise _fail(f"{name}: CSV has no radius column; pass --diameter (or radius=/diameter= in Python)")
+        raise _fail(f"{name}: CSV has no radius column, so the rods' thickness is unknown; add a radius column "
+                    f"(rod,x,y,z,radius) or pass --diameter (radius=/diameter= in Python)")
     usecols = [cols.index(c) for c in want]
 
     try:
