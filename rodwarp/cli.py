@@ -485,6 +485,29 @@ def _parse_box(text: str):
     return vals
 
 
+#: options that take a path: an empty value becomes Path('') == Path('.'), so `--out ''` (an
+#: unset shell variable) would write into the current folder without a word
+_PATH_OPTIONS = ("--out", "--initial", "--entangled-from")
+
+
+def _empty_path_option(args: list[str]) -> str | None:
+    """The first path option of ``args`` given an empty (or all-blank) value, else None.
+
+    Checked on the raw arguments because typer turns '' into ``Path('.')``, which cannot be
+    told apart from a deliberate ``.`` afterwards. Arguments after ``--`` are not options.
+    """
+    for k, a in enumerate(args):
+        if a == "--":
+            break
+        name, eq, value = a.partition("=")
+        if name in _PATH_OPTIONS:
+            if eq and not value.strip():
+                return name
+            if not eq and k + 1 < len(args) and not args[k + 1].strip():
+                return name
+    return None
+
+
 def main(argv=None) -> int:
     """Console entry point: like ``app()`` but a usage error (a bad option value, a missing
     argument, an unknown option) is one line on stderr with exit code 2, not a box."""
@@ -501,8 +524,13 @@ def main(argv=None) -> int:
         usage.append(mod.UsageError)
         if hasattr(mod, "Abort"):
             abort.append(mod.Abort)
+    args = list(argv if argv is not None else sys.argv[1:])
+    empty = _empty_path_option(args)
+    if empty:
+        typer.echo(f"error: {empty} is empty; give a path ({empty} . names the current folder)", err=True)
+        return 2
     try:
-        rv = app(args=argv if argv is not None else sys.argv[1:], prog_name="rodwarp", standalone_mode=False)
+        rv = app(args=args, prog_name="rodwarp", standalone_mode=False)
     except tuple(usage) as e:
         cmd = e.ctx.command_path if getattr(e, "ctx", None) is not None else "rodwarp"
         msg = " ".join(e.format_message().split())

@@ -594,6 +594,9 @@ def make_phantom(rods: str, shape, out, *, voxel_size: float = 1.0, blur: float 
         if p.is_dir() and (p / "final.npz").exists():
             p = p / "final.npz"
         rs = load(p)
+        from rodwarp.rodset._sanity import check_rod_geometry
+
+        check_rod_geometry(rs, str(p))  # duplicated or degenerate rods would be false ground truth
         if units is not None and units != rs.units:
             if p.suffix.lower() == ".csv":
                 rs = load(p, units=units)  # a CSV does not record its unit: --units names it

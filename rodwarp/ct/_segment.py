@@ -66,6 +66,13 @@ def _chunks(shape, chunk, halo):
                 yield clo, chi, blo, bhi
 
 
+#: smallest volume edge (voxels) segmentation accepts: the thinnest rod it resolves is about
+#: 2 voxels across (radius 1), its blurred edges take ~2 voxels on each side and the background
+#: around it another voxel or two; a smaller volume cannot hold a rod and would only be told
+#: "no rods found" after the whole search
+MIN_EDGE_VOXELS = 8
+
+
 def segment_volume(volume, params: SegmentParams | None = None,
                    progress: Callable[[str, int, int], None] | None = None, *,
                    voxel_size=None) -> SegmentResult:
@@ -118,7 +125,11 @@ def segment_volume(volume, params: SegmentParams | None = None,
     from rodwarp.ct._prepare import _Corrected, prepare_volume
 
     tic = time.perf_counter()
-    _Reader(volume)  # shape and dtype checks first, with their own messages
+    shape = _Reader(volume).shape  # shape and dtype checks first, with their own messages
+    if min(shape) < MIN_EDGE_VOXELS:
+        raise _fail(f"volume shape {shape} is too small to hold a rod: every dimension needs at least "
+                    f"{MIN_EDGE_VOXELS} voxels (a rod about 2 voxels across, its blurred edges and some "
+                    f"background); give the whole CT stack")
     prep = prepare_volume(volume, voxel_size, dark=P.dark, fov=P.fov, background=P.background, quality=quality)
     vol = prep.volume
     if isinstance(vol, _Corrected) and isinstance(volume, np.ndarray):

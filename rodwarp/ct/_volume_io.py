@@ -9,6 +9,8 @@ This module does not import warp.
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import re
 from pathlib import Path
 
@@ -82,18 +84,111 @@ def check_volume(vol: np.ndarray, name: str = "volume") -> np.ndarray:
 # reading
 # ----------------------------------------------------------------------------------------------
 
+@contextlib.contextmanager
+def _tifffile_quiet():
+    """Collect tifffile's log records instead of printing them while a TIFF is read.
+
+    tifffile logs problems of damaged files (``invalid page offset``) through ``logging``;
+    with no handler configured Python prints them on stderr, before and besides rodwarp's own
+    one-line error. Yields the list of records, so that callers can tell a truncated file.
+    """
+    log = logging.getLogger("tifffile")
+    records: list[logging.LogRecord] = []
+
+    class _Collect(logging.Handler):
+        def emit(self, record):
+            records.append(record)
+
+    handler = _Collect(logging.DEBUG)
+    propagate = log.propagate
+    log.addHandler(handler)
+    log.propagate = False  # nor through the root logger's handlers
+    try:
+        yield records
+    finally:
+        log.removeHandler(handler)
+        log.propagate = propagate
+
+
+#: photometric interpretations of colour images (TIFF tag 262): RGB, palette, CMYK, YCbCr, CIELab
+_COLOUR_PHOTOMETRIC = {2: "an RGB", 3: "a colour-palette", 5: "a CMYK", 6: "a YCbCr", 8: "a CIELab"}
+
+
+def _check_greyscale(tf, path: Path, what: str = "a greyscale CT stack") -> None:
+    """Refuse a TIFF whose pages are colour or multi-channel: their channels would be read as
+    slices or columns of the volume (a 64 x 64 RGB image is a 64 x 64 x 3 'volume')."""
+    page = tf.pages.first if hasattr(tf.pages, "first") else tf.pages[0]
+    photo = int(getattr(page, "photometric", 1) or 1)
+    spp = int(getattr(page, "samplesperpixel", 1) or 1)
+    if (photo == 2 and spp in (3, 4) and int(getattr(page, "planarconfig", 1)) == 2 and tf.is_shaped
+            and int(getattr(page, "bitspersample", 8)) > 8):
+        # tifffile's own default for a (3 or 4, Y, X) array of 16-bit or float grey values
+        # (deprecated there): planar "RGB" that is a stack of 3 or 4 greyscale slices
+        return
+    if photo in _COLOUR_PHOTOMETRIC or spp > 1:
+        kind = _COLOUR_PHOTOMETRIC.get(photo, "a multi-channel")
+        raise _fail(f"{path} is {kind} image ({spp} samples per pixel), not {what}; convert it to "
+                    f"greyscale (one channel per pixel) first")
+
+
+def _check_complete(tf, path: Path, records) -> None:
+    """Refuse a truncated or damaged TIFF: a page (or its data) beyond the end of the file.
+
+    tifffile skips pages whose offset lies past the end (logging it) and would return a
+    shorter stack; the data of the last pages may be cut off too."""
+    size = tf.filehandle.size
+    cut = any("offset" in r.getMessage() or "truncat" in r.getMessage() for r in records)
+    if not cut:
+        for page in tf.pages:
+            offs, counts = getattr(page, "dataoffsets", ()), getattr(page, "databytecounts", ())
+            if any(o + c > size for o, c in zip(offs, counts)):
+                cut = True
+                break
+    if cut:
+        raise _fail(f"{path} is truncated or corrupt (its pages point past the end of the {size}-byte file); "
+                    f"copy or export the TIFF again")
+
+
+def _tiff_problem(path: Path, e: Exception) -> RodwarpError:
+    """The one-line error for a TIFF tifffile could not read: not a TIFF at all, or damaged."""
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+    except OSError:
+        magic = b""
+    if magic[:2] in (b"II", b"MM"):  # a TIFF header: the rest of the file is cut off or damaged
+        return _fail(f"{path} is truncated or corrupt ({type(e).__name__}: {e}); copy or export the TIFF again")
+    return _fail(f"cannot read {path} as a TIFF (not a TIFF file); check the file is a complete TIFF stack")
+
+
+def _inspect_tiff(path: Path) -> None:
+    """Refuse a colour, truncated or unreadable TIFF before its pixels are read."""
+    import tifffile
+
+    with _tifffile_quiet() as records:
+        try:
+            with tifffile.TiffFile(path) as tf:
+                _check_greyscale(tf, path)
+                _check_complete(tf, path, records)
+        except RodwarpError:
+            raise
+        except Exception as e:  # tifffile raises many types on damaged files
+            raise _tiff_problem(path, e) from None
+
+
 def _read_tiff(path: Path) -> np.ndarray:
     import tifffile
 
+    _inspect_tiff(path)
     try:
-        with tifffile.TiffFile(path) as tf:
+        with _tifffile_quiet(), tifffile.TiffFile(path) as tf:
             series = tf.series[0] if tf.series else None
             if series is not None and series.ndim >= 3 and len(tf.series) == 1:
                 arr = series.asarray()
             else:
                 arr = tf.asarray()
     except (tifffile.TiffFileError, ValueError, OSError, IndexError, KeyError, TypeError) as e:
-        raise _fail(f"cannot read {path} as a TIFF ({type(e).__name__}: {e}); check the file is a complete TIFF stack") from None
+        raise _tiff_problem(path, e) from None
     arr = np.asarray(arr)
     # squeeze singleton axes beyond ZYX (e.g. ImageJ TZCYX with T = C = 1)
     if arr.ndim > 3 and 0 not in arr.shape:
@@ -105,7 +200,11 @@ def _read_slice(path: Path) -> np.ndarray:
     import tifffile
 
     try:
-        return np.asarray(tifffile.imread(path))
+        with _tifffile_quiet(), tifffile.TiffFile(path) as tf:
+            _check_greyscale(tf, path, "a greyscale CT slice")
+            return np.asarray(tf.asarray())
+    except RodwarpError:
+        raise
     except Exception as e:  # tifffile raises many types on corrupt files
         raise _fail(f"cannot read slice {path} ({type(e).__name__}: {e}); remove or replace the file") from None
 
@@ -283,8 +382,10 @@ def open_volume_lazy(path, *, key: str | None = None):
         return _SliceStack(files, first.shape, first.dtype)
     import tifffile
 
+    _inspect_tiff(p)  # colour, truncated or not a TIFF: refused before a memory map hides it
     try:
-        mm = tifffile.memmap(p, mode="r")
+        with _tifffile_quiet():
+            mm = tifffile.memmap(p, mode="r")
     except Exception:
         mm = None
     if mm is not None:
@@ -373,7 +474,7 @@ def _metres(unit) -> float | None:
 def _tiff_voxel_size(path: Path):
     import tifffile
 
-    with tifffile.TiffFile(path) as tf:
+    with _tifffile_quiet(), tifffile.TiffFile(path) as tf:
         if tf.is_ome and tf.ome_metadata:
             import xml.etree.ElementTree as ET
 

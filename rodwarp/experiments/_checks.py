@@ -28,6 +28,14 @@ MAX_PHI_ALPHA = 5.4
 #: deepest overlap of two input rods that the contact solver pushes apart without a blow-up
 #: (the engine stops a run at a quarter diameter; the main job's own packings stay below 0.1 d)
 MAX_INPUT_OVERLAP = 0.1
+#: largest friction coefficient accepted: real materials stay below about 2 (rubber); above 10
+#: the contact solver's friction cone is a typo's, not a material's
+MAX_MU = 10.0
+#: shortest checkpoint interval (s of simulated time) unless --save-every is shorter still: a
+#: checkpoint is taken at most once per step, so a shorter interval checkpoints every step (2.6x
+#: slower, measured) while sparing a resume less than a hundredth of a second of simulation,
+#: a tenth of the 10 Hz drive's period
+CHECKPOINT_FLOOR = 0.01
 #: options that mean nothing with --initial (the input decides them)
 NOT_WITH_INITIAL = ("n_rods", "vertices", "box", "seed")
 
@@ -67,7 +75,8 @@ def check_protocol(p) -> None:
         fail(f"--box must be three positive numbers 'X,Y,Z' in rod lengths, got {box}")
     for axis, v in zip("XYZ", box):
         number(f"--box {axis}", v, gt=0, hint="the box is 'X,Y,Z' in rod lengths")
-    number("--mu", p.mu, ge=0)
+    number("--mu", p.mu, ge=0, le=MAX_MU, hint="friction coefficients of real materials are below about 2 "
+           "(steel on steel 0.2 to 0.8, rubber up to about 2)")
     number("--young", p.young, gt=0, unit="Pa")
     number("--density", p.density, gt=0, unit="kg/m^3")
     if p.dt is not None:
@@ -78,6 +87,11 @@ def check_protocol(p) -> None:
         fail(f"--rod-model must be auto, rigid or elastic, got '{p.rod_model}'")
     number("--save-every", p.save_every, gt=0, unit="s")
     number("--checkpoint-every", p.checkpoint_every, gt=0, unit="s")
+    floor = min(CHECKPOINT_FLOOR, p.save_every)
+    if p.checkpoint_every < floor:
+        fail(f"--checkpoint-every {p.checkpoint_every:g} s is below {floor:g} s of simulated time: it writes a "
+             f"checkpoint after nearly every step (a run checkpointing every step is about 2.6 times slower) "
+             f"while a resume would save under {floor:g} s; use --checkpoint-every {floor:g} or more (default 1)")
     number("--fields-every", p.fields_every, ge=0, unit="s", hint="0 turns the fields series off")
     if p.fields_every > 0:
         k = p.fields_every / p.save_every
@@ -88,6 +102,9 @@ def check_protocol(p) -> None:
     device_name("--device", p.device)
     if p.entangle and not p.initial:
         fail("--entangle only applies with --initial (a random packing is always entangled first); drop it")
+    if p.entangle and p.entangle_duration == 0:
+        fail("--entangle asks for the entangling stage but --entangle-duration 0 skips it; give "
+             "--entangle-duration > 0 or drop --entangle")
     for name, opt in (("units", "--units"), ("initial_diameter", "--diameter")):
         if getattr(p, name, None) is not None and not p.initial:
             fail(f"{opt} only applies with --initial (it describes the input rod set; a random packing is in "
@@ -232,10 +249,12 @@ def check_input_rods(p, explicit=()):
     memory_fits(f"--initial {path} ({rods.n_rods} rods, {rods.n_vertices} vertices)",
                 BASE_BYTES + BYTES_PER_VERTEX * rods.n_vertices, "simulate a smaller rod set")
     d = float(np.mean(rods.diameters))
+    from rodwarp.rodset._sanity import check_rod_geometry
+
+    # zero-length rods, duplicates (refused here with their own message, not as an overlap of
+    # 1 d) and a stray rod, which would stretch the container over its distance
+    check_rod_geometry(rods, f"--initial {path}")
     lengths = rods.rod_lengths()
-    if not np.all(lengths > 0):
-        k = int(np.flatnonzero(~(lengths > 0))[0])
-        fail(f"--initial {path}: rod {k} has zero length; remove it")
     length = float(np.mean(lengths))
     alpha = length / d
     if "alpha" in explicit and not math.isclose(p.alpha, alpha, rel_tol=0.01):

@@ -137,6 +137,9 @@ def load(path: str | os.PathLike, *, radius: float | None = None, diameter: floa
         rods = _load_zarr(path)
     elif path.is_dir():
         raise _fail(f"{path} is a directory but not a zarr group; pass a {', '.join(SUPPORTED_SUFFIXES)} path")
+    elif suffix == ".zarr":  # a zarr store is a folder; a plain file with the name is something else
+        raise _fail(f"{path} is a plain file, not a zarr store (a .zarr rod set is a folder); pass the rod set's "
+                    f".zarr folder, or an .npz or .csv file")
     elif suffix == ".npz":
         rods = _load_npz(path)
     elif suffix == ".csv":
@@ -195,6 +198,11 @@ def _assemble(arrays: dict, meta: dict, path: Path) -> RodSet:
 def _load_npz(path: Path) -> RodSet:
     import zipfile
 
+    # an npz is a zip archive; anything else would reach np.load's .npy/pickle fallbacks, whose
+    # messages advise unpickling, which is never safe for a file of unknown origin
+    if not zipfile.is_zipfile(path):
+        raise _fail(f"{path} is not a rod-set .npz (not a readable zip/npz archive); the file is damaged or "
+                    f"of another kind")
     try:
         with np.load(path, allow_pickle=False) as z:
             if "meta" not in z.files:
@@ -205,6 +213,9 @@ def _load_npz(path: Path) -> RodSet:
     except RodwarpError:
         raise
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
+        if "pickle" in str(e).lower():  # object arrays: rodwarp never writes them, and never unpickles
+            raise _fail(f"{path} is not a rod-set .npz (it holds Python object arrays, which rodwarp does not "
+                        f"write or load)") from None
         raise _fail(f"cannot read {path} as npz ({type(e).__name__}: {e}); the file is damaged or not npz") from None
     return _assemble(arrays, meta, path)
 
@@ -234,6 +245,15 @@ class _NeedSlowPath(Exception):
 
 def _load_csv(path: Path, radius: float | None, units: str) -> RodSet:
     name = str(path)
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    # text CSVs hold no NUL bytes; binary data (or UTF-16 text) would otherwise be reported
+    # as odd characters or a bad header
+    if head.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise _fail(f"{name} is UTF-16 text; save the CSV as UTF-8")
+    if b"\0" in head:
+        raise _fail(f"{name} is not a text CSV (it holds binary data); expected a UTF-8 text file with the header "
+                    f"rod,x,y,z[,radius]")
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             header = next(csv.reader(fh), None)
