@@ -1,17 +1,26 @@
-"""Run every bad-input case of issue 15 through the real command line and tabulate what a user
-sees: command, exit code, message. Writes ``benchmarks/results/bad_inputs.md``.
+"""Run every bad-input case (issues 15 and 29) through the real command line and tabulate what a
+user sees: command, exit code, the lines on stderr, whether anything outside the case's output
+changed, and whether the outcome is the one expected. Writes ``benchmarks/results/bad_inputs.md``.
 
     python scripts/bad_inputs.py [--out DIR]
 
 Each case runs ``rodwarp`` in a fresh process in a scratch folder (inputs it needs are made
-there); the message is the error line (stderr) or, for a run that succeeds, its result line.
+there, some by a setup step just before the case); the message is the error line (stderr) or,
+for a run that succeeds, its result line. Every file in the scratch folder is fingerprinted
+before and after each case: a change outside the case's own output (its ``--out``, an
+analysis's default ``analysis/``, a phantom's TIFF and truth files) is reported. A case passes
+when it gives the expected exit code (2 for bad input: exactly one ``error:`` line on stderr)
+with no traceback and nothing outside its output touched.
 Cases that need a small tmpfs (full disk, read-only) are skipped where mounting is not allowed.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import platform
+import shlex
 import shutil
 import signal
 import subprocess
@@ -26,17 +35,61 @@ ROOT = Path(__file__).resolve().parent.parent
 SHORT = "--alpha 20 --n-rods 12 --entangle-duration 0.02 --duration 0.02 --save-every 0.01 --device cpu --quiet"
 
 
-def rodwarp(args: str, cwd: Path, timeout=300):
-    cmd = [sys.executable, "-m", "rodwarp.cli", *args.split()]
+def rodwarp(args: str, cwd: Path, timeout=600):
+    """Run ``rodwarp ARGS`` in a fresh process: (exit code, message, stderr lines, traceback?, wall s)."""
+    cmd = [sys.executable, "-m", "rodwarp.cli", *shlex.split(args)]
     t = time.perf_counter()
     r = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout)
     wall = time.perf_counter() - t
-    err = [ln for ln in r.stderr.splitlines() if ln.strip() and "CUDA" not in ln]
+    err = [ln for ln in r.stderr.splitlines() if ln.strip()]
     out = [ln for ln in r.stdout.splitlines() if ln.strip()]
     msg = err[-1] if err else (out[-1] if out else "")
     if not err and out and out[0].strip().startswith("Usage"):
         msg = out[0].strip() + " ... (help)"
-    return r.returncode, msg.strip(), wall
+    return r.returncode, msg.strip(), len(err), "Traceback" in r.stderr + r.stdout, wall
+
+
+def _fingerprint(d: Path) -> dict:
+    out = {}
+    for root, dirs, files in os.walk(d):
+        dirs[:] = [x for x in dirs if not x.startswith("mnt")]
+        for f in files:
+            p = Path(root) / f
+            try:
+                st = p.stat()
+            except OSError:
+                continue
+            out[str(p)] = (st.st_size, st.st_mtime_ns)
+    return out
+
+
+def _own_outputs(args: str, d: Path) -> list[Path]:
+    """What the case may change: its --out (and, for a phantom, the truth files beside the TIFF),
+    an analysis's default analysis/ folder, a phase diagram's sweep folder."""
+    tok = shlex.split(args)
+    own = []
+    if "--out" in tok:
+        o = Path(tok[tok.index("--out") + 1])
+        own.append(o)
+        if tok and tok[0] == "phantom":
+            stem = o.name.split(".")[0]
+            own += [o.with_name(f"{stem}_truth.npz"), o.with_name(f"{stem}_truth.json")]
+    elif tok and tok[0] == "analyze":
+        src = Path(tok[1])
+        own.append(src / "analysis" if src.is_dir() else src.parent / "analysis")
+    elif tok and tok[0] == "segment":
+        own.append(Path(tok[1]).parent / "segment")
+    if tok and tok[0] == "phase-diagram":
+        own.append(Path(tok[1]))
+    return [o if o.is_absolute() else d / o for o in own]
+
+
+def _touched_outside(before: dict, after: dict, own: list[Path]) -> list[str]:
+    def mine(path: str) -> bool:
+        return any(path == str(o) or path.startswith(str(o) + os.sep) for o in own)
+
+    changed = [p for p in set(before) | set(after) if before.get(p) != after.get(p)]
+    return sorted(p for p in changed if not mine(p))
 
 
 def make_inputs(d: Path) -> None:
@@ -50,6 +103,115 @@ def make_inputs(d: Path) -> None:
     RodSet.from_polylines(lines, radii=0.005).save(d / "overlap.npz")
     RodSet.from_polylines(flat, radii=0.01).save(d / "alpha50.npz")  # l = 1 m, d = 0.02 m
     (d / "afile").write_text("not a folder")
+    # issue 29: a finished run, its analysis, a phantom and a segmentation to aim commands at
+    for args in (f"simulate {SHORT} --out {d}/base", f"analyze {d}/base --quiet --no-figures --out {d}/base_an",
+                 f"phantom random --shape 48 48 48 --n-rods 4 --aspect 8 --radius 2.5 --cnr 12 --out {d}/p.tif",
+                 f"segment {d}/p.tif --quiet --no-figures --out {d}/seg"):
+        rc, msg, *_ = rodwarp(args, d)
+        assert rc == 0, (args, msg)
+    victim = d / "victim"
+    (victim / "sub").mkdir(parents=True)
+    (victim / "data.txt").write_text("a folder outside every run that must survive")
+    (victim / "sub" / "more.txt").write_text("and its contents")
+
+
+def _copy_run(d: Path, name: str) -> Path:
+    dst = d / name
+    if dst.exists():
+        shutil.rmtree(dst)
+    shutil.copytree(d / "base", dst)
+    return dst
+
+
+def _copy_phantom(d: Path, src: str, dst: str) -> None:
+    for suffix in (".tif", "_truth.npz", "_truth.json"):
+        shutil.copy(d / f"{src}{suffix}", d / f"{dst}{suffix}")
+
+
+def _hostile(d: Path, folder: Path, entry: str) -> None:
+    m = json.loads((folder / "rodwarp-run.json").read_text())
+    m["outputs"].append(entry)
+    (folder / "rodwarp-run.json").write_text(json.dumps(m))
+
+
+_KILLER = (
+    "import os, signal, sys\n"
+    "from pathlib import Path\n"
+    "real = os.replace\n"
+    "def replace(src, dst, *a, **k):\n"
+    "    if Path(dst).name == sys.argv[1]:\n"
+    "        os.kill(os.getpid(), signal.SIGKILL)\n"
+    "    return real(src, dst, *a, **k)\n"
+    "os.replace = replace\n"
+    "from rodwarp.cli import main\n"
+    "sys.exit(main(sys.argv[2:]))\n")
+
+
+def _kill_at(d: Path, target: str, args: str) -> None:
+    """Run ``rodwarp ARGS`` and kill -9 it as it lands the output named ``target``."""
+    r = subprocess.run([sys.executable, "-c", _KILLER, target, *shlex.split(args)], cwd=d, capture_output=True)
+    assert r.returncode == -9, r.stderr[-500:]
+
+
+TINY_SWEEP = ("sweep --alpha 20 --freq 1 --entangle-duration 0.02 --save-every 0.01 --workers 1 --device cpu "
+              "--quiet --no-figures --set n_rods=12")
+
+
+def cases_29(d: Path) -> list[tuple]:
+    """Issue 29's classes: (class, what, arguments, setup or None, expected exit code)."""
+    v = d / "victim"
+    c = [
+        ("1", "manifest lists an absolute folder; simulate --overwrite", f"simulate {SHORT} --seed 1 --overwrite "
+         f"--out {d}/h_abs", lambda: _hostile(d, _copy_run(d, "h_abs"), str(v)), 2),
+        ("1", "manifest lists ../../victim; a plain analyze --out", f"analyze {d}/base --quiet --no-figures --out "
+         f"{d}/h_rel/an", lambda: (shutil.copytree(d / "base_an", d / "h_rel" / "an"),
+                                   _hostile(d, d / "h_rel" / "an", "../../victim")), 2),
+        ("1", "manifest lists a name no command writes; --overwrite", f"simulate {SHORT} --overwrite --out "
+         f"{d}/h_name", lambda: _hostile(d, _copy_run(d, "h_name"), "notes.txt"), 2),
+        ("1", "manifest of an unknown command; --overwrite", f"simulate {SHORT} --overwrite --out {d}/h_kind",
+         lambda: (lambda f: (f / "rodwarp-run.json").write_text(
+             (f / "rodwarp-run.json").read_text().replace('"kind": "simulate"', '"kind": "rm"')))(
+             _copy_run(d, "h_kind")), 2),
+        ("1", "phase-diagram of a sweep whose manifest lists a folder outside", f"phase-diagram {d}/h_sw",
+         lambda: ((d / "h_sw").mkdir(), (d / "h_sw" / "results.csv").write_text("id\n"),
+                  (d / "h_sw" / "rodwarp-run.json").write_text(json.dumps(
+                      {"format": "rodwarp-run", "kind": "sweep", "outputs": ["results.csv", str(v)]}))), 2),
+        ("2", "segment --out into a finished simulate run", f"segment {d}/p.tif --quiet --out {d}/base", None, 2),
+        ("2", "segment --out into an analysis folder", f"segment {d}/p.tif --quiet --out {d}/base_an", None, 2),
+        ("2", "phantom --out into a simulate run folder", f"phantom random --shape 48 48 48 --n-rods 4 --aspect 8 "
+         f"--radius 2.5 --out {d}/base/stack.tif", None, 2),
+        ("2", "phantom over a TIFF that is not a phantom", f"phantom random --shape 48 48 48 --n-rods 4 --aspect 8 "
+         f"--radius 2.5 --out {d}/scan.tif", lambda: (d / "scan.tif").write_bytes(b"II*\x00 a real scan"), 2),
+        ("2", "phantom over an earlier phantom (replaced)", f"phantom random --shape 48 48 48 --n-rods 5 --aspect 8 "
+         f"--radius 2.5 --seed 3 --out {d}/p2.tif",
+         lambda: _copy_phantom(d, "p", "p2"), 0),
+        ("2", "sweep --out into a finished simulate run", f"{TINY_SWEEP} --duration 0.02 --out {d}/base", None, 2),
+        ("2", "phase-diagram of a simulate run", f"phase-diagram {d}/base", None, 2),
+        ("2", "a sweep (first protocol)", f"{TINY_SWEEP} --duration 0.02 --out {d}/sw2", None, 0),
+        ("2", "  ... a second sweep there with another --duration", f"{TINY_SWEEP} --duration 0.04 --out {d}/sw2",
+         None, 2),
+        ("2", "  ... a second sweep there with another --set", f"{TINY_SWEEP} --duration 0.02 --set mu=0.3 "
+         f"--out {d}/sw2", None, 2),
+        ("2", "  ... more points of the same protocol (appended)", f"{TINY_SWEEP.replace('--alpha 20', '--alpha 20,25')}"
+         f" --duration 0.02 --out {d}/sw2", None, 0),
+        ("2", "segment after kill -9 while it replaced another stack's segmentation",
+         f"segment {d}/p.tif --quiet --no-figures --out {d}/segk",
+         lambda: (shutil.copytree(d / "seg", d / "segk"),
+                  _kill_at(d, "summary.json", f"segment {d}/p2.tif --quiet --no-figures --out {d}/segk")), 0),
+        ("2", "simulate after kill -9 while it wrote (not replaced silently)", f"simulate {SHORT} --out {d}/simk",
+         lambda: _kill_at(d, "final.npz", f"simulate {SHORT} --out {d}/simk"), 2),
+        ("2", "  ... --overwrite replaces it", f"simulate {SHORT} --overwrite --out {d}/simk", None, 0),
+        ("5", "--device cuda without a GPU", f"simulate {SHORT.replace('--device cpu', '--device cuda')} "
+         f"--out {d}/f_cuda", None, 2),
+        ("5", "  ... the corrected command in the same folder", f"simulate {SHORT} --out {d}/f_cuda", None, 0),
+        ("5", "a packing that cannot be placed (alpha 10)", f"simulate --alpha 10 --n-rods 60 --entangle-duration "
+         f"0.02 --duration 0.02 --save-every 0.01 --device cpu --quiet --out {d}/f_pack", None, 2),
+        ("5", "  ... the corrected command in the same folder", f"simulate {SHORT} --out {d}/f_pack", None, 0),
+        ("5", "--resume in a folder that never held a run", f"simulate {SHORT} --resume --out {d}/f_res", None, 2),
+        ("5", "  ... the command without --resume", f"simulate {SHORT} --out {d}/f_res", None, 0),
+        ("7", "a CPU run prints no CUDA warning", f"simulate {SHORT} --out {d}/cpu_run", None, 0),
+    ]
+    return c
 
 
 def mount_tmpfs(path: Path, opts: str) -> bool:
@@ -149,22 +311,141 @@ def cases(d: Path) -> list[tuple[str, str]]:
     return c
 
 
+#: the other classes of issue 29 (units 3, silent acceptances 4, garbage 6, phase-diagram rows):
+#: (class, what, arguments with $TMP for the scratch folder), each expected to be refused (exit 2);
+#: their inputs are made by :func:`make_inputs_29`
+_TINY = "--duration 0.02 --save-every 0.01 --device cpu --quiet"
+_SIM = f"--entangle-duration 0.02 {_TINY}"
+EXTRA: list[tuple[str, str, str]] = [
+    ("3", "phantom of a rod set in metres at the default --voxel-size 1", "phantom $TMP/m.npz --shape 64 64 64 "
+     "--out $TMP/u1.tif"),
+    ("3", "phantom, scene radius below half a voxel", "phantom random --radius 0.1 --shape 32 32 32 --out $TMP/u2.tif"),
+    ("3", "phantom, --ring 1e9 saturates the image", "phantom random --ring 1e9 --shape 32 32 32 --out $TMP/u3.tif"),
+    ("3", "phantom, --streaks 5 saturates the image", "phantom random --streaks 5 --shape 32 32 32 --out $TMP/u4.tif"),
+    ("3", "phantom, rods larger than the volume", "phantom $TMP/m.npz --voxel-size 0.0025 --shape 32 32 32 "
+     "--out $TMP/u5.tif"),
+    ("3", "simulate --initial, CSV without a radius column", f"simulate --initial $TMP/nor.csv {_TINY} --out $TMP/u6"),
+    ("3", "simulate --initial, a CSV in um read as metres", f"simulate --initial $TMP/um.csv {_TINY} "
+     "--amplitude 0.0005 --entangle-amplitude 0.001 --out $TMP/u7"),
+    ("3", "simulate --units voxel", f"simulate --initial $TMP/r.csv --units voxel {_TINY} --out $TMP/u8"),
+    ("3", "simulate --units without --initial", f"simulate --units mm {_TINY} --out $TMP/u9"),
+    ("3", "simulate --diameter contradicts the file's radii", f"simulate --initial $TMP/mm.csv --units mm --diameter 3 "
+     f"{_TINY} --amplitude 0.0005 --entangle-amplitude 0.001 --out $TMP/u10"),
+    ("3", "analyze, CSV without a radius column", "analyze $TMP/nor.csv --quiet --out $TMP/u11"),
+    ("3", "analyze --diameter contradicts the file's radii", "analyze $TMP/r.csv --diameter 0.5 --quiet --out $TMP/u12"),
+    ("3", "analyze, um data declared as m with a fine --spacing", "analyze $TMP/um.csv --spacing 0.0001 --quiet "
+     "--out $TMP/u13"),
+    ("4", "duplicated rod analysed", "analyze $TMP/dup.npz --no-figures --quiet --out $TMP/g1"),
+    ("4", "duplicated rod, reversed, simulated", f"simulate --initial $TMP/duprev.npz {_TINY} --out $TMP/g2"),
+    ("4", "zero-length rod analysed", "analyze $TMP/zero.npz --no-figures --quiet --out $TMP/g3"),
+    ("4", "one rod 1e9 m away widens the container", f"simulate --initial $TMP/far.npz {_TINY} --out $TMP/g4"),
+    ("4", "duplicated rods as phantom input", "phantom $TMP/dup.npz --shape 16 16 16 --voxel-size 0.1 "
+     "--out $TMP/g5.tif"),
+    ("4", "empty --out (would write into the current folder)", "simulate --alpha 20 --n-rods 12 --out ''"),
+    ("4", "empty --out= for analyze", "analyze $TMP/good.npz --out="),
+    ("4", "friction coefficient 1e9", "simulate --alpha 20 --n-rods 12 --mu 1e9 --out $TMP/g6"),
+    ("4", "--entangle with zero entangling time", "simulate --initial $TMP/good.npz --entangle --entangle-duration 0 "
+     "--duration 0.02 --save-every 0.01 --out $TMP/g7"),
+    ("4", "a checkpoint every step", "simulate --alpha 20 --n-rods 12 --checkpoint-every 1e-6 --out $TMP/g8"),
+    ("6", "random bytes named .npz (no pickle advice)", "analyze $TMP/rand.npz --out $TMP/g9"),
+    ("6", "a zip holding an object array named .npz", "simulate --initial $TMP/objects.npz --out $TMP/g10"),
+    ("6", "random bytes named .csv", "simulate --initial $TMP/rand.csv --out $TMP/g11"),
+    ("6", "a UTF-16 CSV", "analyze $TMP/utf16.csv --out $TMP/g12"),
+    ("6", "a .zarr that is a plain file", "analyze $TMP/plain.zarr --out $TMP/g13"),
+    ("6", "an RGB TIFF segmented as a volume", "segment $TMP/rgb.tif --voxel-size 1 --units voxel --out $TMP/g14"),
+    ("6", "an RGB stack", "segment $TMP/rgbstack.tif --voxel-size 1 --units voxel --out $TMP/g15"),
+    ("6", "a truncated TIFF (no library log lines)", "segment $TMP/cut.tif --voxel-size 1 --units voxel "
+     "--out $TMP/g16"),
+    ("6", "random bytes named .tif", "segment $TMP/rand.tif --voxel-size 1 --units voxel --out $TMP/g17"),
+    ("6", "a 2 x 2 x 2 volume", "segment $TMP/small.tif --voxel-size 1 --units voxel --out $TMP/g18"),
+]
+
+
+def _write_csv(path: Path, rods, radius: bool = True) -> None:
+    rows = ["rod,x,y,z" + (",radius" if radius else "")]
+    for i in range(rods.n_rods):
+        for x, y, z in rods.points[rods.offsets[i]:rods.offsets[i + 1]]:
+            rows.append(f"{i},{x!r},{y!r},{z!r}" + (f",{rods.radii[i]!r}" if radius else ""))
+    path.write_text("\n".join(rows) + "\n")
+
+
+def make_inputs_29(d: Path) -> None:
+    """The inputs of :data:`EXTRA`: rod sets in several units, duplicated, empty and far-away
+    rods, garbage files and broken TIFFs."""
+    import zipfile
+
+    import tifffile
+
+    from rodwarp.rodset import RodSet
+
+    rng = np.random.default_rng(0)
+    s = np.linspace(-0.5, 0.5, 10)
+    # six 0.1 m rods of radius 5 mm inside a 0.16 m cube, in metres
+    six = [np.stack([0.08 + 0.1 * s, 0.02 + 0.02 * k + 0 * s, 0.03 + 0.02 * k + 0 * s], 1) for k in range(6)]
+    RodSet.from_polylines(six, radii=0.005).save(d / "m.npz")
+    # 16 rods 20 mm long, radius 0.5 mm, 2.5 mm apart: in m, mm and um, with and without radii
+    sixteen = RodSet.from_polylines([np.stack([0.02 * s, 0 * s + 0.0025 * k, 0 * s + 0.001], 1) for k in range(16)],
+                                    radii=0.0005)
+    _write_csv(d / "r.csv", sixteen)
+    _write_csv(d / "nor.csv", sixteen, radius=False)
+    _write_csv(d / "mm.csv", sixteen.to_units("mm"))
+    _write_csv(d / "um.csv", sixteen.to_units("um"))
+    # 12 good rods (alpha 50) and their broken variants
+    good = [np.stack([s, 0 * s + 0.1 * k, 0 * s + 0.1], 1) for k in range(12)]
+    RodSet.from_polylines(good, radii=0.01).save(d / "good.npz")
+    RodSet.from_polylines([*good, good[3].copy()], radii=0.01).save(d / "dup.npz")
+    RodSet.from_polylines([*good, good[3][::-1].copy()], radii=0.01).save(d / "duprev.npz")
+    RodSet.from_polylines([*good, np.zeros((4, 3)) + 0.3], radii=0.01).save(d / "zero.npz")
+    RodSet.from_polylines([good[0] + [1e9, 0, 0], *good[1:]], radii=0.01).save(d / "far.npz")
+    # garbage
+    (d / "rand.npz").write_bytes(rng.bytes(4096))
+    (d / "rand.csv").write_bytes(rng.bytes(4096))
+    (d / "rand.tif").write_bytes(rng.bytes(5000))
+    (d / "plain.zarr").write_bytes(rng.bytes(100))
+    (d / "utf16.csv").write_bytes("rod,x,y,z,radius\n0,0,0,0,1\n".encode("utf-16"))
+    with zipfile.ZipFile(d / "objects.npz", "w") as z:
+        with z.open("meta.npy", "w") as fh:
+            np.lib.format.write_array(fh, np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    tifffile.imwrite(d / "rgb.tif", rng.integers(0, 255, (64, 64, 3), dtype=np.uint8), photometric="rgb")
+    tifffile.imwrite(d / "rgbstack.tif", rng.integers(0, 255, (10, 64, 64, 3), dtype=np.uint8), photometric="rgb")
+    tifffile.imwrite(d / "full.tif", rng.integers(0, 4000, (20, 32, 32), dtype=np.uint16))
+    data = (d / "full.tif").read_bytes()
+    (d / "cut.tif").write_bytes(data[: len(data) // 2])
+    tifffile.imwrite(d / "small.tif", rng.integers(0, 4000, (2, 2, 2), dtype=np.uint16))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bad_inputs.md"))
     args = ap.parse_args(argv)
     d = Path(tempfile.mkdtemp(prefix="rodwarp_bad_"))
     make_inputs(d)
+    make_inputs_29(d)
     rows = []
     killed = False
-    for what, a in cases(d):
+    ok_cases = {"input on z = 0", "input alpha 50", "finished run in --out", "  ... --overwrite", "killed run, resume",
+                "analyze, then another --radius", "  ... --radius 0.2 (replaces it)", "version", "bare rodwarp"}
+    plan = [("15", what, a, None, 0 if what in ok_cases else (4 if "fails at run time" in what else 2))
+            for what, a in cases(d)] + cases_29(d) + [(cls, what, a, None, 2) for cls, what, a in EXTRA]
+    for cls, what, a, setup, expect in plan:
+        a = a.replace("$TMP", str(d))
         if "killed" in a and not killed:
             killed_run(d)
             killed = True
-        rc, msg, wall = rodwarp(a, d)
+        if setup is not None:
+            setup()
+        before = _fingerprint(d)
+        rc, msg, n_err, tb, wall = rodwarp(a, d)
+        touched = _touched_outside(before, _fingerprint(d), _own_outputs(a, d))
         shown = ("rodwarp " + a).strip().replace(str(d), "$TMP")
-        rows.append((what, shown, rc, msg.replace(str(d), "$TMP"), wall))
-        print(f"{rc:>3}  {wall:5.1f}s  {shown}\n          {msg[:160]}", flush=True)
+        one_line = n_err == 1 and msg.startswith("error:") if expect == 2 else True
+        cuda = "CUDA" in msg or (expect == 0 and n_err and "cuda" not in a)
+        advice = "pickle" in msg.lower() or "internal error" in msg  # never library advice, never a bug
+        ok = rc == expect and one_line and not tb and not touched and not advice and not (cls == "7" and cuda)
+        rows.append((cls, what, shown, rc, n_err, "yes" if not touched else "NO: " + ", ".join(
+            t.replace(str(d), "$TMP") for t in touched[:3]), "pass" if ok else "FAIL", msg.replace(str(d), "$TMP"),
+            wall))
+        print(f"{'pass' if ok else 'FAIL'} {rc:>3}  {wall:5.1f}s  {shown}\n          {msg[:160]}", flush=True)
     # location problems on real small file systems
     for what, opts, a in (("--out on a nearly full disk (2 MB tmpfs)", "size=2m",
                            f"simulate {SHORT} --n-rods 200 --duration 1 --out {{m}}/run"),
@@ -172,26 +453,38 @@ def main(argv=None) -> int:
                           ("--out on a read-only file system", "size=1m,ro", f"simulate {SHORT} --out {{m}}/run")):
         m = d / f"mnt{len(rows)}"
         if not mount_tmpfs(m, opts):
-            rows.append((what, "(skipped: cannot mount a tmpfs here)", None, "", 0.0))
+            rows.append(("15", what, "(skipped: cannot mount a tmpfs here)", None, 0, "", "skipped", "", 0.0))
             continue
         try:
-            rc, msg, wall = rodwarp(a.format(m=m), d)
-            rows.append((what, ("rodwarp " + a.format(m=m)).replace(str(d), "$TMP"), rc, msg.replace(str(d), "$TMP"),
-                         wall))
-            print(f"{rc:>3}  {wall:5.1f}s  {rows[-1][1]}\n          {msg[:160]}", flush=True)
+            rc, msg, n_err, tb, wall = rodwarp(a.format(m=m), d)
+            ok = rc == 2 and n_err == 1 and not tb
+            rows.append(("15", what, ("rodwarp " + a.format(m=m)).replace(str(d), "$TMP"), rc, n_err, "yes",
+                         "pass" if ok else "FAIL", msg.replace(str(d), "$TMP"), wall))
+            print(f"{rc:>3}  {wall:5.1f}s  {rows[-1][2]}\n          {msg[:160]}", flush=True)
         finally:
             subprocess.run(["umount", str(m)], capture_output=True)
     shutil.rmtree(d, ignore_errors=True)
+    n_pass = sum(r[6] == "pass" for r in rows)
+    n_fail = sum(r[6] == "FAIL" for r in rows)
+    from rodwarp._util import version_line
+
     lines = ["# Bad inputs and location problems: what a user sees", "",
-             f"Generated by `python scripts/bad_inputs.py` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
-             "every command ran in a fresh process ($TMP is a scratch folder). Exit codes: 0 done, 2 bad input or "
-             "location, 4 a sweep with failed points.", "",
-             "| case | command | exit | message | wall (s) |", "| --- | --- | --- | --- | --- |"]
-    for what, cmd, rc, msg, wall in rows:
-        lines.append(f"| {what} | `{cmd}` | {'' if rc is None else rc} | {msg.replace('|', '/')} | {wall:.1f} |")
+             f"Generated by `python scripts/bad_inputs.py` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} "
+             f"({version_line()}; {platform.node()}, {platform.processor() or platform.machine()}); every command "
+             "ran in a fresh process ($TMP is a scratch folder). Exit codes: 0 done, 2 bad input or location, 4 a "
+             "sweep with failed points. *class*: the issue and class the case comes from (15: issue 15; 1-9: the "
+             "classes of issue 29). *stderr*: lines on stderr. *outside*: every file of $TMP outside the case's "
+             "own output is unchanged. *result*: the expected exit code (2 with exactly one `error:` line for bad "
+             "input), no traceback, nothing outside touched.", "",
+             f"**{n_pass} pass, {n_fail} fail** of {len(rows)} cases.", "",
+             "| class | case | command | exit | stderr | outside | result | message | wall (s) |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for cls, what, cmd, rc, n_err, outside, verdict, msg, wall in rows:
+        lines.append(f"| {cls} | {what} | `{cmd}` | {'' if rc is None else rc} | {n_err} | {outside} | {verdict} | "
+                     f"{msg.replace('|', '/')} | {wall:.1f} |")
     Path(args.out).write_text("\n".join(lines) + "\n")
-    print(f"wrote {args.out}")
-    return 0
+    print(f"wrote {args.out}: {n_pass} pass, {n_fail} fail")
+    return 1 if n_fail else 0
 
 
 if __name__ == "__main__":

@@ -130,7 +130,7 @@ def check_manifest(path, m: dict | None, name: str = "--out") -> None:
     for o in outputs:
         if not allowed_output(kind, o):
             raise RodwarpError(f"{path / MANIFEST} lists {json.dumps(o) if isinstance(o, str) else repr(o)} among "
-                               f"its outputs, which is not a file a {kind} run writes in its folder (a path outside "
+                               f"its outputs, which is not a file that rodwarp {kind} writes in its folder (a path outside "
                                f"it, or a hand-edited or corrupted manifest); rodwarp deletes nothing there: check "
                                f"the folder, or choose another {name}")
 
