@@ -22,8 +22,20 @@ def kernel_cache_dir() -> str:
     )
 
 
+#: what Warp's native library prints on stderr, once per process, when it finds no NVIDIA driver
+#: (warp/native/cuda_util.cpp; no Warp setting turns that probe's message off)
+_NO_DRIVER_LINE = "Could not find or load the NVIDIA CUDA driver"
+
+
 def init() -> None:
-    """Configure and initialise Warp once per process (idempotent)."""
+    """Configure and initialise Warp once per process (idempotent).
+
+    Warp's native library probes for the NVIDIA driver at initialisation and, on a machine
+    without one, prints a "Warp CUDA warning" on stderr.  A CPU machine is a normal place to
+    run rodwarp (``--device auto`` picks the CPU there), so that line is dropped; a user who
+    asks for ``--device cuda`` gets :func:`resolve_device`'s one-line refusal instead.  Any
+    other output of the initialisation is passed on unchanged.
+    """
     global _configured
     if _configured:
         return
@@ -32,8 +44,126 @@ def init() -> None:
     # warp >= 1.19 routes its greeting and module-load lines through a logger
     if hasattr(wp, "LOG_WARNING"):
         wp.config.log_level = wp.LOG_WARNING
-    wp.init()
+    _init_without_driver_warning()
     _configured = True
+
+
+def _init_without_driver_warning() -> None:
+    """``wp.init()`` with file descriptor 2 caught, and re-emitted without the no-driver line.
+
+    The warning is written by C code (``fprintf(stderr, ...)``), below ``sys.stderr``, so only
+    redirecting the descriptor itself catches it.
+    """
+    import tempfile
+
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no usable descriptor 2 (a daemon): nothing to filter
+        wp.init()
+        return
+    with tempfile.TemporaryFile() as caught:
+        try:
+            os.dup2(caught.fileno(), 2)
+            wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        caught.seek(0)
+        text = caught.read().decode(errors="replace")
+    kept = [line for line in text.splitlines(keepends=True) if _NO_DRIVER_LINE not in line]
+    if kept:
+        sys.stderr.write("".join(kept))
+        sys.stderr.flush()
+
+
+#: the kernel modules a simulation launches (:mod:`rodwarp.kernels`); ``fields`` and ``acn``
+#: are the analysis' own and load when it runs
+SIMULATION_MODULES = ("packing", "broadphase", "narrowphase", "frames", "elastics", "friction", "overlap",
+                      "solve")
+
+
+def _module_dir(module, device) -> str:
+    """Cache folder Warp compiles ``module`` into for ``device`` (``wp_<name>_<hash>``).
+
+    The hash depends on the block size the module is built for: 1 for a CPU launch (Warp's
+    default there), the module's own ``block_dim`` on a GPU.
+    """
+    dev = wp.get_device(device)
+    block_dim = 1 if dev.is_cpu else module.options["block_dim"]
+    return os.path.join(wp.config.kernel_cache_dir, module.get_module_identifier(block_dim))
+
+
+def cold_modules(device: str, names=SIMULATION_MODULES) -> list:
+    """The Warp modules among ``rodwarp.kernels.<names>`` not yet compiled in the kernel cache.
+
+    Parameters
+    ----------
+    device : str
+        Warp device name (``cpu``, ``cuda:0``), as :func:`resolve_device` returns.
+    names : sequence of str
+        Modules of :mod:`rodwarp.kernels`.
+
+    Returns
+    -------
+    list of warp Module
+        Those whose cache folder is missing or empty (Warp builds a module in a private folder
+        and renames it into place, so a folder that exists holds a complete build).
+    """
+    import importlib
+
+    from warp._src.context import get_module
+
+    init()
+    out = []
+    for name in names:
+        importlib.import_module(f"rodwarp.kernels.{name}")
+        module = get_module(f"rodwarp.kernels.{name}")
+        path = _module_dir(module, device)
+        if not (os.path.isdir(path) and os.listdir(path)):
+            out.append(module)
+    return out
+
+
+def load_kernels(device: str, names=SIMULATION_MODULES, *, progress: bool = True) -> bool:
+    """Compile (first run) or load the kernel modules of ``names`` for ``device`` now.
+
+    Warp compiles a module at its first launch, which on the first run left a progress bar
+    at t = 0 for tens of seconds with no word why.  When a module is missing from the kernel
+    cache this says so on stderr, once, before compiling, and (with ``progress``) shows a bar
+    over the modules; with every module cached it prints nothing and leaves the loading to
+    the first launch, as before.
+
+    Parameters
+    ----------
+    device : str
+        Warp device name, as :func:`resolve_device` returns.
+    names : sequence of str
+        Modules of :mod:`rodwarp.kernels`.
+    progress : bool
+        Show a bar over the modules being compiled (the one-line notice is printed either way:
+        it explains the wait even in a ``--quiet`` run).
+
+    Returns
+    -------
+    bool
+        Whether anything had to be compiled.
+    """
+    cold = cold_modules(device, names)
+    if not cold:
+        return False
+    # no duration promised: it depends on the machine and the device (19 s for the nine CPU
+    # modules of the default simulate on this project's two-core machine)
+    print(f"compiling Warp kernels (first run; later runs load them from {wp.config.kernel_cache_dir})",
+          file=sys.stderr, flush=True)
+    from rodwarp._util import progress_bar
+
+    with progress_bar(progress) as update:
+        update("compiling kernels", 0, len(cold), note=None)
+        for k, module in enumerate(cold):
+            wp.load_module(module, device=device)
+            update("compiling kernels", k + 1, len(cold))
+    return True
 
 
 def resolve_device(device: str | None) -> str:

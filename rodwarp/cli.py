@@ -179,7 +179,7 @@ def version():
     typer.echo(version_line())
 
 
-@app.command(epilog="Example: rodwarp simulate --alpha 100 --freq 10   (the main job, about 3 min on one core; "
+@app.command(epilog="Example: rodwarp simulate --alpha 100 --freq 10   (the main job; "
                      "writes runs/alpha100_freq10_g0.5_seed0/)")
 @_friendly
 @_field_options(ProtocolParams, _P, _SIMULATE_OPTIONS)

@@ -70,6 +70,14 @@ def test_kill_and_resume_is_bit_exact(tmp_path):
     ma = (ref / "metrics.csv").read_text().splitlines()
     mb = (out / "metrics.csv").read_text().splitlines()
     assert ma == mb  # the whole time series, not only the end
+    # the resumed trajectory holds every frame once and no unwritten (NaN) ones: as many
+    # frames as samples, the same as the uninterrupted run's, its last the final state
+    ga = zarr.open_group(str(ref / "trajectory.zarr"), mode="r")
+    gb = zarr.open_group(str(out / "trajectory.zarr"), mode="r")
+    assert gb["positions"].shape[0] == gb.attrs["n_frames"] == len(mb) - 1
+    assert np.isfinite(gb["positions"][:]).all()
+    assert np.array_equal(ga["positions"][:], gb["positions"][:])
+    assert np.array_equal(gb["positions"][-1], b.points)
 
 
 def test_resume_without_checkpoint_fails_clearly(tmp_path):

@@ -26,7 +26,8 @@ from rodwarp.analysis._registry import field_spec, fields_with
 from rodwarp.analysis._stats import field_statistics, find_tangles, log_histogram, power_law_density, z_profiles
 from rodwarp.rodset.files import save_figure
 
-__all__ = ["plot_histograms", "plot_slices", "plot_zprofiles", "plot_tangles"]
+__all__ = ["plot_histograms", "plot_slices", "plot_zprofiles", "plot_tangles", "plot_distributions",
+           "tangles_figure", "distributions_figure"]
 
 #: fixed margins instead of constrained layout, which took most of each figure's time (the
 #: main job's four figures: 2.7 s, 1.5 s of it in the layout solver; benchmarks/RESULTS.md)
@@ -260,12 +261,26 @@ def _project_largest(labels: np.ndarray, axis: int) -> np.ndarray:
     return np.where(proj == big, 0, proj)
 
 
+def _planes_through_largest(labels: np.ndarray, kz: int, jy: int) -> tuple[int, int]:
+    """The xy plane (kz) and xz plane (jy) holding the most voxels of the largest tangle.
+
+    Tangles sit where the entanglement is high, often low in a pile: planes through the middle
+    of the packing missed them and left the slice panels of tangles.png empty.  Without any
+    tangle the given (middle) planes are kept.
+    """
+    largest = np.asarray(labels) == 1
+    if not largest.any():
+        return kz, jy
+    return int(np.argmax(largest.sum(axis=(1, 2)))), int(np.argmax(largest.sum(axis=(0, 2))))
+
+
 def plot_tangles(fields, labels, stats: dict | None, path) -> Path:
     """Maps of the tangles: e with outliers outlined, tangle labels, and projections.
 
-    Top row: e in the xy plane at mid z and the xz plane at mid y, outlier voxels (e > e_lb)
+    Top row: e in the xy plane and the xz plane through the largest tangle (the planes holding
+    most of its voxels; the middle planes when there is no tangle), outlier voxels (e > e_lb)
     outlined in red; then the tangle labels projected along y (xz view). Bottom row: tangle
-    labels in the same two mid planes, then projected along z (xy view). The largest tangle is
+    labels in the same two planes, then projected along z (xy view). The largest tangle is
     red in every label panel; in projections the largest tangle on a line of sight is shown.
 
     Parameters
@@ -284,6 +299,11 @@ def plot_tangles(fields, labels, stats: dict | None, path) -> Path:
     -------
     pathlib.Path
     """
+    return save_figure(tangles_figure(fields, labels, stats), path)
+
+
+def tangles_figure(fields, labels, stats: dict | None) -> Figure:
+    """The figure of :func:`plot_tangles` (same arguments but the path), not yet written."""
     if stats is None:
         stats = field_statistics(fields)
     if labels is None:
@@ -293,6 +313,7 @@ def plot_tangles(fields, labels, stats: dict | None, path) -> Path:
     if labels.shape != fields.shape:
         raise ValueError(f"labels have shape {labels.shape}, the fields {fields.shape}")
     kz, jy, u, ext_xy, ext_xz = _mid_planes(fields)
+    kz, jy = _planes_through_largest(labels, kz, jy)
     y, z = fields.y, fields.z
     n_lab = int(labels.max()) if labels.size else 0
     lcmap = _label_cmap(n_lab).with_extremes(bad=(1, 1, 1, 0))
@@ -348,13 +369,57 @@ def plot_tangles(fields, labels, stats: dict | None, path) -> Path:
            + ("; percolates along " + ",".join(stats["percolating_axes"]) if stats.get("percolates") else
               "; no tangle percolates"))
     fig.suptitle(sub, fontsize=10)
-    return save_figure(fig, path)
+    return fig
+
+
+def _unit_text(name: str) -> str:
+    """The unit of field ``name`` for an axis label (the registry writes "1" for dimensionless)."""
+    units = field_spec(name).units
+    return "dimensionless" if units in ("1", "") else units
+
+
+def distributions_figure(fields, stats: dict) -> Figure:
+    """The figure of :func:`plot_distributions`, not yet written (tests read its artists).
+
+    A fit the statistics mark as rejected (``accepted`` False: no range passes the KS test,
+    or too short a range) is not drawn: a line over the points would read as a power law
+    the analysis found none of.  The panel says why instead.
+    """
+    fig = Figure(figsize=(9.0, 3.8))
+    # room below the axes for the x labels (the shared _GRID's 8 % cut them off at this height)
+    axs = fig.subplots(1, 2, gridspec_kw=dict(_GRID, bottom=0.15, top=0.9))
+    for ax, name in zip(axs, ("e", "c")):
+        sym = _symbol(name)
+        a = fields.get(name)
+        h = log_histogram(a[fields.valid & np.isfinite(a)])
+        if h is None:
+            _not_available(ax, _label(name))
+            continue
+        ax.loglog(h["x"], h["density"], "o", ms=3, color="C0", label=f"p({sym})")
+        fit = (stats.get("power_law") or {}).get(name)
+        if fit and fit.get("accepted", True):
+            x = np.geomspace(fit["xmin"], fit["xmax"], 20)
+            ax.loglog(x, power_law_density(x, fit), "-", color="C3",
+                      label=f"power law, gamma = {fit['gamma']:.2f} +- {fit['gamma_err']:.2f} "
+                            f"over {fit['decades']:.2f} dec.")
+        elif fit:
+            why = fit.get("note") or "rejected"
+            ax.text(0.03, 0.03, f"power-law fit rejected:\n{why}", transform=ax.transAxes, fontsize=7,
+                    color="0.35", va="bottom", ha="left")
+        ax.set_xlabel(f"{_label(name)} [{_unit_text(name)}]")
+        ax.set_ylabel(f"probability density p({sym}) [per unit {sym}]")
+        ax.legend(fontsize=7)
+        ax.grid(alpha=0.3, which="major")
+        ax.xaxis.set_minor_formatter(NullFormatter())
+    fig.suptitle(f"distributions of the fields ({int(fields.valid.sum())} valid voxels)", fontsize=10)
+    return fig
 
 
 def plot_distributions(fields, stats: dict, path) -> Path:
     """p(e) and p(c) on log-log axes (the paper's Fig. 4E-F): log-binned densities of the valid
     voxels' values and the fitted power law (:func:`rodwarp.analysis.power_law_fit`) drawn
-    over its range, with its exponent and the decades it spans.
+    over its range, with its exponent and the decades it spans, when the fit is accepted (a
+    rejected fit is named with its reason, not drawn).
 
     Parameters
     ----------
@@ -369,25 +434,5 @@ def plot_distributions(fields, stats: dict, path) -> Path:
     -------
     pathlib.Path
     """
-    fig = Figure(figsize=(9.0, 3.6))
-    axs = fig.subplots(1, 2, gridspec_kw=_GRID)
-    for ax, name in zip(axs, ("e", "c")):
-        a = fields.get(name)
-        h = log_histogram(a[fields.valid & np.isfinite(a)])
-        if h is None:
-            _not_available(ax, _label(name))
-            continue
-        ax.loglog(h["x"], h["density"], "o", ms=3, color="C0", label=f"p({_symbol(name)})")
-        fit = (stats.get("power_law") or {}).get(name)
-        if fit:
-            x = np.geomspace(fit["xmin"], fit["xmax"], 20)
-            ax.loglog(x, power_law_density(x, fit), "-", color="C3",
-                      label=f"gamma = {fit['gamma']:.2f} +- {fit['gamma_err']:.2f} over {fit['decades']:.2f} dec.")
-        ax.set_xlabel(_label(name))
-        ax.set_ylabel("density")
-        ax.legend(fontsize=7)
-        ax.grid(alpha=0.3, which="major")
-        ax.xaxis.set_minor_formatter(NullFormatter())
-    fig.suptitle(f"distributions of the fields ({int(fields.valid.sum())} valid voxels)", fontsize=10)
-    save_figure(fig, path)
+    save_figure(distributions_figure(fields, stats), path)
     return Path(path)

@@ -224,9 +224,11 @@ def _timeseries_figure(out: Path, key, rows, path: Path) -> Path | None:
                 if label:
                     labelled.add(a)
                 ax.plot(*zip(*pts), color=colour, lw=1, marker="o" if col == "cv_e" else None, ms=2, label=label)
-        st = [float(x["time"]) for x in m if x["stage"] == "stability"]
-        if st and any(x["stage"] == "entangle" for x in m):
-            t_test = min(st)
+        # the test starts where entangling ends (its last sample, the run's test_start), not
+        # at the first stability sample one save interval later
+        ent = [float(x["time"]) for x in m if x["stage"] == "entangle"]
+        if ent and any(x["stage"] == "stability" for x in m):
+            t_test = max(ent)
     for ax, label in zip(axs, ("Z (contacts per rod)", "f (largest cluster)", "cv_e = sigma_e / mu_e")):
         ax.set_xlabel("t (s)")
         ax.set_ylabel(label)

@@ -446,6 +446,10 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
                        overwrite=overwrite, resumable=any((outdir / "checkpoints").glob("ckpt_*.npz")),
                        need_bytes=output_bytes(params))
     device = _warp.resolve_device(params.device)
+    # compiled now, with a word on stderr when the cache is cold, rather than at the first
+    # launch under a progress bar that would sit at t = 0 for a minute
+    _warp.load_kernels(device, _warp.SIMULATION_MODULES + (("fields",) if params.fields_every > 0 else ()),
+                       progress=progress)
     t_wall = time.perf_counter()
     ckdir = outdir / "checkpoints"
     ck = None

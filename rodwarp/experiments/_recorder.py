@@ -200,10 +200,17 @@ class Recorder:
         self.trajectory.finish()
 
 
-def plot_metrics(path, rows, summary) -> None:
+def plot_metrics(path, rows, summary):
     """metrics.png: Z, f, height kept, rods left, y_c(t)/y_c(0), kinetic energy and the
     entanglement order parameter cv_e = sigma_e / mu_e (with the mean ACN e) against time, the
-    verdict's thresholds drawn on f and h, the entangled part of the test shaded."""
+    verdict's thresholds drawn on f and h, the entangled part of the test shaded, and the
+    start of the test (``summary["test_start"]["time"]``) marked dashed on every panel.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure written (closed in pyplot; its artists can still be read).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -246,11 +253,12 @@ def plot_metrics(path, rows, summary) -> None:
         for k in np.flatnonzero(ent):  # sample k covers the interval since the previous sample
             for a in (ax[0, 1], ax[1, 0]):
                 a.axvspan(tt[k], tt[k + 1], color="tab:green", alpha=0.12, lw=0)
-    t_stab = [r["time"] for r in rows if r["stage"] == "stability"]
-    if t_stab and any(r["stage"] == "entangle" for r in rows):
+    if any(r["stage"] == "stability" for r in rows) and any(r["stage"] == "entangle" for r in rows):
+        # the test starts at test_start (the pile reference's time), not at its first sample,
+        # which comes one save interval later: the marker and its label both sit at t0
         for a in ax.ravel():
             a.axvline(t0, ls="--", lw=0.8, color="0.5")
-        ax[0, 0].annotate("stability test", (t_stab[0], 0.02), xycoords=("data", "axes fraction"), fontsize=8,
+        ax[0, 0].annotate("stability test", (t0, 0.02), xycoords=("data", "axes fraction"), fontsize=8,
                           color="0.4", xytext=(3, 0), textcoords="offset points")
     for a in ax[3]:
         a.set_xlabel("t (s)")
@@ -261,3 +269,4 @@ def plot_metrics(path, rows, summary) -> None:
     fig.subplots_adjust(left=0.08, right=0.98, bottom=0.05, top=0.955, hspace=0.12, wspace=0.22)
     save_figure(fig, path)
     plt.close(fig)
+    return fig

@@ -21,7 +21,8 @@ class Trajectory:
     Arrays (named dimensions, so ``xarray.open_zarr`` gives a labelled dataset):
     ``positions`` (frame, vertex, xyz) float64 m, ``time`` (frame) s, ``rod`` (vertex) the rod
     of each vertex, ``radius`` (rod) m; ``time`` and ``rod`` are coordinates of ``positions``.
-    Attributes: ``n_frames`` (frames complete; later frames are NaN), ``offsets`` and
+    Attributes: ``n_frames`` (frames complete; while a run goes on later frames are NaN, and
+    :meth:`finish` trims the arrays to these frames), ``offsets`` and
     ``radii`` (the rod layout), ``units`` = "m".
     """
 
@@ -31,7 +32,9 @@ class Trajectory:
         self.path = Path(path)
         V = int(offsets[-1])
         if resume and self.path.exists():
-            self.group = zarr.open_group(str(self.path), mode="r+")
+            # not the consolidated metadata: it records the shapes a finished run trimmed to,
+            # and the arrays grow back here
+            self.group = zarr.open_group(str(self.path), mode="r+", use_consolidated=False)
             if self.group["positions"].shape[0] < n_frames_max:
                 self.group["positions"].resize((n_frames_max, V, 3))
                 self.group["time"].resize((n_frames_max,))
@@ -69,7 +72,20 @@ class Trajectory:
             raise OSError(e.errno, e.strerror or str(e), str(self.path)) from None
 
     def finish(self) -> None:
-        """Consolidate the metadata once the last frame is written."""
+        """Trim the arrays to the frames written, then consolidate the metadata.
+
+        The arrays are allocated for the most frames a run can take (a stage's first sample
+        may coincide with the previous stage's last), so the unused tail would stay NaN and
+        ``positions[-1]`` would not be the last frame; after this the arrays hold exactly
+        ``n_frames`` frames.  A resumed run grows them again (see ``__init__``).
+        """
+        n = self.n_frames
+        V = self.group["positions"].shape[1]
+        try:
+            self.group["positions"].resize((n, V, 3))
+            self.group["time"].resize((n,))
+        except OSError as e:
+            raise OSError(e.errno, e.strerror or str(e), str(self.path)) from None
         consolidate_zarr(self.path)
 
 
@@ -194,8 +210,119 @@ def latest_checkpoint(directory):
     return None
 
 
+def snapshot_view(frames, offsets, box=None, q: float = 99.0, margin: float = 0.05) -> dict:
+    """View limits of the side views (x-z) that a few far rods do not stretch.
+
+    A single rod thrown high by the shaking once set the shared z range, squashing every
+    packing into the bottom fifth of ``snapshots.png``.  The limits here span the container
+    and the rods between the ``100 - q`` and ``q`` percentiles of the rods' extents (lowest and
+    highest vertex of each rod), plus ``margin`` of the span; rods reaching beyond are
+    counted, so the figure can say where they went.
+
+    Parameters
+    ----------
+    frames : sequence of (str, ndarray (V, 3))
+        Title and vertex positions (m) of each view.
+    offsets : (N+1,) int
+        Rod layout.
+    box : (2, 3) array-like, optional
+        Container corners (m): always inside the view.
+    q : float
+        Percentile (0-100) of the rods' extents the view reaches.
+    margin : float
+        Fraction of the span added on each side.
+
+    Returns
+    -------
+    dict
+        ``z``: (lo, hi) shared by every view; ``x``: one (lo, hi) per frame; ``above``,
+        ``below``, ``beside``: per frame, the rods reaching above, below, or left or right of
+        the view; ``above_x``: per frame, the mean x of the rods above (None when none).
+    """
+    offsets = np.asarray(offsets, dtype=np.int64)
+    starts = offsets[:-1]
+    box = None if box is None else np.asarray(box, dtype=float)
+
+    def extent(x, axis):
+        v = x[:, axis]
+        return np.minimum.reduceat(v, starts), np.maximum.reduceat(v, starts)
+
+    def bounds(lows, highs, box_lo=None, box_hi=None):
+        lo = float(np.percentile(lows, 100.0 - q)) if lows.size else 0.0
+        hi = float(np.percentile(highs, q)) if highs.size else 1.0
+        if box_lo is not None:
+            lo, hi = min(lo, box_lo), max(hi, box_hi)
+        pad = margin * max(hi - lo, 1e-12)
+        return lo - pad, hi + pad
+
+    zs = [extent(np.asarray(x), 2) for _, x in frames]
+    zlo, zhi = bounds(np.concatenate([a for a, _ in zs]), np.concatenate([b for _, b in zs]),
+                      None if box is None else box[0][2], None if box is None else box[1][2])
+    out = {"z": (zlo, zhi), "x": [], "above": [], "below": [], "beside": [], "above_x": []}
+    for (_, x), (zmin, zmax) in zip(frames, zs):
+        x = np.asarray(x)
+        xmin, xmax = extent(x, 0)
+        xlo, xhi = bounds(xmin, xmax, None if box is None else box[0][0], None if box is None else box[1][0])
+        up = zmax > zhi
+        out["x"].append((xlo, xhi))
+        out["above"].append(int(np.count_nonzero(up)))
+        out["below"].append(int(np.count_nonzero(zmin < zlo)))
+        out["beside"].append(int(np.count_nonzero((xmin < xlo) | (xmax > xhi))))
+        centre_x = np.add.reduceat(x[:, 0], starts) / np.diff(offsets)
+        out["above_x"].append(float(np.mean(centre_x[up])) if up.any() else None)
+    return out
+
+
+def snapshots_figure(frames, offsets, box=None):
+    """The figure of :func:`plot_snapshots` (same arguments but the path), not yet written."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
+
+    view = snapshot_view(frames, offsets, box)
+    # its own Figure (no pyplot): the process's matplotlib backend is left alone
+    fig = Figure(figsize=(3.2 * len(frames), 5.5))
+    axes = np.atleast_1d(fig.subplots(1, len(frames), sharey=True))
+    for k, (ax, (title, x)) in enumerate(zip(axes, frames)):
+        segs = [x[offsets[r]:offsets[r + 1]][:, [0, 2]] for r in range(len(offsets) - 1)]
+        # autolim=False: the far rods must not enter the data limits; the robust box does
+        ax.add_collection(LineCollection(segs, linewidths=0.6, colors="0.2"), autolim=False)
+        ax.set_title(title, fontsize=9)
+        (xlo, xhi), (zlo, zhi) = view["x"][k], view["z"]
+        ax.update_datalim([(xlo, zlo), (xhi, zhi)])
+        ax.autoscale_view(tight=True)
+        ax.set_ylim(zlo, zhi)
+        # adjustable="datalim": equal scales by widening the (autoscaled) x range, never by
+        # shrinking the z range set here
+        ax.set_aspect("equal", adjustable="datalim")
+        if box is not None:
+            ax.add_patch(Rectangle((box[0][0], box[0][2]), box[1][0] - box[0][0], box[1][2] - box[0][2],
+                                   fill=False, ls="--", lw=0.6, color="tab:blue"))
+        n_up = view["above"][k]
+        if n_up:
+            xa = float(np.clip(view["above_x"][k], *view["x"][k]))
+            ax.annotate(f"{n_up} rod{'s' if n_up > 1 else ''} above the view", xy=(xa, 1.0),
+                        xycoords=("data", "axes fraction"), xytext=(0.5, 0.9), textcoords="axes fraction",
+                        ha="center", va="top", fontsize=7, color="tab:red",
+                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="none", alpha=0.8),
+                        arrowprops=dict(arrowstyle="->", color="tab:red", lw=0.8))
+        others = view["below"][k] + view["beside"][k]
+        if others:
+            ax.text(0.02, 0.01, f"{others} rod{'s' if others > 1 else ''} partly beside or below the view",
+                    transform=ax.transAxes, fontsize=6, color="tab:red", va="bottom")
+        ax.set_xlabel("x (m)")
+    axes[0].set_ylabel("z (m)")
+    # fixed margins: tight_layout measured every label's extent and took 0.4 s of the main job
+    w = 3.2 * len(frames)
+    fig.subplots_adjust(left=0.75 / w, right=1.0 - 0.15 / w, bottom=0.09, top=0.95, wspace=0.08)
+    return fig
+
+
 def plot_snapshots(path, frames, offsets, box=None) -> None:
     """Side views (x-z) of the packing at the given (title, positions) frames, as one PNG.
+
+    The views span the container and nearly all rods (:func:`snapshot_view`); rods beyond
+    are counted on the panel, those above with an arrow.
 
     Parameters
     ----------
@@ -208,25 +335,4 @@ def plot_snapshots(path, frames, offsets, box=None) -> None:
     box : (2, 3) array-like, optional
         Container corners (m), drawn dashed.
     """
-    from matplotlib.collections import LineCollection
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Rectangle
-
-    # its own Figure (no pyplot): the process's matplotlib backend is left alone
-    fig = Figure(figsize=(3.2 * len(frames), 5.5))
-    axes = np.atleast_1d(fig.subplots(1, len(frames), sharey=True))
-    for ax, (title, x) in zip(axes, frames):
-        segs = [x[offsets[r]:offsets[r + 1]][:, [0, 2]] for r in range(len(offsets) - 1)]
-        ax.add_collection(LineCollection(segs, linewidths=0.6, colors="0.2"))
-        ax.set_title(title, fontsize=9)
-        ax.set_aspect("equal")
-        ax.autoscale()
-        if box is not None:
-            ax.add_patch(Rectangle((box[0][0], box[0][2]), box[1][0] - box[0][0], box[1][2] - box[0][2],
-                                   fill=False, ls="--", lw=0.6, color="tab:blue"))
-        ax.set_xlabel("x (m)")
-    axes[0].set_ylabel("z (m)")
-    # fixed margins: tight_layout measured every label's extent and took 0.4 s of the main job
-    w = 3.2 * len(frames)
-    fig.subplots_adjust(left=0.75 / w, right=1.0 - 0.15 / w, bottom=0.09, top=0.95, wspace=0.08)
-    save_figure(fig, path)
+    save_figure(snapshots_figure(frames, offsets, box), path)
