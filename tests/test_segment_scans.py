@@ -186,10 +186,12 @@ def test_cli_anisotropic_phantom_segments_from_its_metadata(tmp_path):
     res = runner.invoke(app, ["segment", str(tif), "--out", str(out), "--quiet"])
     assert res.exit_code == 0, res.output
     s = json.loads((out / "summary.json").read_text())
-    assert s["voxel_size_zyx"] == pytest.approx([2.0, 1.0, 1.0]) and s["units"] == "um"
+    # a scene has no physical scale: the TIFF says so, and lengths come out in voxel widths
+    assert s["voxel_size_zyx"] == pytest.approx([2.0, 1.0, 1.0]) and s["units"] == "voxel"
     truth = load_rods(tmp_path / "aniso_truth.npz")
-    rods = load_rods(out / "rods.npz")  # micrometres = voxel widths here (1 um per voxel width)
-    m = match_rods(rods.to_units("voxel", voxel_size=1e-6), truth)
+    rods = load_rods(out / "rods.npz")
+    assert rods.units == "voxel"
+    m = match_rods(rods, truth)
     assert m.f1 == 1.0 and np.max(m.mean_distance) < 0.5
 
 
@@ -204,7 +206,8 @@ def test_cli_curved_phantom_and_flags(tmp_path):
     assert res.exit_code == 0, res.output
     assert "filaments" in res.output
     rods = load_rods(tmp_path / "s" / "rods.npz")
-    m = match_polylines(rods.to_units("voxel", voxel_size=1e-6), truth)
+    assert rods.units == "voxel"
+    m = match_polylines(rods, truth)
     assert m.f1 == 1.0
 
 

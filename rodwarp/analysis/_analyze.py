@@ -252,8 +252,11 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
 
 
 def _fields_with_progress(rods: RodSet, contacts, opts: AnalyzeOptions, progress: bool) -> Fields:
+    from rodwarp import _warp
     from rodwarp.analysis._fields import compute_fields
 
+    # a first run compiles the field kernels: say so before the bar, not after a silent wait
+    _warp.load_kernels(_warp.resolve_device(opts.device), ("acn", "fields"), progress=progress)
     with progress_bar(progress, unit="voxels") as update:
         return compute_fields(rods, radius=opts.radius, spacing=opts.spacing, diameter=opts.diameter,
                               length=opts.length, keep_outside=opts.keep_outside,

@@ -504,13 +504,15 @@ def write_phantom(path_tif, volume: np.ndarray, rods: RodSet, contacts: Contacts
 
     mark_truth(path_tif, complete=False, tiff=Path(path_tif).name, seed=params.get("seed"))
     # the TIFF states the voxel in the rods' unit: segment then reports lengths in it by default
-    write_tiff(path_tif, vol, voxel_size=(zt * m, m, m), unit="um" if unit == "voxel" else unit)
+    # a scene has no physical scale: its TIFF says so (ImageJ unit 'pixel'), and segment then
+    # reports in voxels instead of inventing micrometres
+    write_tiff(path_tif, vol, voxel_size=(zt, 1, 1) if unit == "voxel" else (zt * m, m, m), unit=unit)
     rv.save(npz)
     meta = {"shape": list(vol.shape), "dtype": str(vol.dtype),
             "voxel_size": size, "units": unit,
             "voxel_size_zyx": [zt * size, size, size],
             "seed": params.get("seed"), "n_rods": rv.n_rods, "n_contacts": len(contacts),
-            "voxel_size_zyx_m": [zt * m, m, m],
+            "voxel_size_zyx_m": None if unit == "voxel" else [zt * m, m, m],
             "truth_rods": npz.name, "coordinates": "voxel units: x = column, y = row, z = slice; "
                                                    "voxel (0,0,0) centred at the origin",
             "params": params, "format": PHANTOM_FORMAT, "complete": True, "status": "complete"}

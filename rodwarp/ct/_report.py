@@ -306,6 +306,12 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     source = "--voxel-size"
     if vs is None:
         md = read_voxel_size(stack)
+        from rodwarp.ct._volume_io import read_voxel_ratio
+
+        ratio = read_voxel_ratio(stack) if md is None else None
+        if ratio is not None and units in (None, "voxel"):
+            # a volume with no physical scale (a phantom of a scene): lengths in voxels
+            md, units = (ratio, "ImageJ spacing (voxel units)"), "voxel"
         if md is None:
             raise RodwarpError(f"{stack} records no voxel size (no ImageJ/OME spacing metadata); pass --voxel-size "
                                f"(one value, or three for z,y,x) and --units")

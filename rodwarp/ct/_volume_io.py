@@ -20,7 +20,7 @@ from rodwarp._util import one_line_error as _fail
 from rodwarp.errors import RodwarpError
 
 __all__ = ["read_volume", "open_volume_lazy", "write_tiff", "list_slices", "check_volume", "read_voxel_size",
-           "read_voxel_unit"]
+           "read_voxel_unit", "read_voxel_ratio"]
 
 _TIFF_SUFFIXES = (".tif", ".tiff")
 
@@ -418,7 +418,11 @@ def write_tiff(path, volume, *, voxel_size=None, unit: str = "um") -> Path:
     unit : str
         Length unit the metadata is written in: ``m``, ``mm`` or ``um`` (the ImageJ ``unit``;
         readers, :func:`read_voxel_size` included, convert it back to metres, and
-        :func:`read_voxel_unit` returns it so that lengths can be reported in it).
+        :func:`read_voxel_unit` returns it so that lengths can be reported in it); or ``voxel``
+        for a volume with no physical scale (a phantom of a scene in voxel units):
+        ``voxel_size`` is then in voxel widths (``(2, 1, 1)`` for slices twice as thick), written
+        as ImageJ unit ``pixel``, which :func:`read_voxel_size` does not take for a length and
+        :func:`read_voxel_ratio` reads.
     """
     import tifffile
 
@@ -439,10 +443,11 @@ def write_tiff(path, volume, *, voxel_size=None, unit: str = "um") -> Path:
 
             from rodwarp.rodset import UNITS
 
-            if unit not in ("m", "mm", "um"):
-                raise _fail(f"write_tiff unit must be m, mm or um, got {unit!r}")
-            dz, dy, dx = (v / UNITS[unit] for v in parse_voxel_size(voxel_size))
-            meta.update(unit=unit, spacing=dz)
+            if unit not in ("m", "mm", "um", "voxel"):
+                raise _fail(f"write_tiff unit must be m, mm, um or voxel, got {unit!r}")
+            k = 1.0 if unit == "voxel" else UNITS[unit]
+            dz, dy, dx = (v / k for v in parse_voxel_size(voxel_size))
+            meta.update(unit="pixel" if unit == "voxel" else unit, spacing=dz)
             kw["resolution"] = (1.0 / dx, 1.0 / dy)
         kw.update(imagej=True, metadata=meta)
     else:
@@ -558,9 +563,36 @@ def _zarr_voxel_size(path: Path, key: str | None):
     return tuple(out), "OME-Zarr scale"
 
 
+def _imagej_metadata(path) -> dict:
+    import tifffile
+
+    p = _resolve(path)
+    if _is_zarr(p):
+        return {}
+    if p.is_dir():
+        p = _folder_files(p)[0]
+    with _tifffile_quiet(), tifffile.TiffFile(p) as tf:
+        return dict(tf.imagej_metadata or {})
+
+
+def read_voxel_ratio(path) -> tuple[float, float, float] | None:
+    """The voxel's edges ``(dz, dy, dx)`` in voxel widths of a TIFF that states no physical
+    scale (ImageJ unit ``pixel``, as ``rodwarp phantom`` writes for scenes in voxel units), or
+    None."""
+    try:
+        ij = _imagej_metadata(path)
+    except Exception:  # noqa: BLE001 - metadata is optional: unreadable metadata means none
+        return None
+    if str(ij.get("unit", "")).strip().lower() not in ("pixel", "pixels", "voxel", "voxels"):
+        return None
+    dz = float(ij.get("spacing") or 1.0)
+    return (dz, 1.0, 1.0) if dz > 0 else None
+
+
 def read_voxel_unit(path) -> str | None:
     """The length unit (``m``, ``mm`` or ``um``) a TIFF's ImageJ metadata states its voxel
-    size in, or None (another unit, no ImageJ metadata, not a TIFF, unreadable).
+    size in, ``voxel`` for a TIFF with no physical scale (ImageJ unit ``pixel``), or None
+    (another unit, no ImageJ metadata, not a TIFF, unreadable).
 
     ``rodwarp phantom`` writes its voxel size in the rods' units; ``rodwarp segment`` reports
     in this unit by default, so the round trip keeps the rods' units.
@@ -577,6 +609,8 @@ def read_voxel_unit(path) -> str | None:
             unit = (tf.imagej_metadata or {}).get("unit")
     except Exception:  # noqa: BLE001 - metadata is optional: unreadable metadata means none
         return None
+    if str(unit or "").strip().lower() in ("pixel", "pixels", "voxel", "voxels"):
+        return "voxel"
     k = _metres(unit)
     return {1.0: "m", 1e-3: "mm", 1e-6: "um"}.get(k) if k is not None else None
 
