@@ -469,7 +469,8 @@ def phase_diagram_cmd(
 
     if not (sweep_dir / "results.csv").exists():
         raise RodwarpError(f"'{sweep_dir}' holds no results.csv; run `rodwarp sweep --out {sweep_dir}` first")
-    for f in phase_diagram(sweep_dir):
+    # failed points are left out of the diagram: say how many, so a thin diagram is explained
+    for f in phase_diagram(sweep_dir, note=lambda msg: typer.echo(f"note: {msg}")):
         typer.echo(f"wrote {f}")
 
 

@@ -25,7 +25,27 @@ BLUE, RED = "#1f5fbf", "#c62828"
 DPI = 120
 
 
+#: columns of results.csv the phase diagram reads (besides a_over_g, or freq and amplitude to compute it)
+PHASE_COLUMNS = ("id", "alpha", "gravity", "largest_cluster_fraction", "stable", "status")
+#: numeric columns of an ``ok`` row, with the range its value must lie in: (low, low included,
+#: high); the limits are those ``rodwarp sweep`` checks (alpha > 1, gravity > 0, ...) and
+#: those of the measures (fractions in [0, 1]). A value outside, not a number, or not finite
+#: (NaN alpha, infinite a/g) would be drawn or interpolated as if measured.
+_VALUES = {"alpha": (1.0, False, None), "freq": (0.0, True, None), "gravity": (0.0, False, None),
+           "static_load": (0.0, True, None), "seed": (0.0, True, None), "amplitude": (0.0, True, None),
+           "a_over_g": (0.0, True, None), "largest_cluster_fraction": (0.0, True, 1.0),
+           "height_kept": (0.0, True, None), "persistence": (0.0, True, 1.0), "rods_left": (0.0, True, 1.0),
+           "contacts_per_rod": (0.0, True, None), "cv_e": (0.0, True, None)}
+#: columns an ``ok`` row must fill: without them a point has no place in the diagram
+#: (a_over_g may be empty when freq, amplitude and gravity give it)
+_NEEDED = ("alpha", "gravity", "largest_cluster_fraction")
+#: spellings of the verdict (``rodwarp sweep`` writes True and False)
+_VERDICTS = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
+
+
 def _num(s):
+    """A finite float of a CSV cell, None when empty, unparsable or not finite (lenient: for
+    files other than results.csv)."""
     if s is None or s == "":
         return None
     try:
@@ -35,24 +55,109 @@ def _num(s):
     return v if math.isfinite(v) else None
 
 
-def _ok_rows(out) -> list[dict]:
-    rows = []
-    for r in read_results(Path(out) / "results.csv"):
+def _refuse(csv_path, i: int, r: dict, why: str):
+    pid = r.get("id") or ""
+    raise RodwarpError(f"{csv_path} data row {i} (point {pid!r}): {why}; results.csv holds only what `rodwarp sweep` "
+                       f"writes: fix or remove that row, or rerun the sweep into a clean folder")
+
+
+def _value(csv_path, i: int, r: dict, k: str):
+    """The number in column ``k`` of row ``r`` (None when empty), or a one-line refusal naming
+    the row's id, the column and the value."""
+    s = r.get(k)
+    if s is None or s.strip() == "":
+        return None
+    try:
+        v = float(s)
+    except ValueError:
+        _refuse(csv_path, i, r, f"{k} = {s!r} is not a number")
+    if not math.isfinite(v):
+        _refuse(csv_path, i, r, f"{k} = {s!r} is not a finite number")
+    lo, lo_in, hi = _VALUES[k]
+    if v < lo or (v == lo and not lo_in) or (hi is not None and v > hi):
+        rng = f"{'>=' if lo_in else '>'} {lo:g}" + (f" and <= {hi:g}" if hi is not None else "")
+        _refuse(csv_path, i, r, f"{k} = {s} is out of range (must be {rng})")
+    return v
+
+
+def _check_duplicates(csv_path, raw: list[dict]) -> None:
+    """Refuse two rows of one point id: their verdicts would both count as seeds of that point
+    (opposite ones put alpha* where the sweep measured nothing). ``run_sweep`` writes one row
+    per id, so a duplicate comes from a hand edit or concatenated files."""
+    by_id: dict = {}
+    for i, r in enumerate(raw, 1):
+        if r.get("id"):
+            by_id.setdefault(r["id"], []).append((i, r))
+    for pid, rs in by_id.items():
+        if len(rs) > 1:
+            def verdict(r):
+                if r.get("status") != "ok":
+                    return "failed"
+                v = _VERDICTS.get(str(r.get("stable")).strip().lower())
+                return {True: "stable", False: "unstable"}.get(v, f"stable = {r.get('stable')!r}")
+            what = ", ".join(f"data row {i}: {verdict(r)}" for i, r in rs)
+            raise RodwarpError(f"{csv_path} has {len(rs)} rows of point {pid!r} ({what}); a point has one row, "
+                               f"and alpha* would count both: remove the duplicate rows, or rerun the sweep into "
+                               f"a clean folder")
+
+
+def _phase_rows(out) -> tuple[list[dict], list[dict]]:
+    """The ``ok`` rows of ``out/results.csv`` as numbers, and the failed rows (skipped).
+
+    Returns
+    -------
+    rows : list of dict
+        One per ``ok`` row: the numeric columns (None where empty and optional), ``ag`` (a/g
+        to 4 digits, the group key), ``stable`` (bool) and ``id``.
+    failed : list of dict
+        The rows whose ``status`` is not ``ok`` (a point that failed: it has no results).
+
+    Raises
+    ------
+    RodwarpError
+        One line naming the row's id and the column, for an ``ok`` row with a value that is
+        not a finite number in range, an empty needed column, a verdict other than True or
+        False, or an id that is not a folder name; for two rows of one id; for a file
+        :func:`~rodwarp.experiments.read_results` refuses (not UTF-8, missing columns).
+    """
+    csv_path = Path(out) / "results.csv"
+    raw = read_results(csv_path, required=PHASE_COLUMNS)
+    if raw and "a_over_g" not in raw[0] and not {"freq", "amplitude"} <= set(raw[0]):
+        raise RodwarpError(f"{csv_path} lacks the column a_over_g (or freq and amplitude, which give it); "
+                           f"results.csv holds only what `rodwarp sweep` writes: restore it, or rerun the sweep "
+                           f"into a clean folder")
+    _check_duplicates(csv_path, raw)
+    rows, failed = [], []
+    for i, r in enumerate(raw, 1):
         if r.get("status") != "ok":
+            failed.append(r)
             continue
-        d = {k: _num(r.get(k)) for k in ("alpha", "freq", "gravity", "static_load", "seed", "amplitude",
-                                           "a_over_g", "largest_cluster_fraction", "height_kept", "persistence",
-                                           "rods_left", "contacts_per_rod", "cv_e")}
-        if d["a_over_g"] is None and None not in (d["freq"], d["amplitude"], d["gravity"]):
+        pid = r.get("id") or ""
+        # the id names the point's folder, read for its time series and fields
+        if not pid or pid in (".", "..") or any(c in pid for c in "/\\\0"):
+            _refuse(csv_path, i, r, f"id {pid!r} is not a point's folder name")
+        d = {k: _value(csv_path, i, r, k) for k in _VALUES}
+        for k in _NEEDED:
+            if d[k] is None:
+                _refuse(csv_path, i, r, f"{k} is empty")
+        if d["a_over_g"] is None:
+            if d["freq"] is None or d["amplitude"] is None:
+                _refuse(csv_path, i, r, "a_over_g is empty, and so is freq or amplitude, which give it")
             d["a_over_g"] = 4 * math.pi**2 * d["freq"] ** 2 * d["amplitude"] / d["gravity"]
-        if d["alpha"] is None or d["a_over_g"] is None or d["largest_cluster_fraction"] is None:
-            continue
         d["static_load"] = d["static_load"] or 0.0
-        d["stable"] = str(r.get("stable")).strip().lower() in ("true", "1", "yes")
-        d["id"] = r.get("id")
+        verdict = _VERDICTS.get(str(r.get("stable")).strip().lower())
+        if verdict is None:
+            _refuse(csv_path, i, r, f"stable = {r.get('stable')!r} is not True or False")
+        d["stable"] = verdict
+        d["id"] = pid
         d["ag"] = float(f"{d['a_over_g']:.4g}")
         rows.append(d)
-    return rows
+    return rows, failed
+
+
+def _ok_rows(out) -> list[dict]:
+    """The ``ok`` rows of ``out/results.csv`` (see :func:`_phase_rows`)."""
+    return _phase_rows(out)[0]
 
 
 def _crossing(xs, ys, level=0.5):
@@ -130,7 +235,7 @@ def alpha_star(rows: list[dict], n_boot: int = 200, seed: int = 0) -> list[dict]
     return out
 
 
-def phase_diagram(out) -> list[Path]:
+def phase_diagram(out, note=None) -> list[Path]:
     """Figures and the alpha* table of a sweep directory (reads ``out/results.csv``).
 
     Writes ``phase_cv_e.png`` (Fig. 4L: sigma_e/mu_e against a/g, coloured by stability, with
@@ -145,15 +250,30 @@ def phase_diagram(out) -> list[Path]:
     ``power_law.csv`` (Fig. 4E-F: p(e) and p(c) per alpha, pooled over seeds, and their fitted
     power-law tails, from its analysis/fields.zarr); one of each per (a/g, g, F~) group, the
     group in the name when there are several. Returns the paths written.
+
+    Only the ``ok`` rows are drawn; a failed point's row (``status`` not ``ok``) is skipped,
+    and ``note`` (a callable of one string, optional) is told how many. A row that cannot be
+    a measurement (a value that is not a finite number in range, two rows of one point, a
+    file that is not a UTF-8 CSV with the needed columns) is refused with a one-line
+    :class:`~rodwarp.errors.RodwarpError` naming it (see :func:`_phase_rows`).
     """
     import matplotlib
 
     matplotlib.use("Agg")
 
     out = Path(out)
-    rows = _ok_rows(out)
+    rows, failed = _phase_rows(out)
+    skipped = ""
+    if failed:
+        first = failed[0]
+        status = " ".join(str(first.get("status") or "no status").split())[:120]
+        skipped = (f"{len(failed)} failed row(s) skipped (status not 'ok'; the first: "
+                   f"{first.get('id') or '?'}: {status})")
     if not rows:
-        raise RodwarpError(f"{out / 'results.csv'} has no 'ok' rows with results: nothing to plot")
+        raise RodwarpError(f"{out / 'results.csv'} has no 'ok' rows with results"
+                           f"{' (' + skipped + ')' if skipped else ''}: nothing to plot")
+    if skipped and note is not None:
+        note(f"{out / 'results.csv'}: {skipped}")
     written = [_cv_e_figure(rows, out / "phase_cv_e.png"), _f_alpha_figure(rows, out / "phase_f_alpha.png")]
     if any(r["height_kept"] is not None for r in rows):
         written.append(_verdict_figure(rows, out / "phase_verdict_alpha.png"))
@@ -194,6 +314,52 @@ def _title(key) -> str:
     return f"a/g = {ag:g}, g = {g:g} m/s^2, F~ = {s:g}"
 
 
+#: columns of a point's metrics.csv that the time-series figure draws
+_SERIES = ("contacts_per_rod", "largest_cluster_fraction", "cv_e")
+
+
+def _metrics(path: Path) -> list[dict]:
+    """The rows of a point's ``metrics.csv`` for :func:`_timeseries_figure`: ``time`` a float,
+    ``stage`` a string, the drawn columns floats or "" (not sampled).
+
+    Raises
+    ------
+    RodwarpError
+        One line naming the file (and the row and column) when it is not a UTF-8 CSV, lacks
+        ``time`` or ``stage``, or holds a value that is not a finite number.
+    """
+    fix = "it is the point's own record: restore it, or delete it to leave the point out of the time series"
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            text = fh.read()
+        if "\0" in text:  # valid UTF-8, yet binary: Python's csv reads NUL bytes into the values
+            raise RodwarpError(f"{path} is not a text CSV (it holds NUL bytes); {fix}")
+        reader = csv.DictReader(io.StringIO(text, newline=""))
+        raw = list(reader)
+        header = list(reader.fieldnames or [])
+    except UnicodeDecodeError:
+        raise RodwarpError(f"{path} is not a text CSV (not UTF-8); {fix}") from None
+    except csv.Error as e:
+        raise RodwarpError(f"{path} is not a readable CSV ({e}); {fix}") from None
+    missing = [c for c in ("time", "stage") if c not in header]
+    if missing:
+        raise RodwarpError(f"{path} lacks the column(s) {', '.join(missing)}; {fix}")
+    rows = []
+    for i, x in enumerate(raw, 1):
+        d = {"stage": x.get("stage") or ""}
+        for col in ("time", *_SERIES):
+            cell = x.get(col)
+            if col != "time" and (cell is None or cell.strip() == ""):
+                d[col] = ""
+                continue
+            v = _num(cell)
+            if v is None:
+                raise RodwarpError(f"{path} row {i}: {col} = {cell!r} is not a finite number; {fix}")
+            d[col] = v
+        rows.append(d)
+    return rows
+
+
 def _timeseries_figure(out: Path, key, rows, path: Path) -> Path | None:
     """Fig. 4C-D: Z(t), f(t) and cv_e(t) through entangling and the test, one colour per alpha
     (each seed a line), the test's start dashed."""
@@ -203,7 +369,7 @@ def _timeseries_figure(out: Path, key, rows, path: Path) -> Path | None:
     for r in rows:
         f = _point_file(out, r, "metrics.csv")
         if f is not None:
-            series.append((r["alpha"], list(csv.DictReader(io.StringIO(f.read_text())))))
+            series.append((r["alpha"], _metrics(f)))
     if not series:
         return None
     alphas = sorted({a for a, _ in series})

@@ -315,12 +315,43 @@ def _connect(address: str, timeout: float = 5.0):
     try:
         return Client(address, timeout=f"{timeout:g}s")
     except Exception as e:  # noqa: BLE001 - distributed raises OSError, TimeoutError, even MemoryError here
+        if address.startswith("tls://"):
+            # a TLS scheduler refuses a client without its credentials (TypeError: no ssl_context)
+            raise RodwarpError(f"--scheduler {address}: no TLS connection to a Dask scheduler within {timeout:g} s "
+                               f"({type(e).__name__}); give the cluster's credentials in the Dask config "
+                               f"(distributed.comm.tls.*) or check the address") from None
         raise RodwarpError(f"--scheduler {address}: no Dask scheduler answers there within {timeout:g} s "
                            f"({type(e).__name__}); start one with `dask scheduler` or check the address") from None
 
 
+#: what ``sweep.json`` records as the scheduler of a sweep on its own local cluster
+#: (:func:`_local_cluster`): loopback only, and TLS with credentials made for that one cluster
+LOCAL_CLUSTER = "LocalCluster(127.0.0.1, TLS with temporary credentials)"
+
+
 def _local_cluster(n_workers: int):
-    """A LocalCluster of single-threaded worker processes on 127.0.0.1 with no HTTP server.
+    """A LocalCluster of single-threaded worker processes on 127.0.0.1, TLS-only, with no HTTP server.
+
+    Parameters
+    ----------
+    n_workers : int
+        Worker processes (one thread each).
+
+    Returns
+    -------
+    cluster : distributed.LocalCluster
+        The cluster; its ``security`` holds the credentials (close it when done).
+    client : distributed.Client
+        A client of the cluster, connected with the same credentials.
+
+    Notes
+    -----
+    Loopback alone is no access control: any local process (another user's included) could
+    connect to a plain ``tcp://`` scheduler and run code on its workers, with the rights of
+    the user who started the sweep. So the cluster speaks TLS with mutual authentication
+    (:meth:`distributed.security.Security.temporary`): a self-signed key and certificate made
+    in memory for this cluster, required of every client, worker and nanny; a process without
+    them cannot complete the handshake. ``sweep.json`` says so (:data:`LOCAL_CLUSTER`).
 
     distributed always starts an HTTP server on the scheduler (port 8787: /metrics, /health,
     /info even without a dashboard) and on each worker; a sweep on this machine needs none,
@@ -328,16 +359,27 @@ def _local_cluster(n_workers: int):
     """
     import dask
     from distributed import Client, LocalCluster
+    from distributed.security import Security
 
+    try:
+        security = Security.temporary()
+    except ImportError as e:  # cryptography is a dependency of rodwarp, but a broken install may lack it
+        raise RodwarpError(f"the sweep's local cluster needs TLS credentials, which need the 'cryptography' "
+                           f"package ({e}); install it (`pip install cryptography`) or give --scheduler") from None
     with dask.config.set({"distributed.scheduler.http.routes": [], "distributed.worker.http.routes": []}):
         # a random loopback port (not 8787, which another cluster may hold) for the server
         # that is stopped below
         cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               protocol="tls://", security=security,
                                dashboard_address=None, worker_dashboard_address=None,
                                scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"})
-    client = Client(cluster)
-    _stop_http(dask_scheduler=cluster.scheduler)
-    client.run(_stop_http)
+    try:
+        client = Client(cluster, security=security)
+        _stop_http(dask_scheduler=cluster.scheduler)
+        client.run(_stop_http)
+    except BaseException:
+        cluster.close()  # its worker processes would outlive the error otherwise
+        raise
     return cluster, client
 
 
@@ -378,13 +420,68 @@ def _submit(client, spec: SweepSpec, pts: list[dict], todo: list[dict], out: Pat
 # --------------------------------------------------------------------------------------- CSV
 
 
-def read_results(path) -> list[dict]:
-    """Rows of a results.csv as dicts of strings (empty list when it does not exist)."""
+#: columns every results.csv has: run_sweep keys its rows by ``id`` and skips the ``ok`` ones
+RESULTS_REQUIRED = ("id", "status")
+
+#: what every refusal of a results.csv says to do (the sweep writes the file whole, atomically)
+_RESULTS_FIX = ("results.csv holds only what `rodwarp sweep` writes: restore it, or rerun the sweep into a "
+                "clean folder")
+
+
+def read_results(path, required=RESULTS_REQUIRED) -> list[dict]:
+    """Rows of a results.csv as dicts of strings (empty list when it does not exist or is empty).
+
+    Parameters
+    ----------
+    path : path-like
+        The CSV.
+    required : sequence of str
+        Columns its header must name (default :data:`RESULTS_REQUIRED`).
+
+    Returns
+    -------
+    list of dict
+        One dict per data row, keyed by the header's names; a short row's missing cells are None.
+
+    Raises
+    ------
+    RodwarpError
+        One line when ``path`` is a folder, is not UTF-8 text (a binary or other-encoding
+        file: Python's UnicodeDecodeError would be an internal error) or holds NUL bytes, is
+        not CSV, lacks a required column, or has a row with more cells than its header (its
+        values would be read under the wrong names).
+    """
     path = Path(path)
     if not path.exists():
         return []
-    with open(path, newline="") as fh:
-        return list(csv.DictReader(fh))
+    if path.is_dir():
+        raise RodwarpError(f"{path} is a folder, not a CSV; {_RESULTS_FIX}")
+    try:
+        # utf-8-sig: a spreadsheet's byte-order mark would otherwise be part of the first name
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            text = fh.read()
+        if "\0" in text:  # valid UTF-8, yet binary: Python's csv reads NUL bytes into the values
+            raise RodwarpError(f"{path} is not a text CSV (it holds NUL bytes); {_RESULTS_FIX}")
+        reader = csv.DictReader(io.StringIO(text, newline=""))
+        rows = list(reader)
+        header = list(reader.fieldnames or [])
+    except UnicodeDecodeError as e:
+        raise RodwarpError(f"{path} is not a text CSV (not UTF-8: it holds byte 0x{e.object[e.start]:02x}); "
+                           f"{_RESULTS_FIX}") from None
+    except csv.Error as e:
+        raise RodwarpError(f"{path} is not a readable CSV ({e}); {_RESULTS_FIX}") from None
+    if not header:
+        return []
+    missing = [c for c in required if c not in header]
+    if missing:
+        shown = ", ".join(repr(h) for h in header[:6]) + (", ..." if len(header) > 6 else "")
+        raise RodwarpError(f"{path} lacks the column(s) {', '.join(missing)} (its header: {shown}); "
+                           f"{_RESULTS_FIX}")
+    for i, r in enumerate(rows, 1):
+        if None in r:  # csv.DictReader files a long row's surplus cells under None
+            raise RodwarpError(f"{path}: data row {i} (id {r.get('id') or ''!r}) has {len(r[None])} more cell(s) "
+                               f"than the header's {len(header)} columns; {_RESULTS_FIX}")
+    return rows
 
 
 def _columns(rows: list[dict]) -> list[str]:
