@@ -8,6 +8,7 @@ finished with failed points; 1 an internal error or an abort. No raw tracebacks.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import inspect
 import sys
@@ -147,6 +148,19 @@ def _friendly(fn):
     return wrapper
 
 
+@contextlib.contextmanager
+def _failure_recorded(outdir):
+    """Record in ``outdir``'s manifest that this process's run there failed (with the cause), so
+    the folder says it is incomplete and why; a refused claim leaves another run's record alone."""
+    from rodwarp.rodset.rundir import mark_failed
+
+    try:
+        yield
+    except (RodwarpError, SimulationBlowUp, OSError, KeyboardInterrupt) as e:
+        mark_failed(outdir, e if not isinstance(e, KeyboardInterrupt) else RuntimeError("interrupted"))
+        raise
+
+
 def _print_version(value: bool):
     if value:
         typer.echo(version_line())
@@ -202,7 +216,6 @@ def simulate(
 ):
     """Random packing, entangling by vibration, then the vibration stability test."""
     from rodwarp.experiments import default_run_name, run_protocol
-    from rodwarp.rodset.rundir import mark_failed
 
     # the options that are ProtocolParams fields, the two taken in another form converted
     params = ProtocolParams(**fields, box=_parse_box(box), initial=str(initial) if initial else None,
@@ -210,12 +223,9 @@ def simulate(
     params._explicit = _given(ctx, "alpha", "length", "n_rods", "vertices", "box", "seed")
     params.validate()
     outdir = out or Path("runs") / default_run_name(params)
-    try:
+    with _failure_recorded(outdir):
         summary = run_protocol(params, outdir, progress=not quiet, resume=resume, overwrite=overwrite,
                                entangled_from=entangled_from)
-    except (RodwarpError, SimulationBlowUp, OSError) as e:
-        mark_failed(outdir, e)
-        raise
     typer.echo(
         f"alpha={summary['alpha']:g} n_rods={summary['n_rods']} a/g={summary['a_over_g']:.3g} "
         f"Z={summary['contacts_per_rod']:.2f} f={summary['largest_cluster_fraction']:.3f} "
@@ -256,7 +266,8 @@ def analyze(
                           connectivity=connectivity, bins=bins, device=device, figures=figures)
     opts.validate()
     outdir = out or default_out(input)
-    s = run_analyze(input, outdir, opts, progress=not quiet, overwrite=overwrite)
+    with _failure_recorded(outdir):
+        s = run_analyze(input, outdir, opts, progress=not quiet, overwrite=overwrite)
 
     def f(v):
         return "n/a" if v is None else f"{v:.3g}"
@@ -301,6 +312,9 @@ def phantom(
     aspect: float = typer.Option(_PH["aspect"], help="'random': aspect ratio length / diameter."),
     touching: float = typer.Option(_PH["touching"], help="'random': fraction of rods touching another."),
     seed: int = typer.Option(_PH["seed"], help="Seed of the noise and of the scenes."),
+    overwrite: bool = typer.Option(False, help="Replace --out even when it is not a rodwarp phantom, or lies in "
+                                               "another command's run folder (an earlier phantom is always "
+                                               "replaced)."),
 ):
     """Synthetic 16-bit CT of a rod set: partial volume, blur, noise and artefacts, with ground truth."""
     from rodwarp.ct import check_phantom
@@ -308,6 +322,9 @@ def phantom(
     check_phantom(rods=rods, shape=shape, voxel_size=voxel_size, out=out, blur=blur, cnr=cnr, ring=ring,
                     cupping=cupping, streaks=streaks, n_rods=n_rods, radius=radius, aspect=aspect,
                     touching=touching, seed=seed, fov=fov, z_thickness=z_thickness, units=units)
+    from rodwarp.ct._phantom_owner import check_phantom_out
+
+    check_phantom_out(out, overwrite=overwrite)
     rs = make_phantom(rods, shape, out, voxel_size=voxel_size, blur=blur, cnr=cnr, ring=ring, cupping=cupping,
                       streaks=streaks, fov=fov, dark=dark, z_thickness=z_thickness, n_rods=n_rods, radius=radius,
                       aspect=aspect, touching=touching, seed=seed, units=units)
@@ -333,6 +350,8 @@ def segment(
     chunk: Optional[int] = typer.Option(None, help="Process in overlapping chunks of this edge (voxels), for big volumes."),
     contact_tolerance: float = typer.Option(_S.contact_tolerance, help="Largest surface gap counted as contact (voxels)."),
     figures: bool = typer.Option(True, help="Write the QA PNGs."),
+    overwrite: bool = typer.Option(False, help="Write into --out even when it holds another command's run (an "
+                                               "earlier segmentation there is always replaced)."),
     quiet: bool = typer.Option(False, help="No progress bar."),
 ):
     """CT stack to rod centrelines and contacts (CPU)."""
@@ -345,8 +364,11 @@ def segment(
                     out=out if out is not None else seg_default_out(stack), chunk=chunk,
                     contact_tolerance=contact_tolerance, min_fill=min_fill)
     params = SegmentParams(shape=shape, dark=dark_rods, min_fill=min_fill)
-    s = run_segment(stack, voxel_size=voxel_size, units=units, diameter=diameter, out=out, chunk=chunk,
-                    contact_tolerance=contact_tolerance, figures=figures, progress=not quiet, params=params)
+    outdir = out if out is not None else seg_default_out(stack)
+    with _failure_recorded(outdir):
+        s = run_segment(stack, voxel_size=voxel_size, units=units, diameter=diameter, out=outdir, chunk=chunk,
+                        contact_tolerance=contact_tolerance, figures=figures, progress=not quiet, params=params,
+                        overwrite=overwrite)
     u = s["units"]
     typer.echo(f"{s['n_rods']} {'filaments' if s.get('shape') == 'curved' else 'rods'}, {s['n_contacts']} contacts, "
                f"diameter {s['diameter']:.4g} {u} ({s['diameter_voxels']:.2f} voxels), {s['wall_time_s']:.1f} s "
@@ -424,6 +446,9 @@ def sweep(
     device: str = _swp("device"),
     share_entangling: bool = _swp("share_entangling"),
     figures: bool = typer.Option(True, help="Draw the phase diagram at the end."),
+    overwrite: bool = typer.Option(False, help="Replace the run --out holds. Without it a sweep adds its points to "
+                                               "the folder's sweep of the same protocol (durations, amplitude, "
+                                               "--set values) and refuses any other."),
     quiet: bool = typer.Option(False, help="No progress bar."),
     set_: Optional[list[str]] = typer.Option(None, "--set", help="Any other simulate parameter for every point, "
                                              "KEY=VALUE (repeatable; the names of `rodwarp simulate`'s options "
@@ -443,13 +468,14 @@ def sweep(
                      # only when changed: rows of sweeps run before this option still match their points
                      overrides={**({} if save_every == _P["save_every"][0] else {"save_every": save_every}),
                                 **_overrides(set_ or [])})
-    path = run_sweep(spec, out, scheduler=scheduler, workers=workers, progress=not quiet)
+    with _failure_recorded(out):
+        path = run_sweep(spec, out, scheduler=scheduler, workers=workers, progress=not quiet, overwrite=overwrite)
     import json
 
     meta = json.loads((Path(out) / "sweep.json").read_text())
     failed, total = int(meta.get("failed") or 0), int(meta.get("n_points") or 0)
     if figures and failed < total:
-        for f in phase_diagram(out):
+        for f in phase_diagram(out, note=lambda msg: typer.echo(f"note: {msg}")):
             typer.echo(f"wrote {f}")
     typer.echo(f"results -> {path}")
     if failed:
@@ -466,7 +492,14 @@ def phase_diagram_cmd(
 ):
     """Phase diagram of a sweep: cv_e against a/g (Fig. 4L), f against alpha and a/g, alpha*."""
     from rodwarp.experiments import phase_diagram
+    from rodwarp.rodset import rundir
 
+    m = rundir.read_manifest(sweep_dir) if sweep_dir.is_dir() else None
+    rundir.check_manifest(sweep_dir, m, "SWEEP_DIR")
+    if m is not None and m.get("kind") != "sweep":
+        # its figures would land among another command's outputs
+        raise RodwarpError(f"'{sweep_dir}' holds {rundir._describe(m)}, not a sweep; give the --out of a "
+                           "`rodwarp sweep`")
     if not (sweep_dir / "results.csv").exists():
         raise RodwarpError(f"'{sweep_dir}' holds no results.csv; run `rodwarp sweep --out {sweep_dir}` first")
     # failed points are left out of the diagram: say how many, so a thin diagram is explained

@@ -312,11 +312,11 @@ def cases(d: Path) -> list[tuple[str, str]]:
 
 
 #: the other classes of issue 29 (units 3, silent acceptances 4, garbage 6, phase-diagram rows):
-#: (class, what, arguments with $TMP for the scratch folder), each expected to be refused (exit 2);
+#: (class, what, arguments with $TMP for the scratch folder[, expected exit code, default 2]);
 #: their inputs are made by :func:`make_inputs_29`
 _TINY = "--duration 0.02 --save-every 0.01 --device cpu --quiet"
 _SIM = f"--entangle-duration 0.02 {_TINY}"
-EXTRA: list[tuple[str, str, str]] = [
+EXTRA: list[tuple] = [
     ("3", "phantom of a rod set in metres at the default --voxel-size 1", "phantom $TMP/m.npz --shape 64 64 64 "
      "--out $TMP/u1.tif"),
     ("3", "phantom, scene radius below half a voxel", "phantom random --radius 0.1 --shape 32 32 32 --out $TMP/u2.tif"),
@@ -358,6 +358,17 @@ EXTRA: list[tuple[str, str, str]] = [
      "--out $TMP/g16"),
     ("6", "random bytes named .tif", "segment $TMP/rand.tif --voxel-size 1 --units voxel --out $TMP/g17"),
     ("6", "a 2 x 2 x 2 volume", "segment $TMP/small.tif --voxel-size 1 --units voxel --out $TMP/g18"),
+    ("6", "phase-diagram, a binary results.csv", "phase-diagram $TMP/pd_bin"),
+    ("6", "phase-diagram, results.csv with NUL bytes", "phase-diagram $TMP/pd_nul"),
+    ("6", "phase-diagram, a CSV without the needed columns", "phase-diagram $TMP/pd_cols"),
+    ("6", "phase-diagram, results.csv is a folder", "phase-diagram $TMP/pd_dir"),
+    ("6", "phase-diagram, a row longer than the header", "phase-diagram $TMP/pd_long"),
+    ("4", "phase-diagram, one point twice with opposite verdicts", "phase-diagram $TMP/pd_dup"),
+    ("4", "phase-diagram, an ok row with NaN alpha", "phase-diagram $TMP/pd_nan"),
+    ("4", "phase-diagram, an ok row with infinite a/g", "phase-diagram $TMP/pd_inf"),
+    ("4", "phase-diagram, a verdict neither True nor False", "phase-diagram $TMP/pd_verdict"),
+    ("4", "phase-diagram, a point id that is a path out of the sweep", "phase-diagram $TMP/pd_id"),
+    ("4", "phase-diagram, a failed row is skipped and counted (a note)", "phase-diagram $TMP/pd_failed", 0),
 ]
 
 
@@ -412,6 +423,30 @@ def make_inputs_29(d: Path) -> None:
     data = (d / "full.tif").read_bytes()
     (d / "cut.tif").write_bytes(data[: len(data) // 2])
     tifffile.imwrite(d / "small.tif", rng.integers(0, 4000, (2, 2, 2), dtype=np.uint16))
+    # results.csv files a phase diagram must refuse (and one it draws with a note)
+    head = "id,alpha,freq,gravity,static_load,seed,amplitude,a_over_g,largest_cluster_fraction,stable,status"
+    rows = ["a50,50,10,0.5,0,0,0.001,7.9,0.3,False,ok", "a100,100,10,0.5,0,0,0.001,7.9,0.8,True,ok",
+            "a200,200,10,0.5,0,0,0.001,7.9,0.9,True,ok"]
+
+    def sweep_dir(name: str, text, *, binary: bool = False) -> None:
+        (d / name).mkdir()
+        f = d / name / "results.csv"
+        f.write_bytes(text) if binary else f.write_text(text)
+
+    def table(*extra: str, edit=lambda r: r) -> str:
+        return "\n".join([head, *[edit(r) for r in rows], *extra]) + "\n"
+
+    sweep_dir("pd_bin", b"\x89PNG\r\n\x1a\n\xff\xfe\x00\x01", binary=True)
+    sweep_dir("pd_nul", (head + "\na50,50,10,0.5,0,0,0.001,7.9,0.3,False,ok\x00\n").encode(), binary=True)
+    sweep_dir("pd_cols", "name,value\nfoo,1\n")
+    (d / "pd_dir" / "results.csv").mkdir(parents=True)
+    sweep_dir("pd_long", table("a300,300,10,0.5,0,0,0.001,7.9,0.9,True,ok,extra"))
+    sweep_dir("pd_dup", table("a100,100,10,0.5,0,0,0.001,7.9,0.2,False,ok"))
+    sweep_dir("pd_nan", table(edit=lambda r: r.replace("a100,100,", "a100,nan,")))
+    sweep_dir("pd_inf", table(edit=lambda r: r.replace(",7.9,0.8,", ",inf,0.8,")))
+    sweep_dir("pd_verdict", table(edit=lambda r: r.replace(",True,ok", ",maybe,ok") if r.startswith("a100") else r))
+    sweep_dir("pd_id", table(edit=lambda r: r.replace("a100,", "../../etc,", 1)))
+    sweep_dir("pd_failed", table("a25,25,10,0.5,0,0,0.001,,,,error: placed only 5 of 12 rods"))
 
 
 def main(argv=None) -> int:
@@ -426,7 +461,8 @@ def main(argv=None) -> int:
     ok_cases = {"input on z = 0", "input alpha 50", "finished run in --out", "  ... --overwrite", "killed run, resume",
                 "analyze, then another --radius", "  ... --radius 0.2 (replaces it)", "version", "bare rodwarp"}
     plan = [("15", what, a, None, 0 if what in ok_cases else (4 if "fails at run time" in what else 2))
-            for what, a in cases(d)] + cases_29(d) + [(cls, what, a, None, 2) for cls, what, a in EXTRA]
+            for what, a in cases(d)] + cases_29(d) + [(e[0], e[1], e[2], None, e[3] if len(e) > 3 else 2)
+                                                       for e in EXTRA]
     for cls, what, a, setup, expect in plan:
         a = a.replace("$TMP", str(d))
         if "killed" in a and not killed:

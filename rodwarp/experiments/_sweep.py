@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 import os
 import socket
@@ -537,7 +538,7 @@ def _same_point(row: dict, point: dict) -> bool:
 
 
 def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int | None = None,
-              progress: bool = True) -> Path:
+              progress: bool = True, overwrite: bool = False) -> Path:
     """Run every unfinished point of ``spec`` on Dask and record the results under ``out``.
 
     Parameters
@@ -556,6 +557,10 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
         ``scheduler``.
     progress : bool
         Show a progress bar (points done of total, time remaining).
+    overwrite : bool
+        Replace whatever run ``out`` holds. Without it a sweep adds its points to the folder's
+        sweep of the same :func:`protocol` (finished points are kept, not rerun) and refuses a
+        folder of another protocol or of another command, naming what differs.
 
     Returns
     -------
@@ -566,6 +571,7 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
 
     from rodwarp._util import progress_bar, versions
     from rodwarp.experiments._checks import check_scheduler
+    from rodwarp.rodset import rundir
     from rodwarp.validation import output_location
 
     spec.validate()
@@ -573,8 +579,15 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
     check_points(pts, local=not scheduler)
     out = Path(out)
     output_location(out, "--out")
+    # the folder is checked before the scheduler is contacted: a refusal costs nothing
+    rundir.check(out, "sweep", protocol(spec), rundir.SWEEP_OUTPUTS, overwrite=overwrite, append=True,
+                 legacy=_legacy_protocol(out))
     if scheduler:
         scheduler = check_scheduler(scheduler)
+    # a sweep adds points to the folder's sweep of the same protocol and is refused for any
+    # other (results of two protocols never share a results.csv or a phase diagram)
+    run = rundir.claim(out, "sweep", protocol(spec), rundir.SWEEP_OUTPUTS, overwrite=overwrite, append=True,
+                       legacy=_legacy_protocol(out))
     (out / "points").mkdir(parents=True, exist_ok=True)
     csv_path = out / "results.csv"
     old = {r.get("id"): r for r in read_results(csv_path)}
@@ -596,7 +609,7 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
             write_results(csv_path, ordered)
 
     meta = {"spec": spec.to_dict(), "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
-            "scheduler": scheduler or "LocalCluster(127.0.0.1)",
+            "scheduler": scheduler or LOCAL_CLUSTER,
             "workers": None if scheduler else (workers or os.cpu_count()),
             "n_points": len(pts), "skipped": len(done), "submitted": len(todo),
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "finished": None, "failed": None,
@@ -638,4 +651,29 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
     meta.update({"finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "failed": failed,
                  "wall_s": time.perf_counter() - t0})
     write_json(out / "sweep.json", meta)
+    run.complete(n_points=len(pts), failed=failed)
     return csv_path
+
+
+#: SweepSpec fields that choose the grid's points or how they are run, not what a point
+#: measures: two sweeps that differ only in these may share a folder and a results.csv
+_NOT_PROTOCOL = ("alphas", "freqs", "gravities", "static_loads", "seeds", "device", "share_entangling")
+
+
+def protocol(spec: SweepSpec) -> dict:
+    """What every point of a sweep shares (durations, amplitude, overrides, analysis options):
+    the parameters a second sweep into the same folder must repeat (:func:`run_sweep`)."""
+    return {k: v for k, v in spec.to_dict().items() if k not in _NOT_PROTOCOL}
+
+
+def _legacy_protocol(out: Path) -> dict | None:
+    """The protocol of a sweep written before manifests (its ``sweep.json``), or None."""
+    from rodwarp.rodset import rundir
+
+    if not (out / "sweep.json").is_file() or rundir.read_manifest(out) is not None:
+        return None
+    try:
+        spec = json.loads((out / "sweep.json").read_text()).get("spec") or {}
+        return protocol(SweepSpec(**{k: v for k, v in spec.items() if k in {f.name for f in fields(SweepSpec)}}))
+    except (OSError, ValueError, TypeError, AttributeError):
+        return {"unreadable sweep.json": True}
