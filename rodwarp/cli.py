@@ -475,7 +475,11 @@ def sweep(
     meta = json.loads((Path(out) / "sweep.json").read_text())
     failed, total = int(meta.get("failed") or 0), int(meta.get("n_points") or 0)
     if figures and failed < total:
-        for f in phase_diagram(out, note=lambda msg: typer.echo(f"note: {msg}")):
+        from rodwarp.rodset.rundir import writing_part
+
+        with writing_part(out, "phase_diagram"):
+            written = phase_diagram(out, note=lambda msg: typer.echo(f"note: {msg}"))
+        for f in written:
             typer.echo(f"wrote {f}")
     typer.echo(f"results -> {path}")
     if failed:
@@ -503,7 +507,10 @@ def phase_diagram_cmd(
     if not (sweep_dir / "results.csv").exists():
         raise RodwarpError(f"'{sweep_dir}' holds no results.csv; run `rodwarp sweep --out {sweep_dir}` first")
     # failed points are left out of the diagram: say how many, so a thin diagram is explained
-    for f in phase_diagram(sweep_dir, note=lambda msg: typer.echo(f"note: {msg}")):
+    # the sweep's manifest says the diagram is incomplete until its last file is written
+    with rundir.writing_part(sweep_dir, "phase_diagram"):
+        written = phase_diagram(sweep_dir, note=lambda msg: typer.echo(f"note: {msg}"))
+    for f in written:
         typer.echo(f"wrote {f}")
 
 

@@ -250,7 +250,7 @@ def test_kill_while_phantom_writes_marks_its_truth_incomplete_and_a_rerun_replac
     assert meta["complete"] is True and meta["n_rods"] == 6 and meta["seed"] == 2
 
 
-def test_kill_while_sweep_starts_then_the_same_sweep_completes(tmp_path):
+def test_kill_while_sweep_or_its_phase_diagram_writes_then_the_same_command_completes(tmp_path):
     sw = tmp_path / "sw"
     args = ["sweep", "--alpha", "20", "--freq", "1", "--entangle-duration", "0.02", "--duration", "0.02",
             "--save-every", "0.01", "--workers", "1", "--device", "cpu", "--quiet", "--no-figures",
@@ -263,6 +263,12 @@ def test_kill_while_sweep_starts_then_the_same_sweep_completes(tmp_path):
     assert m["complete"] and m["n_points"] == 1
     rows = (sw / "results.csv").read_text().splitlines()
     assert len(rows) == 2 and ",ok," in rows[1] + ","
+    # phase-diagram writes into the sweep's folder: killed mid-way, the manifest says so; rerun, it is whole
+    _killed("alpha_star.csv", ["phase-diagram", str(sw)], tmp_path)
+    assert _manifest(sw)["parts"]["phase_diagram"]["complete"] is False
+    res = runner.invoke(app, ["phase-diagram", str(sw)])
+    assert res.exit_code == 0, res.output
+    assert _manifest(sw)["parts"]["phase_diagram"]["complete"] is True and (sw / "alpha_star.csv").exists()
 
 
 # ---------------------------------------------------------------- sweeps of two protocols

@@ -29,6 +29,7 @@ written). One rule for every command that writes a folder:
 
 from __future__ import annotations
 
+import contextlib
 import fnmatch
 import json
 import os
@@ -223,6 +224,38 @@ def mark_failed(path, error: BaseException) -> None:
         write_json(path / MANIFEST, m)
     except OSError:
         pass  # the error being reported matters more than its record
+
+
+@contextlib.contextmanager
+def writing_part(path, part: str):
+    """Mark a later part of a finished run (a sweep's phase diagram) as being written.
+
+    The manifest of ``path`` records ``parts[part]`` with ``complete`` false before the part's
+    files are written and true once they all are, so a kill while a part is rewritten leaves
+    the folder saying which of its outputs are incomplete. A folder without a manifest (from
+    before manifests) is written as before.
+    """
+    path = Path(path)
+    m = _read_manifest(path)
+    if m is None or m.get("unreadable"):
+        yield
+        return
+    parts = m.setdefault("parts", {})
+    parts[part] = {"complete": False, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "pid": os.getpid()}
+    write_json(path / MANIFEST, m)
+    try:
+        yield
+    except BaseException as e:
+        m = _read_manifest(path) or m
+        m.setdefault("parts", {}).setdefault(part, {}).update(status="failed", error=_cause(str(e), 500))
+        try:
+            write_json(path / MANIFEST, m)
+        except OSError:
+            pass  # the error being reported matters more than its record
+        raise
+    m = _read_manifest(path) or m
+    m.setdefault("parts", {})[part] = {"complete": True, "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    write_json(path / MANIFEST, m)
 
 
 class RunDir:
