@@ -335,6 +335,8 @@ EXTRA: list[tuple] = [
     ("3", "analyze --diameter contradicts the file's radii", "analyze $TMP/r.csv --diameter 0.5 --quiet --out $TMP/u12"),
     ("3", "analyze, um data declared as m with a fine --spacing", "analyze $TMP/um.csv --spacing 0.0001 --quiet "
      "--out $TMP/u13"),
+    ("4", "a bundle of parallel rods analysed (S = 1 everywhere: valid)", "analyze $TMP/r.csv --quiet "
+     "--out $TMP/bundle_an", 0),
     ("4", "duplicated rod analysed", "analyze $TMP/dup.npz --no-figures --quiet --out $TMP/g1"),
     ("4", "duplicated rod, reversed, simulated", f"simulate --initial $TMP/duprev.npz {_TINY} --out $TMP/g2"),
     ("4", "zero-length rod analysed", "analyze $TMP/zero.npz --no-figures --quiet --out $TMP/g3"),
@@ -376,7 +378,7 @@ def _write_csv(path: Path, rods, radius: bool = True) -> None:
     rows = ["rod,x,y,z" + (",radius" if radius else "")]
     for i in range(rods.n_rods):
         for x, y, z in rods.points[rods.offsets[i]:rods.offsets[i + 1]]:
-            rows.append(f"{i},{x!r},{y!r},{z!r}" + (f",{rods.radii[i]!r}" if radius else ""))
+            rows.append(f"{i},{float(x)!r},{float(y)!r},{float(z)!r}" + (f",{float(rods.radii[i])!r}" if radius else ""))
     path.write_text("\n".join(rows) + "\n")
 
 
@@ -394,9 +396,10 @@ def make_inputs_29(d: Path) -> None:
     # six 0.1 m rods of radius 5 mm inside a 0.16 m cube, in metres
     six = [np.stack([0.08 + 0.1 * s, 0.02 + 0.02 * k + 0 * s, 0.03 + 0.02 * k + 0 * s], 1) for k in range(6)]
     RodSet.from_polylines(six, radii=0.005).save(d / "m.npz")
-    # 16 rods 20 mm long, radius 0.5 mm, 2.5 mm apart: in m, mm and um, with and without radii
-    sixteen = RodSet.from_polylines([np.stack([0.02 * s, 0 * s + 0.0025 * k, 0 * s + 0.001], 1) for k in range(16)],
-                                    radii=0.0005)
+    # 16 rods 20 mm long, radius 0.5 mm, 4 mm apart in a 4 x 4 bundle: in m, mm and um, with and
+    # without radii
+    sixteen = RodSet.from_polylines([np.stack([0.02 * s, 0 * s + 0.004 * (k // 4), 0 * s + 0.001 + 0.004 * (k % 4)], 1)
+                                     for k in range(16)], radii=0.0005)
     _write_csv(d / "r.csv", sixteen)
     _write_csv(d / "nor.csv", sixteen, radius=False)
     _write_csv(d / "mm.csv", sixteen.to_units("mm"))

@@ -257,3 +257,16 @@ def test_plots_with_missing_fields_and_defaults(tmp_path):
         plot_zprofiles(f, tmp_path / "zprof.png"),
         plot_tangles(f, None, None, tmp_path / "sub" / "tangles.png"),  # labels and stats computed
     ])
+
+
+def test_histogram_of_values_equal_but_for_rounding():
+    # a field constant over the packing (S = 1 for parallel rods) differs only in the last bits:
+    # NumPy refuses to cut such a range into 40 bins, which made `rodwarp analyze` of a
+    # parallel bundle fail with an internal error
+    from rodwarp.analysis._stats import histogram
+
+    v = np.array([1.0, 1.0 + 2.2e-16, 1.0 + 4.4e-16, np.nan])
+    h = histogram(v, 40)
+    assert h["n"] == 3 and h["counts"].sum() == 3 and len(h["edges"]) == 41
+    assert h["edges"][0] < 1.0 < h["edges"][-1] and h["edges"][-1] - h["edges"][0] < 1e-5
+    assert np.nansum(h["density"] * np.diff(h["edges"])) == pytest.approx(1.0)

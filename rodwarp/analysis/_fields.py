@@ -92,9 +92,13 @@ def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float 
         raise RodwarpError(f"the analysis domain {dom.tolist()} is empty or not finite")
     size = dom[1] - dom[0]
     if not keep_outside and np.any(size < 2 * R):
+        from rodwarp.rodset._scale import unit_hint
+
+        hint = unit_hint(rods, float(np.max(size)))
         raise RodwarpError(
-            f"no ball of radius R = {R:g} fits in the domain of size {size.round(6).tolist()}; "
-            "lower --radius or pass --keep-outside")
+            f"no ball of radius R = {R:g} {rods.units} fits in the domain of size {size.round(6).tolist()} "
+            f"{rods.units}; " + (f"check the units first: {hint}; else " if hint else "")
+            + "lower --radius or pass --keep-outside")
     n_vox = np.prod(np.floor(size / h) + 1)
     if n_vox > 2**31 - 1:
         from rodwarp.rodset._scale import unit_hint

@@ -237,6 +237,12 @@ def histogram(values, bins: int = 40, range=None) -> dict[str, np.ndarray]:  # n
     """
     v = np.asarray(values, dtype=np.float64).ravel()
     v = v[np.isfinite(v)]
+    if range is None and v.size and 0 < v.max() - v.min() < 1e-9 * max(1.0, abs(v.max()), abs(v.min())):
+        # values equal but for rounding (a field constant over the packing): NumPy cannot cut
+        # so narrow a range into `bins` finite bins, so centre a range of a relative 1e-6 on them
+        c = 0.5 * (v.max() + v.min())
+        half = 1e-6 * max(abs(c), 1e-12)
+        range = (c - half, c + half)
     counts, edges = np.histogram(v, bins=bins, range=range)
     total = counts.sum()
     widths = np.diff(edges)
