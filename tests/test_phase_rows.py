@@ -155,7 +155,7 @@ def test_a_binary_metrics_csv_of_a_point_is_refused_by_file(tmp_path, capsys):
     (tmp_path / "points" / ID / "metrics.csv").write_bytes(b"\xff\xfe" + bytes(range(256)))
     rc, out, err = _cli(capsys, tmp_path)
     assert rc == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err
-    assert f"points/{ID}/metrics.csv is not a text CSV (not UTF-8)" in err
+    assert f"points/{ID}/metrics.csv is not a text CSV (not UTF-8: it holds byte 0x" in err
 
 
 def test_read_results_refuses_garbage_for_the_sweep_too(tmp_path):

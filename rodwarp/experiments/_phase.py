@@ -328,19 +328,10 @@ def _metrics(path: Path) -> list[dict]:
         One line naming the file (and the row and column) when it is not a UTF-8 CSV, lacks
         ``time`` or ``stage``, or holds a value that is not a finite number.
     """
+    from rodwarp.rodset.files import read_csv_rows
+
     fix = "it is the point's own record: restore it, or delete it to leave the point out of the time series"
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as fh:
-            text = fh.read()
-        if "\0" in text:  # valid UTF-8, yet binary: Python's csv reads NUL bytes into the values
-            raise RodwarpError(f"{path} is not a text CSV (it holds NUL bytes); {fix}")
-        reader = csv.DictReader(io.StringIO(text, newline=""))
-        raw = list(reader)
-        header = list(reader.fieldnames or [])
-    except UnicodeDecodeError:
-        raise RodwarpError(f"{path} is not a text CSV (not UTF-8); {fix}") from None
-    except csv.Error as e:
-        raise RodwarpError(f"{path} is not a readable CSV ({e}); {fix}") from None
+    header, raw = read_csv_rows(path, fix)
     missing = [c for c in ("time", "stage") if c not in header]
     if missing:
         raise RodwarpError(f"{path} lacks the column(s) {', '.join(missing)}; {fix}")

@@ -33,7 +33,7 @@ from pathlib import Path
 
 from rodwarp.errors import RodwarpError
 from rodwarp.experiments._protocol import ProtocolParams
-from rodwarp.rodset.files import write_json, write_text
+from rodwarp.rodset.files import read_csv_rows, write_json, write_text
 
 #: parameters that define a point (besides the ProtocolParams overrides)
 GRID_KEYS = ("alpha", "freq", "gravity", "static_load", "seed")
@@ -455,22 +455,7 @@ def read_results(path, required=RESULTS_REQUIRED) -> list[dict]:
     path = Path(path)
     if not path.exists():
         return []
-    if path.is_dir():
-        raise RodwarpError(f"{path} is a folder, not a CSV; {_RESULTS_FIX}")
-    try:
-        # utf-8-sig: a spreadsheet's byte-order mark would otherwise be part of the first name
-        with open(path, newline="", encoding="utf-8-sig") as fh:
-            text = fh.read()
-        if "\0" in text:  # valid UTF-8, yet binary: Python's csv reads NUL bytes into the values
-            raise RodwarpError(f"{path} is not a text CSV (it holds NUL bytes); {_RESULTS_FIX}")
-        reader = csv.DictReader(io.StringIO(text, newline=""))
-        rows = list(reader)
-        header = list(reader.fieldnames or [])
-    except UnicodeDecodeError as e:
-        raise RodwarpError(f"{path} is not a text CSV (not UTF-8: it holds byte 0x{e.object[e.start]:02x}); "
-                           f"{_RESULTS_FIX}") from None
-    except csv.Error as e:
-        raise RodwarpError(f"{path} is not a readable CSV ({e}); {_RESULTS_FIX}") from None
+    header, rows = read_csv_rows(path, _RESULTS_FIX)
     if not header:
         return []
     missing = [c for c in required if c not in header]

@@ -17,7 +17,7 @@ from typing import Any, Iterator
 
 from rodwarp._util import json_safe
 
-__all__ = ["atomic_path", "write_json", "write_text", "save_figure", "consolidate_zarr"]
+__all__ = ["atomic_path", "write_json", "write_text", "save_figure", "consolidate_zarr", "read_csv_rows"]
 
 
 @contextlib.contextmanager
@@ -126,3 +126,47 @@ def consolidate_zarr(path: str | os.PathLike) -> None:
         # zarr 3 notes that consolidated metadata is not in the v3 spec yet; xarray reads it
         warnings.simplefilter("ignore")
         zarr.consolidate_metadata(str(path))
+
+
+def read_csv_rows(path: str | os.PathLike, fix: str) -> tuple[list[str], list[dict]]:
+    """The header and rows (dicts of strings) of a UTF-8 CSV that rodwarp wrote, or one line why not.
+
+    Parameters
+    ----------
+    path : path-like
+        The CSV (a spreadsheet's byte-order mark is tolerated).
+    fix : str
+        What the user should do, appended to every refusal.
+
+    Returns
+    -------
+    (header, rows)
+        The header's names, and one dict per data row as :class:`csv.DictReader` gives it.
+
+    Raises
+    ------
+    RodwarpError
+        ``path`` is a folder, is not UTF-8 text (a binary or other-encoding file, whose
+        UnicodeDecodeError would otherwise be an internal error), holds NUL bytes, or is not CSV.
+    """
+    import csv
+    import io
+
+    from rodwarp.errors import RodwarpError
+
+    path = Path(path)
+    if path.is_dir():
+        raise RodwarpError(f"{path} is a folder, not a CSV; {fix}")
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            text = fh.read()
+        if "\0" in text:  # valid UTF-8, yet binary: Python's csv reads NUL bytes into the values
+            raise RodwarpError(f"{path} is not a text CSV (it holds NUL bytes); {fix}")
+        reader = csv.DictReader(io.StringIO(text, newline=""))
+        rows = list(reader)
+        return list(reader.fieldnames or []), rows
+    except UnicodeDecodeError as e:
+        raise RodwarpError(f"{path} is not a text CSV (not UTF-8: it holds byte 0x{e.object[e.start]:02x}); "
+                           f"{fix}") from None
+    except csv.Error as e:
+        raise RodwarpError(f"{path} is not a readable CSV ({e}); {fix}") from None
