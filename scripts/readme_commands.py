@@ -74,7 +74,10 @@ def main(argv=None) -> int:
             argv_ = ["bash", "-c", cmd] if lang == "bash" else [str(clone / ".venv" / "bin" / "python"), "-c", cmd]
             r = subprocess.run(argv_, cwd=clone, env=env, capture_output=True, text=True)
             rc = r.returncode
-            lines = [ln for ln in (r.stdout + r.stderr).splitlines() if ln.strip() and "━" not in ln]
+            # the result line (stdout) when there is one, else the last word on stderr (the error)
+            out = [ln for ln in r.stdout.splitlines() if ln.strip() and "━" not in ln]
+            err = [ln for ln in r.stderr.splitlines() if ln.strip() and "━" not in ln]
+            lines = out if out and rc == 0 else (err or out)
             last = lines[-1].strip() if lines else ""
             if rc != 0:
                 print(r.stdout[-2000:], r.stderr[-2000:], flush=True)
