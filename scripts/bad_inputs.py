@@ -518,15 +518,11 @@ SAYS = {
 
 
 def _cpu_model() -> str:
-    """The processor, named as /proc/cpuinfo names it (the machine a table was made on)."""
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.lower().startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
+    """The processor the table was made on (the benchmarks' own provenance helper)."""
+    sys.path.insert(0, str(ROOT))
+    from benchmarks.common import cpu_model
+
+    return cpu_model()
 
 
 def main(argv=None) -> int:
