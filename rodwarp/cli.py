@@ -419,10 +419,13 @@ def _overrides(items: list[str]) -> dict:
                 value = int(text)
             elif "float" in kind:
                 value = None if text.lower() == "none" and "None" in kind else float(text)
+            elif "tuple" in kind:  # box: 'X,Y,Z', as simulate's own option takes it
+                value = _parse_box(text)
             else:
                 value = text
-        except ValueError:
-            raise RodwarpError(f"--set {key}={text}: not a valid {kind.replace(' | None', '')}") from None
+        except ValueError:  # RodwarpError too: the box's own message names --box, not --set
+            what = "three positive numbers 'X,Y,Z'" if "tuple" in kind else f"a valid {kind.replace(' | None', '')}"
+            raise RodwarpError(f"--set {key}={text}: not {what}") from None
         out[key] = value
     return out
 

@@ -269,11 +269,14 @@ def test_sweep_set_reads_each_value_as_its_parameter_type():
     from rodwarp.cli import _overrides
     from rodwarp.errors import RodwarpError
 
-    got = _overrides(["rod_model=rigid", "rolling=false", "iterations=6", "step-safety=0.5", "dt=none"])
-    assert got == {"rod_model": "rigid", "rolling": False, "iterations": 6, "step_safety": 0.5, "dt": None}
+    got = _overrides(["rod_model=rigid", "rolling=false", "iterations=6", "step-safety=0.5", "dt=none",
+                      "box=2,2,2.5"])
+    assert got == {"rod_model": "rigid", "rolling": False, "iterations": 6, "step_safety": 0.5, "dt": None,
+                   "box": (2.0, 2.0, 2.5)}
     assert type(got["iterations"]) is int and type(got["step_safety"]) is float
     for bad, msg in (("rod_modl=rigid", "no such simulate parameter"), ("rolling=maybe", "not a valid bool"),
-                     ("iterations=six", "not a valid int"), ("iterations", "needs KEY=VALUE")):
+                     ("iterations=six", "not a valid int"), ("iterations", "needs KEY=VALUE"),
+                     ("box=2,2", "three positive numbers")):
         with pytest.raises(RodwarpError, match=msg):
             _overrides([bad])
     # the overrides reach every point of the grid
