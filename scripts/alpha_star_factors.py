@@ -32,8 +32,8 @@ OUT = TRANSITION / "factors"
 LEVELS = [
     ("baseline", "exact law, N = 5.4 alpha, A = 1 mm, a/g = 1", [TRANSITION], None,
      "the protocol of docs/transition.md: g = 10, f = 15.92 Hz, 3 seeds"),
-    ("number of rods", "N = 540 (box widened: 2 x 2 at alpha 25, 1.41 x 1.41 at 50)",
-     [OUT / "fixedN_alpha25", OUT / "fixedN_alpha50", TRANSITION], (25.0, 50.0, 100.0),
+    ("number of rods", "N = 540 (box widened: 2.58, 2 and 1.41 wide at alpha 15, 25 and 50)",
+     [OUT / "fixedN_alpha15", OUT / "fixedN_alpha25", OUT / "fixedN_alpha50", TRANSITION], (15.0, 25.0, 50.0, 100.0),
      "alpha 100 is the baseline's own N = 540 run; a/g = 1"),
     ("drive", "A = 1 mm (l/1000), a/g = 2.5", [TRANSITION / "g10_ag2.5"], None, "f = 25.2 Hz"),
     ("drive", "A = 50 mm (l/20), a/g = 2.5", [OUT / "drive_l20"], None, "f = 3.559 Hz"),
