@@ -28,7 +28,8 @@ ROOT = Path(__file__).resolve().parent.parent
 TRANSITION = ROOT / "benchmarks" / "results" / "transition"
 OUT = TRANSITION / "factors"
 
-#: (factor, level, folders holding results.csv, alphas kept (None: all), what the level is)
+#: (factor, level, folders holding results.csv, alphas kept (None: all), what the level is);
+#: the figure's label of each level is :data:`SHORT`
 LEVELS = [
     ("baseline", "exact law, N = 5.4 alpha, A = 1 mm, a/g = 1", [TRANSITION], None,
      "the protocol of docs/transition.md: g = 10, f = 15.92 Hz, 3 seeds"),
@@ -39,6 +40,11 @@ LEVELS = [
     ("drive", "A = 50 mm (l/20), a/g = 2.5", [OUT / "drive_l20"], None, "f = 3.559 Hz"),
     ("drive", "A = 500 mm (l/2), a/g = 2.5", [OUT / "drive_l2"], None, "f = 1.125 Hz (the laboratory's drive)"),
 ]
+SHORT = {"exact law, N = 5.4 alpha, A = 1 mm, a/g = 1": "baseline (N = 5.4 alpha, A = 1 mm, a/g = 1)",
+         "N = 540 (box widened: 2.58, 2 and 1.41 wide at alpha 15, 25 and 50)": "N = 540 at every alpha (a/g = 1)",
+         "A = 1 mm (l/1000), a/g = 2.5": "drive A = l/1000, a/g = 2.5",
+         "A = 50 mm (l/20), a/g = 2.5": "drive A = l/20, a/g = 2.5",
+         "A = 500 mm (l/2), a/g = 2.5": "drive A = l/2, a/g = 2.5 (the laboratory's)"}
 #: reference values drawn beside the measured alpha*
 REFERENCES = {"rodwarp before (verdict, a/g = 1)": 35.0, "paper (simulation and experiment)": 100.0,
               "acrylic piles stand without walls (Desmond & Weeks)": 35.0}
@@ -105,7 +111,7 @@ def main() -> int:
             missing.append(f"{factor}: {level}")
             continue
         seeds = sorted({int(r["seed"]) for r in rows})
-        table.append({"factor": factor, "level": level, "what": what, "alphas": sorted({r["alpha"] for r in rows}),
+        table.append({"factor": factor, "level": level, "short": SHORT.get(level, level), "what": what, "alphas": sorted({r["alpha"] for r in rows}),
                       "seeds": len(seeds), "points": len(rows), "point_time_s": wall, "m": measures(rows),
                       "stable": {a: sum(r["stable"] for r in rows if r["alpha"] == a) for a in
                                  sorted({r["alpha"] for r in rows})},
@@ -141,29 +147,38 @@ def main() -> int:
     md += ["", "References: " + "; ".join(f"{k} {v:g}" for k, v in REFERENCES.items()) + "."]
     write_text(OUT / "alpha_star_factors.md", "\n".join(md) + "\n")
     # figure: one row per level, alpha* by each measure with its bracket
-    fig, ax = plt.subplots(figsize=(9, 0.6 * len(table) + 2.2))
+    from matplotlib.lines import Line2D
+
+    fig, ax = plt.subplots(figsize=(10, 0.75 * len(table) + 2.6))
     colours = {"verdict": "C0", "f": "C1", "h": "C2"}
+    names = {"verdict": "verdict (h, f, persistence)", "f": "f >= 0.5 (the paper's measure)", "h": "h >= 0.26"}
     for i, t in enumerate(table):
         y = len(table) - 1 - i
         for j, k in enumerate(("verdict", "f", "h")):
             x, err, lo, hi, boot, note = t["m"][k]
-            yy = y + (j - 1) * 0.22
+            yy = y + (1 - j) * 0.22
             if x is not None:
-                ax.errorbar([x], [yy], xerr=[[x - lo], [hi - x]], fmt="o", color=colours[k], capsize=3,
-                            label=k if i == 0 else None)
+                ax.errorbar([x], [yy], xerr=[[x - lo], [hi - x]], fmt="o", color=colours[k], capsize=3)
             elif lo is not None:  # above the largest alpha measured
-                ax.annotate("", xy=(lo * 1.6, yy), xytext=(lo, yy), arrowprops=dict(arrowstyle="->", color=colours[k]))
+                ax.annotate("", xy=(lo * 1.7, yy), xytext=(lo, yy),
+                            arrowprops=dict(arrowstyle="-|>", color=colours[k], lw=1.5))
             elif hi is not None:  # below the smallest
-                ax.annotate("", xy=(hi / 1.6, yy), xytext=(hi, yy), arrowprops=dict(arrowstyle="->", color=colours[k]))
-    for (name, v), ls in zip(REFERENCES.items(), ("--", "-", ":")):
-        ax.axvline(v, color="grey", ls=ls, lw=1, label=f"{name}: {v:g}")
+                ax.annotate("", xy=(hi / 1.7, yy), xytext=(hi, yy),
+                            arrowprops=dict(arrowstyle="-|>", color=colours[k], lw=1.5))
+    styles = dict(zip(REFERENCES, ("--", "-", ":")))
+    for name, v in REFERENCES.items():
+        ax.axvline(v, color="grey", ls=styles[name], lw=1)
+    handles = [Line2D([], [], color=colours[k], marker="o", ls="", label=names[k]) for k in colours]
+    handles += [Line2D([], [], color="grey", ls=styles[n], label=f"{n}: {v:g}") for n, v in REFERENCES.items()]
     ax.set_yticks(range(len(table)))
-    ax.set_yticklabels([f"{t['factor']}: {t['level']}" for t in reversed(table)], fontsize=8)
+    ax.set_yticklabels([t["short"] for t in reversed(table)], fontsize=9)
+    ax.set_ylim(-0.6, len(table) - 0.4)
     ax.set_xscale("log")
-    ax.set_xlim(10, 400)
-    ax.set_xlabel("alpha* (aspect ratio l / d) [dimensionless]; bars: bracketing alphas; arrows: beyond the range")
-    ax.set_title("alpha* against each factor (g = 10 m/s^2, exact contact law, 3 seeds)", fontsize=10)
-    ax.legend(fontsize=7, loc="lower right")
+    ax.set_xlim(8, 400)
+    ax.set_xlabel("alpha* = l / d [dimensionless]; bars: the bracketing alphas; arrows: beyond the alphas run",
+                  fontsize=9)
+    ax.set_title("alpha* against each factor: g = 10 m/s^2, exact contact law, 3 seeds per alpha", fontsize=10)
+    ax.legend(handles=handles, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False)
     fig.tight_layout()
     save_figure(fig, OUT / "alpha_star_factors.png")
     plt.close(fig)
