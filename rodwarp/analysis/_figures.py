@@ -361,6 +361,11 @@ def tangles_figure(fields, labels, stats: dict | None) -> Figure:
     draw_labels(axs[1, 2], _project_largest(labels, 0), ext_xy, "x", "y", "tangles projected along z",
                 valid.any(axis=0))
 
+    from matplotlib.ticker import MaxNLocator
+
+    for ax in axs.flat:  # a tall, narrow panel (the xz plane of a tall pile) crowds its x ticks
+        (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+        ax.xaxis.set_major_locator(MaxNLocator(2 if abs(x1 - x0) < 0.6 * abs(y1 - y0) else 4))
     ext = stats.get("largest_tangle_extent") or {}
     sub = (f"{stats.get('n_tangles', n_lab)} tangles (connectivity {stats.get('connectivity', 26)}), "
            f"e_lb = {stats.get('e_lb', float('nan')):.3g}, outliers {100 * stats.get('outlier_fraction', 0):.2f}% "
