@@ -10,14 +10,10 @@ from __future__ import annotations
 
 import pytest
 
-pytest.importorskip("distributed")
-pytest.importorskip("cryptography")
+# distributed and cryptography are dependencies of rodwarp: a missing one must fail here, not skip
+from distributed import Client, LocalCluster
 
-from distributed import Client, LocalCluster  # noqa: E402
-from distributed.security import Security  # noqa: E402
-
-from rodwarp.errors import RodwarpError  # noqa: E402
-from rodwarp.experiments._sweep import LOCAL_CLUSTER, _connect, _local_cluster  # noqa: E402
+from rodwarp.experiments._sweep import LOCAL_CLUSTER, _connect, _local_cluster
 
 
 @pytest.fixture(scope="module")

@@ -563,6 +563,10 @@ def _zarr_voxel_size(path: Path, key: str | None):
     return tuple(out), "OME-Zarr scale"
 
 
+#: ImageJ units that say a volume has no physical scale (lengths in voxel widths)
+_NO_SCALE = ("pixel", "pixels", "voxel", "voxels")
+
+
 def _imagej_metadata(path) -> dict:
     import tifffile
 
@@ -583,7 +587,7 @@ def read_voxel_ratio(path) -> tuple[float, float, float] | None:
         ij = _imagej_metadata(path)
     except Exception:  # noqa: BLE001 - metadata is optional: unreadable metadata means none
         return None
-    if str(ij.get("unit", "")).strip().lower() not in ("pixel", "pixels", "voxel", "voxels"):
+    if str(ij.get("unit", "")).strip().lower() not in _NO_SCALE:
         return None
     dz = float(ij.get("spacing") or 1.0)
     return (dz, 1.0, 1.0) if dz > 0 else None
@@ -597,19 +601,11 @@ def read_voxel_unit(path) -> str | None:
     ``rodwarp phantom`` writes its voxel size in the rods' units; ``rodwarp segment`` reports
     in this unit by default, so the round trip keeps the rods' units.
     """
-    import tifffile
-
     try:
-        p = _resolve(path)
-        if _is_zarr(p):
-            return None
-        if p.is_dir():
-            p = _folder_files(p)[0]
-        with tifffile.TiffFile(p) as tf:
-            unit = (tf.imagej_metadata or {}).get("unit")
+        unit = _imagej_metadata(path).get("unit")
     except Exception:  # noqa: BLE001 - metadata is optional: unreadable metadata means none
         return None
-    if str(unit or "").strip().lower() in ("pixel", "pixels", "voxel", "voxels"):
+    if str(unit or "").strip().lower() in _NO_SCALE:
         return "voxel"
     k = _metres(unit)
     return {1.0: "m", 1e-3: "mm", 1e-6: "um"}.get(k) if k is not None else None

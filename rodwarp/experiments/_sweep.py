@@ -565,14 +565,15 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
     out = Path(out)
     output_location(out, "--out")
     # the folder is checked before the scheduler is contacted: a refusal costs nothing
+    legacy = _legacy_protocol(out)
     rundir.check(out, "sweep", protocol(spec), rundir.SWEEP_OUTPUTS, overwrite=overwrite, append=True,
-                 legacy=_legacy_protocol(out))
+                 legacy=legacy)
     if scheduler:
         scheduler = check_scheduler(scheduler)
     # a sweep adds points to the folder's sweep of the same protocol and is refused for any
     # other (results of two protocols never share a results.csv or a phase diagram)
     run = rundir.claim(out, "sweep", protocol(spec), rundir.SWEEP_OUTPUTS, overwrite=overwrite, append=True,
-                       legacy=_legacy_protocol(out))
+                       legacy=legacy)
     (out / "points").mkdir(parents=True, exist_ok=True)
     csv_path = out / "results.csv"
     old = {r.get("id"): r for r in read_results(csv_path)}
