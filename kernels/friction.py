@@ -35,6 +35,7 @@ contacts run one thread per rod.
 
 import warp as wp
 
+from rodwarp.kernels.imc import solve_imc
 from rodwarp.kernels.narrowphase import any_perpendicular
 from rodwarp.kernels.structs import ContactFrame, ContactSide, RodContacts, RodModel, StepParams, WallContacts, Walls
 
@@ -172,6 +173,15 @@ def solve_local(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.f
         if f.coupled == 0 or change <= wp.float64(1.0e-9) * (pn + wp.length(pt)):
             break
     return n * pn + pt, gamma
+
+
+@wp.func
+def solve_contact(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.float64, params: StepParams):
+    """The local solve of the step's contact law: exact (:func:`solve_local`) or IMC
+    (:func:`rodwarp.kernels.imc.solve_imc`)."""
+    if params.law == 1:
+        return solve_imc(u, f, n, P, mu, params)
+    return solve_local(u, f, n, P, mu)
 
 
 @wp.func
@@ -358,24 +368,26 @@ def prepare_rod_contacts(
         return
     a, b, W = rod_contact_sides(k, model, x, contacts, tangent)
     f = local_frame(W, contacts.normal[k], approach_target(contacts.gap[k], params))
+    f.gap = contacts.gap[k]
     f.a = a
     f.b = b
     frames[k] = f
 
 
 @wp.func
-def rod_contact_exact(f: ContactFrame, P: wp.vec3d, n: wp.vec3d, mu: wp.float64, v: wp.array(dtype=wp.vec3d),
+def rod_contact_exact(f: ContactFrame, P: wp.vec3d, n: wp.vec3d, params: StepParams, v: wp.array(dtype=wp.vec3d),
                       spin: wp.array(dtype=wp.float64)):
     """The exact local impulse of a rod-rod contact (frame ``f``, impulse ``P``, normal ``n``)
     against the current velocities, the other contacts held fixed."""
-    return solve_local(side_velocity(f.a, v, spin) - side_velocity(f.b, v, spin), f, n, P, mu)
+    return solve_contact(side_velocity(f.a, v, spin) - side_velocity(f.b, v, spin), f, n, P, params.mu, params)
 
 
 @wp.func
-def wall_contact_exact(f: ContactFrame, P: wp.vec3d, walls: Walls, p: int, v: wp.array(dtype=wp.vec3d),
-                       spin: wp.array(dtype=wp.float64)):
+def wall_contact_exact(f: ContactFrame, P: wp.vec3d, walls: Walls, p: int, params: StepParams,
+                       v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
     """``rod_contact_exact`` for a wall contact with wall p (frame side ``a`` the rod's)."""
-    return solve_local(side_velocity(f.a, v, spin) - wall_velocity(walls, p), f, walls.normal[p], P, walls.mu[p])
+    return solve_contact(side_velocity(f.a, v, spin) - wall_velocity(walls, p), f, walls.normal[p], P, walls.mu[p],
+                         params)
 
 
 @wp.func
@@ -395,7 +407,7 @@ def solve_rod_contact(
     f = frames[k]
     P = impulse[k]
     n = normal[k]
-    P_exact, gamma = rod_contact_exact(f, P, n, params.mu, v, spin)
+    P_exact, gamma = rod_contact_exact(f, P, n, params, v, spin)
     frames[k].gamma = gamma
     P_new = relaxed(P_exact, P, n, params.mu, params.relax)
     dP = P_new - P
@@ -481,6 +493,7 @@ def wall_frame(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(d
     n = walls.normal[p]
     c, W = contact_side(model, x, tangent, e, se, n * (-model.radius[model.vertex_rod[i]]))
     f = local_frame(W, n, approach_target(contacts.gap[k], params))
+    f.gap = contacts.gap[k]
     f.a = c
     return f
 
@@ -582,7 +595,7 @@ def solve_rod_walls(
         p = k % walls.n
         f = contacts.frames[j]
         P = contacts.impulse[k]
-        P_exact, gamma = wall_contact_exact(f, P, walls, p, v, spin)
+        P_exact, gamma = wall_contact_exact(f, P, walls, p, params, v, spin)
         contacts.frames[j].gamma = gamma
         P_new = relaxed(P_exact, P, walls.normal[p], walls.mu[p], params.relax)
         dP = P_new - P
@@ -711,13 +724,14 @@ def rod_contact_residual(
         return
     f = frames[k]
     P = impulse[k]
-    P_exact, gamma = rod_contact_exact(f, P, normal[k], params.mu, v, spin)
+    P_exact, gamma = rod_contact_exact(f, P, normal[k], params, v, spin)
     wp.atomic_max(residual, 0, wp.length(f.W * (P_exact - P)))
 
 
 @wp.kernel
 def wall_contact_residual(
     walls: Walls,
+    params: StepParams,
     contacts: WallContacts,
     v: wp.array(dtype=wp.vec3d),
     spin: wp.array(dtype=wp.float64),
@@ -730,5 +744,5 @@ def wall_contact_residual(
     k = contacts.key[j]
     f = contacts.frames[j]
     P = contacts.impulse[k]
-    P_exact, gamma = wall_contact_exact(f, P, walls, k % walls.n, v, spin)
+    P_exact, gamma = wall_contact_exact(f, P, walls, k % walls.n, params, v, spin)
     wp.atomic_max(residual, 0, wp.length(f.W * (P_exact - P)))

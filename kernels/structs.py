@@ -119,6 +119,7 @@ class ContactFrame:
     target: wp.float64  # lowest normal relative velocity (m/s)
     Winv: wp.mat33d  # W^-1 (N s / m), for the exact sticking impulse; zero when W is singular
     gamma: wp.float64  # the sliding solve's multiplier in the last sweep (m/s per N s), its next guess
+    gap: wp.float64  # surface gap at the start of the step (m; negative: overlap), for the IMC law
 
 
 @wp.struct
@@ -184,3 +185,9 @@ class StepParams:
     contact_distance: wp.float64  # base speculative margin (m)
     warm: wp.float64  # fraction of last step's impulses reused
     relax: wp.float64  # over-relaxation of each contact's impulse update (1: plain Gauss-Seidel)
+    law: int  # contact law: 0 exact (Signorini and the Coulomb cone), 1 IMC (smooth penalty, smoothed friction)
+    imc_k: wp.float64  # IMC contact stiffness k_c (N/m): energy k_c [softplus(K1 (-gap)) / K1]^2
+    imc_k1: wp.float64  # IMC K1 = 15 / delta (1/m)
+    imc_k2: wp.float64  # IMC K2 = 15 / nu (s/m)
+    imc_reach: wp.float64  # IMC distance tolerance delta (m): no force at a larger gap
+    imc_nu: wp.float64  # IMC slip tolerance nu (m/s): full Coulomb friction above it

@@ -98,7 +98,8 @@ def _field_options(cls, table: dict, order: tuple[str, ...]):
 #: `rodwarp simulate`'s options in --help order: ProtocolParams fields, and the command's own
 _SIMULATE_OPTIONS = ("alpha", "freq", "amplitude", "gravity", "duration", "entangle_duration", "entangle_freq",
                      "entangle_amplitude", "static_load", "n_rods", "length", "vertices", "box", "mu", "young",
-                     "density", "dt", "iterations", "step_safety", "rod_model", "rolling", "save_every",
+                     "density", "dt", "iterations", "step_safety", "rod_model", "rolling", "contact_law",
+                     "imc_delta", "imc_nu", "imc_stiffness", "save_every",
                      "checkpoint_every", "fields_every", "resume", "overwrite", "entangle", "seed", "device", "out", "initial",
                      "units", "initial_diameter", "entangled_from", "quiet")
 
@@ -222,6 +223,9 @@ def simulate(
                             initial_diameter=initial_diameter)
     params._explicit = _given(ctx, "alpha", "length", "n_rods", "vertices", "box", "seed")
     params.validate()
+    if params.law == "imc" and params.rolling:
+        typer.echo("note: --rolling with --contact-law imc: DisMech's IMC friction acts on the centreline (no "
+                   "rolling); this run lets the rods spin, which the paper's model did not", err=True)
     outdir = out or Path("runs") / default_run_name(params)
     with _failure_recorded(outdir):
         summary = run_protocol(params, outdir, progress=not quiet, resume=resume, overwrite=overwrite,

@@ -85,6 +85,19 @@ def check_protocol(p) -> None:
     number("--step-safety", p.step_safety, gt=0, le=4, hint="the fraction of a diameter the fastest rod may cross per step")
     if p.rod_model not in ("auto", "rigid", "elastic"):
         fail(f"--rod-model must be auto, rigid or elastic, got '{p.rod_model}'")
+    if p.contact_law is not None and p.contact_law not in ("exact", "imc"):
+        fail(f"--contact-law must be exact or imc, got '{p.contact_law}'")
+    if p.contact_law != "imc":
+        for name in ("imc_delta", "imc_nu", "imc_stiffness"):
+            if getattr(p, name) is not None:
+                fail(f"--{name.replace('_', '-')} only applies with --contact-law imc; add it or drop the option")
+    if p.imc_delta is not None:
+        number("--imc-delta", p.imc_delta, gt=0, le=1, hint="delta is in rod diameters (the paper's d/10 is 0.1)")
+    if p.imc_nu is not None:
+        number("--imc-nu", p.imc_nu, gt=0, le=10, unit="m/s", hint="the slip tolerance is a speed (DisMech's "
+               "examples use 1e-3 m/s)")
+    if p.imc_stiffness is not None:
+        number("--imc-stiffness", p.imc_stiffness, gt=0, unit="N/m", hint="leave it out for 1000 rod weights per delta")
     number("--save-every", p.save_every, gt=0, unit="s")
     number("--checkpoint-every", p.checkpoint_every, gt=0, unit="s")
     floor = min(CHECKPOINT_FLOOR, p.save_every)

@@ -81,8 +81,18 @@ class ProtocolParams:
     step_safety: float = _param(1.0, "Adaptive step: the fastest rod crosses at most this many diameters per step "
                                      "(1: the knee of the effort benchmark; the step also shrinks while rods "
                                      "overlap by more than 0.02 d; ignored with --dt).")
-    rolling: bool = _param(True, "Rods spin about their axes; --no-rolling locks the spin (friction on the "
-                                 "centreline only).")
+    rolling: bool | None = _param(None, "Rods spin about their axes; --no-rolling locks the spin (friction on the "
+                                        "centreline only). Default: on with the exact contact law, off with IMC "
+                                        "(DisMech's friction acts on the centreline).")
+    contact_law: str | None = _param(None, "Contact law: exact (Signorini and the Coulomb cone, the default) or imc "
+                                           "(DisMech's smooth penalty and smoothed friction, the paper's; "
+                                           "docs/physics.md).", "law")
+    imc_delta: float | None = _param(None, "IMC distance tolerance delta, in rod diameters (default 0.1: the "
+                                           "paper's d/10).", "delta")
+    imc_nu: float | None = _param(None, "IMC slip tolerance nu (m/s; default 1e-3, DisMech's examples): friction "
+                                        "is smoothed below it, so a load below mu F_n creeps.", "nu")
+    imc_stiffness: float | None = _param(None, "IMC contact stiffness k_c (N/m; default 1000 rod weights per "
+                                               "delta).", "kc")
     save_every: float = _param(0.1, "Metrics and frame interval (s of simulated time).", "save")
     checkpoint_every: float = _param(1.0, "Checkpoint interval (s of simulated time).", "ckpt")
     fields_every: float = _param(0.5, "Interval (s of simulated time, a multiple of --save-every) of the "
@@ -106,6 +116,27 @@ class ProtocolParams:
         from rodwarp.experiments._checks import check_protocol
 
         check_protocol(self)
+
+    @property
+    def law(self) -> str:
+        """The contact law, ``exact`` unless ``contact_law`` says ``imc``."""
+        return self.contact_law or "exact"
+
+    @property
+    def spin(self) -> bool:
+        """Whether rods spin: ``rolling``, else on with the exact law and off with IMC."""
+        return self.rolling if self.rolling is not None else self.law != "imc"
+
+    def contact_law_object(self):
+        """The :class:`~rodwarp.sim.ContactLaw` of these parameters (delta still in diameters
+        here is converted to metres)."""
+        from rodwarp.sim.contact_law import IMC_NU, ContactLaw
+
+        if self.law != "imc":
+            return ContactLaw("exact")
+        delta = None if self.imc_delta is None else self.imc_delta * self.diameter
+        return ContactLaw("imc", delta=delta, nu=self.imc_nu if self.imc_nu is not None else IMC_NU,
+                          stiffness=self.imc_stiffness)
 
     @property
     def diameter(self) -> float:
@@ -188,7 +219,7 @@ def _build(params: ProtocolParams, rods, device, rod_model: str):
 
     g_eff = params.effective_gravity
     model = Model(rods, Material(params.young, params.density), gravity=(0.0, 0.0, -g_eff), mu=params.mu,
-                  rod_model=rod_model, rolling=params.rolling, device=device)
+                  rod_model=rod_model, rolling=params.spin, contact_law=params.contact_law_object(), device=device)
     bb = rods.bounding_box()
     if rods.box is not None:
         # the input's container, widened to its rods: rods lying on (or sunk into) the box's
@@ -306,8 +337,8 @@ def _resume_point(params: ProtocolParams, ckdir: Path):
         raise RodwarpError(f"nothing to resume: no checkpoint in {ckdir}; run without --resume")
     saved = ck[1]["parameters"]
     # a parameter left at None equals one absent from an older checkpoint (fields added since)
-    mine = {k: v for k, v in asdict(params).items() if k != "device" and v is not None}
-    theirs = {k: v for k, v in saved.items() if k != "device" and v is not None}
+    mine = {k: v for k, v in _effective(asdict(params)).items() if k != "device" and v is not None}
+    theirs = {k: v for k, v in _effective(saved).items() if k != "device" and v is not None}
     if json.loads(json.dumps(mine)) != theirs:
         m = json.loads(json.dumps(mine))
         diff = sorted(k for k in set(m) | set(theirs) if m.get(k) != theirs.get(k))
@@ -329,8 +360,21 @@ def _comparable(parameters: dict) -> dict:
     """The parameters that fix the packing and its entangling (JSON round trip, so tuples
     compare equal to the lists a checkpoint holds)."""
     # None equals absent: a donor written before a field was added still matches
-    return {k: v for k, v in json.loads(json.dumps(parameters)).items()
+    return {k: v for k, v in json.loads(json.dumps(_effective(parameters))).items()
             if k not in (*TEST_FIELDS, "device") and v is not None}
+
+
+def _effective(parameters: dict) -> dict:
+    """Parameters with the defaults that depend on others filled in (rolling on unless the
+    contact law is IMC; the exact law as absent), so that a run written before these options
+    existed (rolling True, no contact law) compares equal to today's defaults."""
+    out = dict(parameters)
+    imc = out.get("contact_law") == "imc"
+    if out.get("rolling") is None:
+        out["rolling"] = not imc
+    if out.get("contact_law") == "exact":
+        out["contact_law"] = None
+    return out
 
 
 def _entangled_point(params: ProtocolParams, donor: Path, outdir: Path):
@@ -684,6 +728,7 @@ def _summary(params, model, rows, loop, verdict, contacts, centroid_height, rule
         "centroid_height_ratio": centroid_height / loop.y0,
         "max_penetration_over_d": max(r["max_penetration_over_d"] for r in rows),
         "rod_model": rule["rod_model"], "rod_model_rule": rule,
+        "contact_law": model.contact_law.to_dict(), "rolling": model.rolling,
         "seed": params.seed, "device": run["device"], "dt": loop.dts, "steps": loop.steps,
         "wall_time_s": run["wall_time_s"], "resumed": run["resumed"], "entangled_from": run.get("entangled_from"),
         "initial_orientation": run["initial_orientation"],

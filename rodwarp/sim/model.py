@@ -33,6 +33,7 @@ import warp as wp
 from rodwarp import _warp
 from rodwarp.errors import RodwarpError
 from rodwarp.rodset import RodSet
+from rodwarp.sim.contact_law import ContactLaw
 
 ROD_MODELS = ("elastic", "rigid")
 
@@ -202,6 +203,11 @@ class Model:
         spin (an infinite axial inertia): friction then acts on the centreline only, the
         model of the seed paper's disMech, kept for comparison (docs/physics.md, "Coulomb
         friction at the surface, and rolling").
+    contact_law : ContactLaw or {"exact", "imc"}
+        The law at rod-rod and rod-wall contacts (:class:`~rodwarp.sim.ContactLaw`): exact
+        (default) or DisMech's IMC; its defaults (delta, stiffness) are filled in from the
+        rods and gravity (``model.contact_law``). IMC acts on the centreline in DisMech: pair
+        it with ``rolling=False``.
     device : str
         ``cpu``, ``cuda``, ``cuda:N`` or ``auto``.
     """
@@ -220,6 +226,7 @@ class Model:
         extensible: bool = False,
         rod_model: str = "elastic",
         rolling: bool = True,
+        contact_law: ContactLaw | str = "exact",
         device: str = "cpu",
     ):
         _warp.init()
@@ -342,6 +349,13 @@ class Model:
         self.bend_stiffness_np = material.young * inertia_area
         self.radius_np = r.astype(np.float64)
         self.contact_distance = float(contact_distance) if contact_distance is not None else 0.1 * float(2 * r.min())
+        law = ContactLaw(contact_law) if isinstance(contact_law, str) else contact_law
+        g_mag = float(np.linalg.norm(self.gravity)) or 9.81
+        rod_mass = np.bincount(vertex_rod, weights=edge_mass, minlength=N) if V else np.zeros(1)
+        self.contact_law = law.resolved(float(2 * r.min()), float(rod_mass.max()) * g_mag)
+        if self.contact_law.imc:
+            # the penalty acts up to delta from touching: pairs and walls must be found there
+            self.contact_distance = max(self.contact_distance, self.contact_law.delta)
 
         d = self.device
         st = self.arrays = _structs().RodModel()

@@ -32,6 +32,7 @@ from rodwarp.errors import RodwarpError, SimulationBlowUp
 from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, overlap, solve
 from rodwarp.kernels.structs import ContactFrame, RodFactors, StepParams, WallContacts, Walls
 from rodwarp.sim._bounds import StepBounds
+from rodwarp.sim.contact_law import IMC_SHARPNESS
 from rodwarp.sim.contacts import ContactPipeline
 from rodwarp.sim.model import Model
 from rodwarp.sim.state import State, cached_view
@@ -398,6 +399,14 @@ class RodSolver(StepBounds):
         params.contact_distance = wp.float64(m.contact_distance)
         params.warm = wp.float64(self.warm_start)
         params.relax = wp.float64(self.relax)
+        law = m.contact_law
+        params.law = int(law.imc)
+        if law.imc:
+            params.imc_k = wp.float64(law.stiffness)
+            params.imc_k1 = wp.float64(IMC_SHARPNESS / law.delta)
+            params.imc_k2 = wp.float64(IMC_SHARPNESS / law.nu)
+            params.imc_reach = wp.float64(law.delta)
+            params.imc_nu = wp.float64(law.nu)
 
         if n_contacts:
             if self._frames.shape[0] < n_contacts:
@@ -452,7 +461,8 @@ class RodSolver(StepBounds):
         self._launch("elastics", elastics.integrate_positions, dim=V, device=dev,
                      inputs=[state_in.x, state_out.v, fdt, state_out.x])
         passes = 0
-        if self.position_sweeps and (n_contacts or P):
+        # an IMC overlap is the penalty's compliance, not an error to project away
+        if self.position_sweeps and (n_contacts or P) and not m.contact_law.imc:
             passes = self._project_positions(rs_in, state_out, contacts, walls, wc, params, P)
         self._launch("elastics", frames.advance_frames, dim=V, device=dev, inputs=[
             m.arrays, state_in.x, state_out.x, state_in.director, state_in.theta, state_out.spin, fdt,
@@ -623,7 +633,7 @@ class RodSolver(StepBounds):
         n = int(self._n_wall_frames.numpy()[0])
         if n:
             wp.launch(friction.wall_contact_residual, dim=n, device=m.device, inputs=[
-                walls, self._wall_contacts(state_out), v, spin, out])
+                walls, params, self._wall_contacts(state_out), v, spin, out])
         return float(out.numpy()[0])
 
     def energy(self, state: State) -> dict:
