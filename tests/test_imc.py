@@ -136,3 +136,66 @@ def test_the_exact_law_sticks_where_imc_creeps():
     model.add_plane((0, 0, 1), 0.0, mu=MU, name="floor")
     t, v = mean_velocity(model, 0.3)
     assert abs(v[-1]) < 1e-10
+
+
+# ----------------------------------------------------------------------------------------------
+# the command line: --contact-law and its options
+# ----------------------------------------------------------------------------------------------
+
+TINY = ["--alpha", "20", "--n-rods", "12", "--entangle-duration", "0.02", "--duration", "0.02", "--save-every",
+        "0.01", "--device", "cpu", "--quiet"]
+
+
+def _one_error_line(capsys, args):
+    from rodwarp.cli import main
+
+    capsys.readouterr()
+    rc = main([str(a) for a in args])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert rc == 2 and len(err) == 1 and err[0].startswith("error: "), err
+    return err[0]
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--contact-law", "hertz"], "--contact-law must be exact or imc"),
+    (["--imc-nu", "1e-3"], "--imc-nu only applies with --contact-law imc"),
+    (["--contact-law", "exact", "--imc-delta", "0.1"], "--imc-delta only applies with --contact-law imc"),
+    (["--contact-law", "imc", "--imc-nu", "0"], "--imc-nu"),
+    (["--contact-law", "imc", "--imc-delta", "3"], "in rod diameters"),
+    (["--contact-law", "imc", "--imc-stiffness", "-5"], "--imc-stiffness"),
+])
+def test_bad_contact_law_options_are_refused_in_one_line(capsys, tmp_path, args, fragment):
+    line = _one_error_line(capsys, ["simulate", *TINY, *args, "--out", tmp_path / "run"])
+    assert fragment in line, line
+    assert not (tmp_path / "run").exists()
+
+
+def test_imc_run_records_its_law_and_locks_the_spin_unless_asked(capsys, tmp_path):
+    import json
+
+    from rodwarp.cli import main
+
+    assert main(["simulate", *TINY, "--contact-law", "imc", "--imc-nu", "0.01", "--out", str(tmp_path / "a")]) == 0
+    s = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert s["contact_law"]["name"] == "imc" and s["contact_law"]["nu_m_per_s"] == 0.01
+    assert s["contact_law"]["delta_m"] == pytest.approx(0.1 * 1.0 / 20)  # d / 10 (l = 1 m, alpha 20)
+    assert s["rolling"] is False  # DisMech's friction acts on the centreline
+    capsys.readouterr()
+    assert main(["simulate", *TINY, "--contact-law", "imc", "--rolling", "--out", str(tmp_path / "b")]) == 0
+    assert "note: --rolling with --contact-law imc" in capsys.readouterr().err
+    assert json.loads((tmp_path / "b" / "summary.json").read_text())["rolling"] is True
+    assert main(["simulate", *TINY, "--out", str(tmp_path / "c")]) == 0
+    s = json.loads((tmp_path / "c" / "summary.json").read_text())
+    assert s["contact_law"]["name"] == "exact" and s["rolling"] is True
+
+
+def test_runs_written_before_the_contact_law_option_compare_equal_to_todays_defaults():
+    from rodwarp.experiments._protocol import _comparable, _effective
+
+    old = {"alpha": 50.0, "rolling": True, "seed": 0}  # a checkpoint of an older rodwarp
+    new = {"alpha": 50.0, "rolling": None, "contact_law": None, "imc_nu": None, "seed": 0}
+    assert _comparable(old) == _comparable(new)
+    assert _comparable({**new, "contact_law": "exact"}) == _comparable(old)
+    # an IMC run's default locks the spin: it differs from an old rolling run
+    assert _comparable({**new, "contact_law": "imc"}) != _comparable(old)
+    assert _effective({**new, "contact_law": "imc"})["rolling"] is False
