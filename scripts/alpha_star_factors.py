@@ -39,12 +39,22 @@ LEVELS = [
     ("drive", "A = 1 mm (l/1000), a/g = 2.5", [TRANSITION / "g10_ag2.5"], None, "f = 25.2 Hz"),
     ("drive", "A = 50 mm (l/20), a/g = 2.5", [OUT / "drive_l20"], None, "f = 3.559 Hz"),
     ("drive", "A = 500 mm (l/2), a/g = 2.5", [OUT / "drive_l2"], None, "f = 1.125 Hz (the laboratory's drive)"),
+    ("contact law", "exact, spin locked (--no-rolling)", [OUT / "exact_locked"], None, "the exact law with "
+     "DisMech's centreline friction: separates locking the spin from IMC's smoothing"),
+    ("contact law", "IMC, delta = d/10, nu = 1e-4 m/s", [OUT / "imc_nu1e-4"], None, "spin locked, as DisMech"),
+    ("contact law", "IMC, delta = d/10, nu = 1e-3 m/s", [OUT / "imc_nu1e-3"], None, "spin locked; DisMech's "
+     "examples' nu"),
+    ("contact law", "IMC, delta = d/10, nu = 1e-2 m/s", [OUT / "imc_nu1e-2"], None, "spin locked"),
 ]
 SHORT = {"exact law, N = 5.4 alpha, A = 1 mm, a/g = 1": "baseline (N = 5.4 alpha, A = 1 mm, a/g = 1)",
          "N = 540 (box widened: 2.58, 2 and 1.41 wide at alpha 15, 25 and 50)": "N = 540 at every alpha (a/g = 1)",
          "A = 1 mm (l/1000), a/g = 2.5": "drive A = l/1000, a/g = 2.5",
          "A = 50 mm (l/20), a/g = 2.5": "drive A = l/20, a/g = 2.5",
-         "A = 500 mm (l/2), a/g = 2.5": "drive A = l/2, a/g = 2.5 (the laboratory's)"}
+         "A = 500 mm (l/2), a/g = 2.5": "drive A = l/2, a/g = 2.5 (the laboratory's)",
+         "exact, spin locked (--no-rolling)": "exact law, spin locked (a/g = 1)",
+         "IMC, delta = d/10, nu = 1e-4 m/s": "IMC, nu = 1e-4 m/s (a/g = 1)",
+         "IMC, delta = d/10, nu = 1e-3 m/s": "IMC, nu = 1e-3 m/s (a/g = 1)",
+         "IMC, delta = d/10, nu = 1e-2 m/s": "IMC, nu = 1e-2 m/s (a/g = 1)"}
 #: reference values drawn beside the measured alpha*
 REFERENCES = {"rodwarp before (verdict, a/g = 1)": 35.0, "paper (simulation and experiment)": 100.0,
               "acrylic piles stand without walls (Desmond & Weeks)": 35.0}
