@@ -349,6 +349,11 @@ EXTRA: list[tuple] = [
     ("4", "--entangle with zero entangling time", "simulate --initial $TMP/good.npz --entangle --entangle-duration 0 "
      "--duration 0.02 --save-every 0.01 --out $TMP/g7"),
     ("4", "a checkpoint every step", "simulate --alpha 20 --n-rods 12 --checkpoint-every 1e-6 --out $TMP/g8"),
+    ("4", "unknown contact law", "simulate --alpha 20 --n-rods 12 --contact-law hertz --out $TMP/g8a"),
+    ("4", "IMC option without the IMC law", "simulate --alpha 20 --n-rods 12 --imc-nu 1e-3 --out $TMP/g8b"),
+    ("4", "IMC delta given in metres (it is in diameters)", "simulate --alpha 20 --n-rods 12 --contact-law imc "
+     "--imc-delta 5 --out $TMP/g8c"),
+    ("4", "IMC slip tolerance zero", "simulate --alpha 20 --n-rods 12 --contact-law imc --imc-nu 0 --out $TMP/g8d"),
     ("6", "random bytes named .npz (no pickle advice)", "analyze $TMP/rand.npz --out $TMP/g9"),
     ("6", "a zip holding an object array named .npz", "simulate --initial $TMP/objects.npz --out $TMP/g10"),
     ("6", "random bytes named .csv", "simulate --initial $TMP/rand.csv --out $TMP/g11"),
@@ -494,6 +499,10 @@ SAYS = {
     "friction coefficient 1e9": "--mu",
     "--entangle with zero entangling time": "--entangle-duration 0",
     "a checkpoint every step": "--checkpoint-every",
+    "unknown contact law": "--contact-law must be exact or imc",
+    "IMC option without the IMC law": "only applies with --contact-law imc",
+    "IMC delta given in metres (it is in diameters)": "in rod diameters",
+    "IMC slip tolerance zero": "--imc-nu",
     "random bytes named .npz (no pickle advice)": "not a rod-set .npz",
     "a zip holding an object array named .npz": "object arrays",
     "random bytes named .csv": "not a text CSV",
