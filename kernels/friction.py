@@ -38,6 +38,7 @@ import warp as wp
 from rodwarp.kernels.imc import solve_imc
 from rodwarp.kernels.narrowphase import any_perpendicular
 from rodwarp.kernels.structs import ContactFrame, ContactSide, RodContacts, RodModel, StepParams, WallContacts, Walls
+from rodwarp.kernels.walls import wall_surface, wall_velocity
 
 wp.set_module_options({"enable_backward": False})
 
@@ -383,11 +384,10 @@ def rod_contact_exact(f: ContactFrame, P: wp.vec3d, n: wp.vec3d, params: StepPar
 
 
 @wp.func
-def wall_contact_exact(f: ContactFrame, P: wp.vec3d, walls: Walls, p: int, params: StepParams,
+def wall_contact_exact(f: ContactFrame, P: wp.vec3d, n: wp.vec3d, walls: Walls, p: int, params: StepParams,
                        v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
-    """``rod_contact_exact`` for a wall contact with wall p (frame side ``a`` the rod's)."""
-    return solve_contact(side_velocity(f.a, v, spin) - wall_velocity(walls, p), f, walls.normal[p], P, walls.mu[p],
-                         params)
+    """``rod_contact_exact`` for a contact with wall p of normal ``n`` (frame side ``a`` the rod's)."""
+    return solve_contact(side_velocity(f.a, v, spin) - wall_velocity(walls, p), f, n, P, walls.mu[p], params)
 
 
 @wp.func
@@ -470,27 +470,12 @@ def vertex_edge(model: RodModel, i: int):
 
 
 @wp.func
-def wall_offset(walls: Walls, p: int):
-    """n . x of wall p at the start of the step (m)."""
-    return walls.offset[p] + walls.shift[p] * walls.drive_disp
-
-
-@wp.func
-def wall_velocity(walls: Walls, p: int):
-    """Mean velocity of wall p over the step (m/s)."""
-    if walls.moving[p] != 0:
-        return walls.drive_dir * walls.drive_vel
-    return wp.vec3d(F0, F0, F0)
-
-
-@wp.func
 def wall_frame(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d), walls: Walls,
                params: StepParams, contacts: WallContacts, k: int):
     """The local frame of wall contact k (vertex x wall), side ``a`` the rod's."""
     i = k // walls.n
-    p = k - i * walls.n
     e, se = vertex_edge(model, i)
-    n = walls.normal[p]
+    n = contacts.normal[k]
     c, W = contact_side(model, x, tangent, e, se, n * (-model.radius[model.vertex_rod[i]]))
     f = local_frame(W, n, approach_target(contacts.gap[k], params))
     f.gap = contacts.gap[k]
@@ -525,11 +510,12 @@ def prepare_wall_contacts(
         e, se = vertex_edge(model, i)
         for p in range(walls.n):
             k = i * walls.n + p
-            n = walls.normal[p]
-            g = wp.dot(n, x[i]) - wall_offset(walls, p) - rr
+            dist, n = wall_surface(walls, p, x[i], walls.drive_disp)
+            g = dist - rr
             closing = wp.max(-wp.dot(v[i] - wall_velocity(walls, p), n), F0)
             if walls.on[p] != 0 and g < params.contact_distance + closing * params.dt * wp.float64(2.0):
                 contacts.gap[k] = g
+                contacts.normal[k] = n
                 P = contacts.impulse[k] * params.warm
                 pn = wp.max(wp.dot(P, n), F0)
                 P = n * pn + (P - n * wp.dot(P, n))
@@ -595,9 +581,10 @@ def solve_rod_walls(
         p = k % walls.n
         f = contacts.frames[j]
         P = contacts.impulse[k]
-        P_exact, gamma = wall_contact_exact(f, P, walls, p, params, v, spin)
+        n = contacts.normal[k]
+        P_exact, gamma = wall_contact_exact(f, P, n, walls, p, params, v, spin)
         contacts.frames[j].gamma = gamma
-        P_new = relaxed(P_exact, P, walls.normal[p], walls.mu[p], params.relax)
+        P_new = relaxed(P_exact, P, n, walls.mu[p], params.relax)
         dP = P_new - P
         side_apply(f.a, dP, v, spin)
         contacts.impulse[k] = P_new
@@ -744,5 +731,5 @@ def wall_contact_residual(
     k = contacts.key[j]
     f = contacts.frames[j]
     P = contacts.impulse[k]
-    P_exact, gamma = wall_contact_exact(f, P, walls, k % walls.n, params, v, spin)
+    P_exact, gamma = wall_contact_exact(f, P, contacts.normal[k], walls, k % walls.n, params, v, spin)
     wp.atomic_max(residual, 0, wp.length(f.W * (P_exact - P)))

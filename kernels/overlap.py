@@ -15,6 +15,7 @@ import warp as wp
 
 from rodwarp.kernels.friction import contact_side, side_response, vertex_edge
 from rodwarp.kernels.structs import ContactFrame, ContactSide, RodContacts, RodModel, StepParams, WallContacts, Walls
+from rodwarp.kernels.walls import wall_surface
 
 wp.set_module_options({"enable_backward": False})
 
@@ -73,9 +74,8 @@ def project_rod_walls(r: int, model: RodModel, x0: wp.array(dtype=wp.vec3d), tan
         for p in range(walls.n):
             if walls.on[p] == 0:
                 continue
-            n = walls.normal[p]
-            off = walls.offset[p] + walls.shift[p] * (walls.drive_disp + walls.drive_vel * params.dt)
-            gap = wp.dot(n, x[i]) - off - rr
+            dist, n = wall_surface(walls, p, x[i], walls.drive_disp + walls.drive_vel * params.dt)
+            gap = dist - rr
             excess = -gap - params.slop
             if excess <= F0:
                 continue

@@ -60,13 +60,15 @@ class RodState:
 
 @wp.struct
 class Walls:
-    """The walls of a step: static arrays per wall, the drive as scalars (no per-step copies)."""
+    """The walls of a step: static arrays per wall, the drive as scalars (no per-step copies).
+    Device functions of every kind: kernels/walls.py."""
 
     n: int
-    normal: wp.array(dtype=wp.vec3d)  # unit, into the allowed half-space
-    offset: wp.array(dtype=wp.float64)  # n . x >= offset at rest (m)
+    kind: wp.array(dtype=wp.int32)  # which kind of wall (rodwarp/sim/walls.py, KINDS)
+    geom0: wp.array(dtype=wp.vec4d)  # the kind's geometry, as rodwarp/sim/walls.py packs it
+    geom1: wp.array(dtype=wp.vec4d)
     moving: wp.array(dtype=wp.int32)  # 1: the wall follows the drive
-    shift: wp.array(dtype=wp.float64)  # n . drive direction of a moving wall (its offset's change per metre)
+    shift: wp.array(dtype=wp.float64)  # a moving plane's offset change per metre of drive (n . drive direction)
     mu: wp.array(dtype=wp.float64)
     on: wp.array(dtype=wp.int32)  # 0: removed (no contact)
     drive_dir: wp.vec3d  # unit direction of the drive
@@ -125,6 +127,7 @@ class ContactFrame:
 @wp.struct
 class WallContacts:
     gap: wp.array(dtype=wp.float64)  # vertex x wall; > 1e299 when out of reach
+    normal: wp.array(dtype=wp.vec3d)  # vertex x wall: the wall's normal at the vertex, start of the step
     impulse: wp.array(dtype=wp.vec3d)  # vertex x wall (N s)
     active: wp.array(dtype=wp.int32)  # rods with a vertex within reach of a wall
     n_active: wp.array(dtype=wp.int32)

@@ -16,9 +16,10 @@ The model, its units and its step bounds are described in docs/physics.md.
 from rodwarp.sim.contact_law import ContactLaw
 from rodwarp.sim.control import Control, Drive
 from rodwarp.sim.metrics import centroid_height, rod_contacts
-from rodwarp.sim.model import ROD_MODELS, STEEL, Material, Model, Plane
+from rodwarp.sim.model import ROD_MODELS, STEEL, Material, Model
 from rodwarp.sim.solver import RodSolver, StepInfo, run
 from rodwarp.sim.state import State
+from rodwarp.sim.walls import Plane
 
 __all__ = ["ContactLaw", "Control", "Drive", "Material", "Model", "Plane", "ROD_MODELS", "RodSolver", "STEEL", "State",
            "StepInfo", "centroid_height", "rod_contacts", "run"]

@@ -248,7 +248,7 @@ class StepBounds:
     def _can_touch(self, control) -> bool:
         """Whether any contact is possible: rod-rod contacts on, or a wall in place."""
         m = self.model
-        return (m.rod_contacts and m.n_segments > 1) or bool(len(m.planes) and control.walls_in_place())
+        return (m.rod_contacts and m.n_segments > 1) or bool(len(m.walls) and control.walls_in_place())
 
     def _bound_reason(self, control=None, speed=None) -> str:
         if self.bending == "explicit" and self.explicit_bending_dt() < self.contact_dt(control, speed):

@@ -18,22 +18,31 @@ from rodwarp.errors import RodwarpError
 
 @dataclass
 class Drive:
-    """Prescribed displacement A sin(2 pi f (t - phase_time)) of the moving walls along ``direction``."""
+    """Prescribed displacement of the moving walls along ``direction`` (m): A sin(2 pi f (t -
+    phase_time)) (a vibrated floor), or, with ``ramp_speed`` set, a ramp at that speed from
+    ``phase_time`` for ``ramp_duration`` then held (a piston that compresses, a container lifted
+    away)."""
 
     amplitude: float = 0.0
     frequency: float = 0.0
     direction: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
     phase_time: float = 0.0
+    ramp_speed: float = 0.0
+    ramp_duration: float = math.inf
 
     def displacement(self, t: float) -> float:
         """Displacement at time t (m)."""
+        if self.ramp_speed != 0.0:
+            return self.ramp_speed * min(max(t - self.phase_time, 0.0), self.ramp_duration)
         if self.amplitude == 0.0 or self.frequency == 0.0:
             return 0.0
         return self.amplitude * math.sin(2.0 * math.pi * self.frequency * (t - self.phase_time))
 
     @property
     def peak_speed(self) -> float:
-        """2 pi f |A| (m/s)."""
+        """Fastest wall speed (m/s): 2 pi f |A|, or the ramp's speed."""
+        if self.ramp_speed != 0.0:
+            return abs(self.ramp_speed)
         return 2.0 * math.pi * self.frequency * abs(self.amplitude)
 
 
@@ -43,19 +52,19 @@ class Control:
     Parameters
     ----------
     model : Model
-        The scene whose walls (``model.planes``) this control switches.
+        The scene whose walls (``model.walls``) this control switches.
     """
 
     def __init__(self, model):
         self.model = model
-        self.on = np.ones(len(model.planes), dtype=bool)
+        self.on = np.ones(len(model.walls), dtype=bool)
         self.drive = Drive()
         self._torque = None
 
     # ------------------------------------------------------------------ walls
     def _sync(self) -> None:
         # walls added to the model after this control was made are in place
-        n = len(self.model.planes)
+        n = len(self.model.walls)
         if self.on.size < n:
             self.on = np.concatenate([self.on, np.ones(n - self.on.size, dtype=bool)])
 
@@ -63,24 +72,24 @@ class Control:
         """Take walls out by name (e.g. the side walls and lid before the stability test)."""
         self._sync()
         names = set(names)
-        known = {p.name for p in self.model.planes}
+        known = {p.name for p in self.model.walls}
         unknown = sorted(names - known)
         if unknown:
             raise RodwarpError(f"no wall named {', '.join(unknown)}; the model has {', '.join(sorted(known))}")
-        for k, p in enumerate(self.model.planes):
+        for k, p in enumerate(self.model.walls):
             if p.name in names:
                 self.on[k] = False
 
     def restore_walls(self, names=None) -> None:
         """Put walls back in place (all when ``names`` is None)."""
         self._sync()
-        for k, p in enumerate(self.model.planes):
+        for k, p in enumerate(self.model.walls):
             if names is None or p.name in set(names):
                 self.on[k] = True
 
     def walls_in_place(self) -> list[str]:
         self._sync()
-        return [p.name for k, p in enumerate(self.model.planes) if self.on[k]]
+        return [p.name for k, p in enumerate(self.model.walls) if self.on[k]]
 
     def set_drive(self, amplitude: float, frequency: float, direction=(0.0, 0.0, 1.0), phase_time: float = 0.0) -> None:
         """Moving walls follow x = A sin(2 pi f (t - phase_time)) along ``direction`` (m, Hz)."""
@@ -89,38 +98,27 @@ class Control:
         d = np.asarray(direction, float)
         self.drive = Drive(float(amplitude), float(frequency), d / np.linalg.norm(d), float(phase_time))
 
+    def set_ramp(self, speed: float, duration: float = math.inf, direction=(0.0, 0.0, 1.0),
+                 start_time: float = 0.0) -> None:
+        """Moving walls travel at ``speed`` (m/s) along ``direction`` from ``start_time`` (s) for
+        ``duration`` (s), then stay: a piston pressing by speed x duration, a container lifted away."""
+        if not (math.isfinite(speed) and duration > 0):
+            raise RodwarpError(f"a ramp needs a finite speed and a positive duration, got {speed} m/s for {duration} s")
+        d = np.asarray(direction, float)
+        self.drive = Drive(direction=d / np.linalg.norm(d), phase_time=float(start_time), ramp_speed=float(speed),
+                           ramp_duration=float(duration))
+
     def floor_height(self, t: float) -> float | None:
         """Height z (m) at time t of the wall named ``floor`` (moving with the drive when it is
         ``moving``); None when the scene has no floor in place."""
         self._sync()
-        for k, p in enumerate(self.model.planes):
-            if p.name == "floor" and self.on[k]:
+        for k, p in enumerate(self.model.walls):
+            if p.name == "floor" and p.kind == "plane" and self.on[k]:
                 z = p.offset / p.normal[2] if abs(p.normal[2]) > 0 else p.offset
                 if p.moving:
                     z += float(self.drive.direction[2]) * self.drive.displacement(t)
                 return float(z)
         return None
-
-    def wall_kinematics(self, t: float, dt: float):
-        """Wall normals, offsets at time t, mean velocities over [t, t + dt], friction, in place."""
-        self._sync()
-        P = len(self.model.planes)
-        normals = np.zeros((max(P, 1), 3))
-        offsets = np.zeros(max(P, 1))
-        vel = np.zeros((max(P, 1), 3))
-        mus = np.zeros(max(P, 1))
-        on = np.zeros(max(P, 1), dtype=np.int32)
-        d0 = self.drive.displacement(t)
-        d1 = self.drive.displacement(t + dt)
-        for k, p in enumerate(self.model.planes):
-            normals[k] = p.normal
-            mus[k] = p.mu
-            offsets[k] = p.offset
-            on[k] = int(self.on[k])
-            if p.moving:
-                offsets[k] += float(p.normal @ self.drive.direction) * d0
-                vel[k] = self.drive.direction * ((d1 - d0) / dt)
-        return normals, offsets, vel, mus, on
 
     # ------------------------------------------------------------------ torques
     def set_torque(self, torque) -> None:

@@ -1,4 +1,4 @@
-"""The static description of a rod scene: :class:`Material`, walls (:class:`Plane`), :class:`Model`.
+"""The static description of a rod scene: :class:`Material`, walls (:mod:`rodwarp.sim.walls`), :class:`Model`.
 
 Follows the Model / State / Control / solver split of Warp's simulation examples and of
 Newton: the model holds what does not change during a run (masses, inertias, rest shape,
@@ -34,6 +34,7 @@ from rodwarp import _warp
 from rodwarp.errors import RodwarpError
 from rodwarp.rodset import RodSet
 from rodwarp.sim.contact_law import ContactLaw
+from rodwarp.sim.walls import Plane
 
 ROD_MODELS = ("elastic", "rigid")
 
@@ -76,31 +77,6 @@ class Material:
 
 
 STEEL = Material()
-
-
-@dataclass
-class Plane:
-    """Half-space wall {x : n . x >= offset} with Coulomb friction.
-
-    Parameters
-    ----------
-    normal : (3,) array
-        Unit normal pointing into the allowed region.
-    offset : float
-        Plane position n . x at rest (m).
-    mu : float
-        Friction coefficient against rods.
-    moving : bool
-        Whether the wall follows the container drive of the control.
-    name : str
-        Label used by :meth:`Control.remove_walls` and in messages.
-    """
-
-    normal: np.ndarray
-    offset: float
-    mu: float = 0.2
-    moving: bool = False
-    name: str = "plane"
 
 
 # ----------------------------------------------------------------------------- frames (host)
@@ -248,7 +224,7 @@ class Model:
         self.damping = float(damping)
         self.device = _warp.resolve_device(device)
         self.rod_contacts = bool(rod_contacts)
-        self.planes: list[Plane] = []
+        self.walls: list = []  # rodwarp.sim.walls kinds
         self.box: np.ndarray | None = None if rods.box is None else np.asarray(rods.box, float)
         pin_in = np.zeros(rods.n_vertices, dtype=bool)
         if pinned is not None:
@@ -426,13 +402,25 @@ class Model:
     def add_plane(self, normal, offset: float, *, mu: float | None = None, moving: bool = False,
                   name: str = "plane") -> Plane:
         """Add a half-space wall {x : n . x >= offset}; returns the :class:`Plane`."""
-        n = np.asarray(normal, dtype=np.float64).reshape(3)
-        ln = np.linalg.norm(n)
-        if not ln > 0:
-            raise RodwarpError("plane normal must be a non-zero vector")
-        plane = Plane(n / ln, float(offset), self.mu if mu is None else float(mu), bool(moving), name)
-        self.planes.append(plane)
-        return plane
+        return self.add_wall(Plane.make(normal, offset, mu=mu, moving=moving, name=name))
+
+    def add_wall(self, wall):
+        """Add a wall of any kind (:mod:`rodwarp.sim.walls`: ``Plane.make(...)``,
+        ``Cylinder.make(...)``); a wall without a friction coefficient takes the model's.
+        Returns the wall."""
+        if any(w.name == wall.name for w in self.walls):
+            raise RodwarpError(f"the model already has a wall named '{wall.name}'; give another name")
+        if wall.mu is None:
+            wall.mu = self.mu
+        elif not (wall.mu >= 0 and math.isfinite(wall.mu)):
+            raise RodwarpError(f"wall friction coefficient must be >= 0, got {wall.mu}")
+        self.walls.append(wall)
+        return wall
+
+    @property
+    def planes(self) -> list[Plane]:
+        """The plane walls (read only; :attr:`walls` holds every wall)."""
+        return [w for w in self.walls if w.kind == "plane"]
 
     def add_box(self, lower, upper, *, walls=("floor", "x-", "x+", "y-", "y+"), mu: float | None = None,
                 moving: bool = False):

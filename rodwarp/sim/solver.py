@@ -36,6 +36,7 @@ from rodwarp.sim.contact_law import IMC_SHARPNESS
 from rodwarp.sim.contacts import ContactPipeline
 from rodwarp.sim.model import Model
 from rodwarp.sim.state import State, cached_view
+from rodwarp.sim.walls import device_rows
 
 
 @dataclass
@@ -223,7 +224,8 @@ class RodSolver(StepBounds):
             dmin = model.min_diameter
             skin = dmin + 0.2 * min(float(model.rest_length_np.max()), 20.0 * dmin)
         self.contacts = ContactPipeline(model, skin, self._launch, lambda: self.timings)
-        self._wall_gap = wp.zeros(V * max(len(model.planes), 1), dtype=wp.float64, device=d)
+        self._wall_gap = wp.zeros(V * max(len(model.walls), 1), dtype=wp.float64, device=d)
+        self._wall_normal = wp.zeros(V * max(len(model.walls), 1), dtype=wp.vec3d, device=d)
         self._active = wp.zeros(max(model.n_rods, 1), dtype=wp.int32, device=d)
         self._n_active = wp.zeros(1, dtype=wp.int32, device=d)
         self._wall_span = wp.zeros(max(model.n_rods, 1), dtype=wp.vec2i, device=d)
@@ -289,30 +291,17 @@ class RodSolver(StepBounds):
         """The Walls bundle of this step: per-wall arrays copied only when the control's walls
         change; the drive enters as three scalars."""
         m = self.model
-        P = len(m.planes)
+        P = len(m.walls)
         key = (id(control), P, tuple(control.on.tolist()), tuple(control.drive.direction.tolist()))
         w = self._walls_struct
         if w is None or self._walls_key != key:
             dev = m.device
-            rows = max(P, 1)
-            normal = np.zeros((rows, 3))
-            offset = np.zeros(rows)
-            moving = np.zeros(rows, dtype=np.int32)
-            shift = np.zeros(rows)
-            mu = np.zeros(rows)
-            on = np.zeros(rows, dtype=np.int32)
-            for k, p in enumerate(m.planes):
-                normal[k], offset[k], mu[k], on[k] = p.normal, p.offset, p.mu, int(control.on[k])
-                moving[k] = int(p.moving)
-                shift[k] = float(p.normal @ control.drive.direction) if p.moving else 0.0
+            rows = device_rows(m.walls, control.on, control.drive.direction)
             w = self._walls_struct = Walls()
             w.n = P
-            w.normal = wp.array(normal, dtype=wp.vec3d, device=dev)
-            w.offset = wp.array(offset, dtype=wp.float64, device=dev)
-            w.moving = wp.array(moving, dtype=wp.int32, device=dev)
-            w.shift = wp.array(shift, dtype=wp.float64, device=dev)
-            w.mu = wp.array(mu, dtype=wp.float64, device=dev)
-            w.on = wp.array(on, dtype=wp.int32, device=dev)
+            for name, a in rows.items():
+                dtype = wp.vec4d if a.ndim == 2 else (wp.int32 if a.dtype == np.int32 else wp.float64)
+                setattr(w, name, wp.array(a, dtype=dtype, device=dev))
             w.drive_dir = wp.vec3d(*control.drive.direction)
             self._walls_key = key
         d0 = control.drive.displacement(t)
@@ -353,7 +342,7 @@ class RodSolver(StepBounds):
             if self._v_elastic is None:
                 e = self.energy(state_in)
                 self._v_elastic = math.sqrt(2.0 * (e["bending"] + e["stretching"] + e["twist"]) / m.total_mass())
-        P = len(m.planes)
+        P = len(m.walls)
         touching = state_in.contact_count > 0 or (P > 0 and bool(control.walls_in_place()))
         theta = self.theta_for(dt, touching)
         if theta == 0.0 and touching and not self._warned_explicit:
@@ -367,6 +356,7 @@ class RodSolver(StepBounds):
         state_out.ensure_wall_storage()
         if self._wall_gap.shape[0] != V * max(P, 1):
             self._wall_gap = wp.zeros(V * max(P, 1), dtype=wp.float64, device=dev)
+            self._wall_normal = wp.zeros(V * max(P, 1), dtype=wp.vec3d, device=dev)
         f = self.factors
         f.implicit_bending = int(theta != 0.0)
         rs_in = state_in.rod_state()
@@ -498,6 +488,7 @@ class RodSolver(StepBounds):
     def _wall_contacts(self, state_out: State) -> WallContacts:
         # one view per state (the output state alternates), kept on the state itself
         return cached_view(state_out.__dict__, "_wall_contacts", WallContacts, gap=self._wall_gap,
+                           normal=self._wall_normal,
                            impulse=state_out.wall_impulse, active=self._active, n_active=self._n_active,
                            span=self._wall_span, key=self._wall_key, frames=self._wall_frames,
                            n_frames=self._n_wall_frames)

@@ -40,7 +40,7 @@ class State:
         self.spin = wp.zeros(V, dtype=wp.float64, device=d)
         self.theta = wp.zeros(V, dtype=wp.float64, device=d)
         self.director = wp.zeros(V, dtype=wp.vec3d, device=d)
-        self.wall_impulse = wp.zeros(V * max(len(model.planes), 1), dtype=wp.vec3d, device=d)
+        self.wall_impulse = wp.zeros(V * max(len(model.walls), 1), dtype=wp.vec3d, device=d)
         self.contact_count = 0
         self.allocate_contacts(max(contact_capacity, 16))
 
@@ -58,7 +58,7 @@ class State:
 
     def ensure_wall_storage(self) -> None:
         """Size the wall impulses for the model's walls (after walls were added to the model)."""
-        n = self.model.n_vertices * max(len(self.model.planes), 1)
+        n = self.model.n_vertices * max(len(self.model.walls), 1)
         if self.wall_impulse.shape[0] != n:
             self.wall_impulse = wp.zeros(n, dtype=wp.vec3d, device=self.model.device)
 

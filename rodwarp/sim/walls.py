@@ -1,0 +1,81 @@
+"""Walls of a scene, one tagged type: :class:`Plane` (more kinds add a class here and a branch in
+kernels/walls.py).
+
+Each kind states its geometry once here, for the host (:meth:`distance`, used by checks and
+tests) and as a row of the device's :class:`~rodwarp.kernels.structs.Walls` bundle
+(:func:`device_rows`), whose device functions live in :mod:`rodwarp.kernels.walls`. A wall that
+``moving`` follows the control's drive (a vibrated floor, a piston, a container lifted away:
+:class:`~rodwarp.sim.control.Drive`). Walls are switched in and out by name in the
+:class:`~rodwarp.sim.control.Control`; the model keeps them all.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rodwarp.errors import RodwarpError
+
+#: the device's kind codes (kernels/walls.py)
+KINDS = {"plane": 0}
+
+
+@dataclass
+class Plane:
+    """Half-space wall {x : n . x >= offset} with Coulomb friction.
+
+    Parameters
+    ----------
+    normal : (3,) array
+        Unit normal pointing into the allowed region.
+    offset : float
+        Plane position n . x at rest (m).
+    mu : float
+        Friction coefficient against rods.
+    moving : bool
+        Whether the wall follows the drive of the control.
+    name : str
+        Label used by :meth:`Control.remove_walls` and in messages.
+    """
+
+    normal: np.ndarray
+    offset: float
+    mu: float | None = 0.2
+    moving: bool = False
+    name: str = "plane"
+    kind = "plane"
+
+    def distance(self, x, displacement=0.0, direction=(0.0, 0.0, 1.0)):
+        """Signed distance (m) of points ``x`` (..., 3) from the surface, positive inside, with the
+        drive displaced by ``displacement`` (m) along ``direction`` when the wall moves."""
+        shift = float(np.dot(self.normal, direction)) * displacement if self.moving else 0.0
+        return np.asarray(x, float) @ self.normal - (self.offset + shift)
+
+    def device_row(self, drive_direction):
+        """(geom0, geom1, shift) of the device bundle (kernels/walls.py, ``plane_surface``)."""
+        shift = float(self.normal @ drive_direction) if self.moving else 0.0
+        return (*self.normal, self.offset), (0.0, 0.0, 0.0, 0.0), shift
+
+    @classmethod
+    def make(cls, normal, offset: float, *, mu: float | None = None, moving: bool = False, name: str = "plane"):
+        """A plane with its normal normalised; ``mu`` None takes the model's."""
+        n = np.asarray(normal, dtype=np.float64).reshape(3)
+        ln = np.linalg.norm(n)
+        if not ln > 0:
+            raise RodwarpError("plane normal must be a non-zero vector")
+        return cls(n / ln, float(offset), mu, bool(moving), name)
+
+
+def device_rows(walls, on, drive_direction) -> dict:
+    """Per-wall arrays of the device bundle (``kernels.structs.Walls``), one row per wall; a
+    model without walls gets one inert row (arrays cannot be empty)."""
+    rows = max(len(walls), 1)
+    out = {"kind": np.zeros(rows, dtype=np.int32), "geom0": np.zeros((rows, 4)), "geom1": np.zeros((rows, 4)),
+           "moving": np.zeros(rows, dtype=np.int32), "shift": np.zeros(rows), "mu": np.zeros(rows),
+           "on": np.zeros(rows, dtype=np.int32)}
+    for k, w in enumerate(walls):
+        out["kind"][k] = KINDS[w.kind]
+        out["geom0"][k], out["geom1"][k], out["shift"][k] = w.device_row(drive_direction)
+        out["mu"][k], out["on"][k], out["moving"][k] = w.mu, int(on[k]), int(w.moving)
+    return out
