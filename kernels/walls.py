@@ -4,15 +4,19 @@ wall is added here alone.
 
 Kinds (``Walls.kind``; host side :mod:`rodwarp.sim.walls`):
 
-* 0, a plane: the half-space {x : n . x >= offset}, n its unit normal into the allowed region.
+* 0, a plane: the half-space {x : n . x >= offset}, n its unit normal into the allowed region;
+* 1, a cylinder with the rods inside it: {x : |(x - c) - a ((x - c) . a)| <= R}, axis through c
+  along the unit a, radius R; its normal at a point is the inward radial direction there.
 
-A wall that moves follows the control's drive: it is displaced by ``drive_dir * d(t)``. A
-capsule touches a plane first at a segment endpoint (the distance to a plane is affine along a
-segment), so the vertex spheres are the contacts.
+A wall that moves follows the control's drive: its offset (plane) or axis point (cylinder) is
+displaced by ``drive_dir * d(t)``. A capsule touches either kind first at a segment endpoint (the
+distance to a plane is affine along a segment, the distance from an axis convex), so the vertex
+spheres are the contacts.
 """
 
 import warp as wp
 
+from rodwarp.kernels.narrowphase import any_perpendicular
 from rodwarp.kernels.structs import Walls
 
 wp.set_module_options({"enable_backward": False})
@@ -20,6 +24,7 @@ wp.set_module_options({"enable_backward": False})
 F0 = wp.float64(0.0)
 
 PLANE = wp.constant(0)
+CYLINDER = wp.constant(1)
 
 
 @wp.func
@@ -32,10 +37,30 @@ def plane_surface(walls: Walls, p: int, x: wp.vec3d, disp: wp.float64):
 
 
 @wp.func
+def cylinder_surface(walls: Walls, p: int, x: wp.vec3d, disp: wp.float64):
+    """Cylinder, rods inside: geom0 = (a point of the axis, radius), geom1 = (unit axis, 0)."""
+    g = walls.geom0[p]
+    h = walls.geom1[p]
+    c = wp.vec3d(g[0], g[1], g[2])
+    if walls.moving[p] != 0:
+        c = c + walls.drive_dir * disp
+    a = wp.vec3d(h[0], h[1], h[2])
+    rel = x - c
+    rho = rel - a * wp.dot(rel, a)
+    L = wp.length(rho)
+    n = any_perpendicular(a)
+    if L > F0:
+        n = -rho / L
+    return g[3] - L, n
+
+
+@wp.func
 def wall_surface(walls: Walls, p: int, x: wp.vec3d, disp: wp.float64):
     """Signed distance (m) of point ``x`` from wall p's surface, positive on the allowed side,
     and the wall's unit normal there (into the allowed region), with the drive displaced by
     ``disp`` (m)."""
+    if walls.kind[p] == CYLINDER:
+        return cylinder_surface(walls, p, x, disp)
     return plane_surface(walls, p, x, disp)
 
 

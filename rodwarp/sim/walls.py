@@ -1,5 +1,4 @@
-"""Walls of a scene, one tagged type: :class:`Plane` (more kinds add a class here and a branch in
-kernels/walls.py).
+"""Walls of a scene, one tagged type: :class:`Plane` and :class:`Cylinder`.
 
 Each kind states its geometry once here, for the host (:meth:`distance`, used by checks and
 tests) and as a row of the device's :class:`~rodwarp.kernels.structs.Walls` bundle
@@ -18,7 +17,7 @@ import numpy as np
 from rodwarp.errors import RodwarpError
 
 #: the device's kind codes (kernels/walls.py)
-KINDS = {"plane": 0}
+KINDS = {"plane": 0, "cylinder": 1}
 
 
 @dataclass
@@ -65,6 +64,56 @@ class Plane:
         if not ln > 0:
             raise RodwarpError("plane normal must be a non-zero vector")
         return cls(n / ln, float(offset), mu, bool(moving), name)
+
+
+@dataclass
+class Cylinder:
+    """The inside of a circular cylinder, {x : |(x - c) - a ((x - c) . a)| <= R}: rods are kept
+    within ``radius`` of the axis through ``point`` along ``axis`` (infinitely long: close it
+    with planes).
+
+    Parameters
+    ----------
+    point : (3,) array
+        A point of the axis at rest (m).
+    axis : (3,) array
+        Axis direction (normalised here).
+    radius : float
+        Radius of the inner surface (m).
+    mu, moving, name
+        As for :class:`Plane`; a moving cylinder's axis follows the drive.
+    """
+
+    point: np.ndarray
+    axis: np.ndarray
+    radius: float
+    mu: float | None = 0.2
+    moving: bool = False
+    name: str = "cylinder"
+    kind = "cylinder"
+
+    def device_row(self, drive_direction):
+        """(geom0, geom1, shift) of the device bundle (kernels/walls.py, ``cylinder_surface``)."""
+        return (*self.point, self.radius), (*self.axis, 0.0), 0.0
+
+    @classmethod
+    def make(cls, point, axis, radius: float, *, mu: float | None = None, moving: bool = False,
+             name: str = "cylinder"):
+        """A cylinder with its axis normalised; ``mu`` None takes the model's."""
+        a = np.asarray(axis, dtype=np.float64).reshape(3)
+        la = np.linalg.norm(a)
+        if not la > 0:
+            raise RodwarpError("cylinder axis must be a non-zero vector")
+        if not (np.isfinite(radius) and radius > 0):
+            raise RodwarpError(f"cylinder radius must be a positive length (m), got {radius}")
+        return cls(np.asarray(point, dtype=np.float64).reshape(3), a / la, float(radius), mu, bool(moving), name)
+
+    def distance(self, x, displacement=0.0, direction=(0.0, 0.0, 1.0)):
+        """As :meth:`Plane.distance`: R minus the distance from the axis (m)."""
+        c = self.point + (np.asarray(direction, float) * displacement if self.moving else 0.0)
+        rel = np.asarray(x, float) - c
+        rho = rel - np.outer(rel @ self.axis, self.axis).reshape(rel.shape)
+        return self.radius - np.linalg.norm(rho, axis=-1)
 
 
 def device_rows(walls, on, drive_direction) -> dict:
