@@ -31,8 +31,8 @@ def pile(bending: str):
     solver.bending = bending
     state = model.state()
     state.load_numpy(state_arrays)
-    stage = protocol._stages(params)[1]
-    control = protocol.stage_control(model, stage.name, stage.amplitude, stage.freq, info["stage_t0"])
+    stage = protocol.plan(params)[1]
+    control = stage.control(model, info["stage_t0"])
     return solver, state, control, info["stepper"]
 
 

@@ -10,8 +10,9 @@
 One private module per concern, their public names re-exported here:
 
 =================  ==========================================================================
-``_protocol``      :class:`ProtocolParams`, :func:`rod_model_rule`, :func:`stage_control`,
-                   :func:`run_protocol` - the stages on one stepping loop; :func:`default_run_name`
+``_plan``          :func:`plan`, :class:`Stage` - the run plan: the stages, written once
+``_protocol``      :class:`ProtocolParams`, :func:`rod_model_rule`, :func:`run_protocol` - the
+                   plan's stages on one stepping loop; :func:`default_run_name`
 ``_recorder``      :class:`Recorder` - a run's samples (metrics rows, trajectory and VTK frames)
                    and checkpoints; :func:`plot_metrics`
 ``_packing``       :func:`random_packing` - the first stage, random sequential addition
@@ -32,8 +33,8 @@ from rodwarp._util import lazy_exports
 _WHERE = {
     # the protocol
     "ProtocolParams": "_protocol", "RODS_PER_ALPHA": "_protocol", "RIGID_SAG": "_protocol",
-    "SIDE_WALLS": "_protocol", "Stage": "_protocol", "LoopPosition": "_protocol", "option_table": "_protocol",
-    "rod_model_rule": "_protocol", "stage_control": "_protocol", "run_protocol": "_protocol",
+    "SIDE_WALLS": "_plan", "Stage": "_plan", "plan": "_plan", "LoopPosition": "_protocol",
+    "option_table": "_protocol", "rod_model_rule": "_protocol", "run_protocol": "_protocol",
     "default_run_name": "_protocol",
     "Recorder": "_recorder", "plot_metrics": "_recorder",
     "random_packing": "_packing", "orientation_statistics": "_packing", "isotropic_directions": "_packing",

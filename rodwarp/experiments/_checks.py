@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from rodwarp.experiments._plan import STEPS_PER_PERIOD, frames, plan
 from rodwarp.validation import BASE_BYTES, device_name, fail, integer, memory_fits, number
 
 #: bytes of memory per simulated vertex (model, two states, contact lists, solver scratch and
@@ -130,25 +131,22 @@ def check_protocol(p) -> None:
                  f"decides {'it' if len(given) == 1 else 'them'}); drop {opts}")
 
     # consistency of durations, intervals and the step
-    stages = [("stability test", "--duration", p.duration)]
-    if p.entangle_duration > 0 and (not p.initial or p.entangle):
-        stages.insert(0, ("entangling", "--entangle-duration", p.entangle_duration))
+    stages = plan(p)
     if p.save_every > p.duration:
         fail(f"--save-every {p.save_every:g} s is longer than the stability test (--duration {p.duration:g} s): "
              f"the verdict needs samples inside the test; lower --save-every")
     if p.dt is not None:
-        for title, opt, dur in stages:
-            if p.dt > dur or stage_steps(dur, p.dt) < 1:
-                fail(f"--dt {p.dt:g} s is longer than the {title} ({opt} {dur:g} s): not a single full step fits; "
-                     f"lower --dt below {dur:g} s or leave it out for the default step")
+        for s in stages:
+            if p.dt > s.duration or stage_steps(s.duration, p.dt) < 1:
+                fail(f"--dt {p.dt:g} s is longer than the {s.title} ({s.option} {s.duration:g} s): not a single full "
+                     f"step fits; lower --dt below {s.duration:g} s or leave it out for the default step")
         check_step_count(p, p.dt, "--dt")
     # the step can never exceed 1/40 of a drive period (solver default): a lower bound on the work
-    for title, opt, dur in stages:
-        f = p.entangle_freq if title == "entangling" else p.freq
-        if f > 0 and 40.0 * f * dur > MAX_STEPS:
-            fq = "--entangle-freq" if title == "entangling" else "--freq"
-            fail(f"{fq} {f:g} Hz over {opt} {dur:g} s needs at least {40.0 * f * dur:.3g} steps (40 per period), "
-                 f"more than {MAX_STEPS:.0e}; lower the frequency or the duration")
+    for s in stages:
+        if s.min_steps() > MAX_STEPS:
+            fq = s.option.replace("duration", "freq")
+            fail(f"{fq} {s.freq:g} Hz over {s.option} {s.duration:g} s needs at least {s.min_steps():.3g} steps "
+                 f"({STEPS_PER_PERIOD:g} per period), more than {MAX_STEPS:.0e}; lower the frequency or the duration")
     height = box[2] * p.length
     if 2 * p.entangle_amplitude >= 0.5 * height or 2 * p.amplitude >= 0.5 * height:
         fail(f"vibration amplitude does not fit the box (height {height:g} m); lower --amplitude")
@@ -173,16 +171,12 @@ def check_protocol(p) -> None:
                  f"{phi * p.alpha:.3g}); random packing places at most phi * alpha ~ {MAX_PHI_ALPHA:g}: "
                  f"lower --n-rods or enlarge --box")
     p._n_vertices = n_vertices
-    frames = 1 + sum(int(math.ceil(dur / p.save_every)) + 1 for _, _, dur in stages)
-    p._frames = frames
+    p._frames = frames(stages, p.save_every)
 
 
 def check_step_count(p, dt: float, source: str) -> None:
     """Refuse a run of more than :data:`MAX_STEPS` steps at step ``dt`` (s)."""
-    stages = [p.duration]
-    if p.entangle_duration > 0 and (not p.initial or p.entangle):
-        stages.append(p.entangle_duration)
-    steps = sum(stage_steps(d, dt) for d in stages)
+    steps = sum(stage_steps(s.duration, dt) for s in plan(p))
     if steps > MAX_STEPS:
         fail(f"the run needs {steps:.3g} steps at dt = {dt:.3g} s ({source}), more than {MAX_STEPS:.0e} "
              f"(weeks of computing); shorten --duration/--entangle-duration or lower --alpha")

@@ -16,6 +16,7 @@ import math
 from pathlib import Path
 
 from rodwarp.errors import RodwarpError
+from rodwarp.experiments._plan import ENTANGLE, TEST
 from rodwarp.experiments._sweep import _cell, read_results
 from rodwarp.rodset.files import save_figure, write_text
 
@@ -383,8 +384,8 @@ def _timeseries_figure(out: Path, key, rows, path: Path) -> Path | None:
                 ax.plot(*zip(*pts), color=colour, lw=1, marker="o" if col == "cv_e" else None, ms=2, label=label)
         # the test starts where entangling ends (its last sample, the run's test_start), not
         # at the first stability sample one save interval later
-        ent = [float(x["time"]) for x in m if x["stage"] == "entangle"]
-        if ent and any(x["stage"] == "stability" for x in m):
+        ent = [float(x["time"]) for x in m if x["stage"] == ENTANGLE]
+        if ent and any(x["stage"] == TEST for x in m):
             t_test = max(ent)
     for ax, label in zip(axs, ("Z (contacts per rod)", "f (largest cluster)", "cv_e = sigma_e / mu_e")):
         ax.set_xlabel("t (s)")

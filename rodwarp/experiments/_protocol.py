@@ -7,8 +7,9 @@ Stages (the seed paper's "Numerical simulations of rod packings"; docs/protocol.
 3. stability: side walls and lid removed, the floor vibrated at ``freq`` with ``amplitude``
    for ``duration``; f = largest contact cluster / all rods measured over time.
 
-The stages run on one stepping loop (:func:`run_protocol`): each stage is a drive and a set of
-walls (:func:`stage_control`) on the same model and states; the loop takes adaptive steps that
+The stages are a run plan (:func:`rodwarp.experiments._plan.plan`) stepped by one loop
+(:func:`run_protocol`): each stage is a drive and a set of walls (``Stage.control``) on the
+same model and states; the loop takes adaptive steps that
 land exactly on the sample times, and a :class:`~rodwarp.experiments._recorder.Recorder` takes
 the samples (metrics row, trajectory and VTK frames) and the checkpoints, which also hold the
 loop's own position (:class:`LoopPosition`), so a resumed run is bit-identical.
@@ -28,11 +29,12 @@ import math
 import time
 from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 
 from rodwarp.errors import RodwarpError
+
+from rodwarp.experiments._plan import ENTANGLE, SIDE_WALLS, frames, plan  # noqa: E402
 
 #: rods per unit aspect ratio: the paper's packings hold N = round(5.4 alpha) rods (its
 #: "Materials and Methods"; docs/protocol.md). A number of rods, not a contact number.
@@ -233,21 +235,19 @@ def _build(params: ProtocolParams, rods, device, rod_model: str):
 
 
 #: walls removed for the stability test (the floor stays and vibrates; docs/protocol.md)
-SIDE_WALLS = ("ceiling", "x-", "x+", "y-", "y+")
+def _check_plan(stages):
+    """Refuse a plan without exactly one test stage or with a name twice (one line)."""
+    names = [s.name for s in stages]
+    if sum(s.test for s in stages) != 1:
+        raise RodwarpError(f"a run plan needs exactly one test stage (Stage(test=True)); got {names}")
+    if len(set(names)) != len(names):
+        raise RodwarpError(f"stage names must be unique in a run plan; got {names}")
+    return stages
 
 
-def stage_control(model, name: str, amp: float, freq: float, t0: float):
-    """Control of a stage: entangling in the closed container, the stability test on the floor alone."""
-    control = model.control()
-    if name == "stability":
-        control.remove_walls(SIDE_WALLS)
-    control.set_drive(amp, freq, phase_time=t0)
-    return control
-
-
-def _default_dt(params: ProtocolParams, model, solver) -> float:
-    """The worst-case step of the run (s): the smaller of the solver's default steps under the
-    entangling and the stability-test drives, at the scene's characteristic speed.
+def _default_dt(stages, model, solver) -> float:
+    """The worst-case step of the run (s): the smallest of the solver's default steps under the
+    drives of its stages, at the scene's characteristic speed.
 
     A run takes adaptive steps (:meth:`RodSolver.adaptive_dt`); this step only sizes the run
     before it starts (:func:`~rodwarp.experiments._checks.check_step_count` refuses a run of
@@ -257,27 +257,7 @@ def _default_dt(params: ProtocolParams, model, solver) -> float:
     alpha = 100, f = 10 Hz, 2.5e-3 s let rods overlap by 0.25 d where 1e-3 s kept the largest
     overlap at 0.015 d).
     """
-    return min(solver.default_dt(stage_control(model, "entangle", params.entangle_amplitude, params.entangle_freq,
-                                               0.0)),
-               solver.default_dt(stage_control(model, "stability", params.amplitude, params.freq, 0.0)))
-
-
-class Stage(NamedTuple):
-    """One stage of the protocol: its name, duration (s) and the drive of its moving walls."""
-
-    name: str
-    duration: float
-    amplitude: float
-    freq: float
-
-
-def _stages(params: ProtocolParams) -> list[Stage]:
-    """The stages a run steps through: entangling (unless skipped) then the stability test."""
-    stages = []
-    if params.entangle_duration > 0 and (not params.initial or params.entangle):
-        stages.append(Stage("entangle", params.entangle_duration, params.entangle_amplitude, params.entangle_freq))
-    stages.append(Stage("stability", params.duration, params.amplitude, params.freq))
-    return stages
+    return min(solver.default_dt(stage.control(model, 0.0)) for stage in stages)
 
 
 @dataclass
@@ -382,7 +362,7 @@ def _entangled_point(params: ProtocolParams, donor: Path, outdir: Path):
     it is missing, unreadable, or of another packing or entangling than ``params``."""
     from rodwarp.rodset.trajectory import read_checkpoint_file
 
-    if _stages(params)[0].name != "entangle":
+    if plan(params)[0].name != ENTANGLE:
         raise RodwarpError("--entangled-from: this run has no entangling stage (entangle duration 0, or --initial "
                            "without --entangle); drop --entangled-from")
     if donor.resolve() == outdir.resolve():
@@ -439,7 +419,7 @@ def _take_entangling(donor: Path, outdir: Path, meta: dict, n_frames: int, rods)
 
 
 def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resume: bool = False,
-                 overwrite: bool = False, thresholds=None, entangled_from=None) -> dict:
+                 overwrite: bool = False, thresholds=None, entangled_from=None, stages=None) -> dict:
     """Run the whole experiment and write its outputs to ``outdir``.
 
     Writes ``summary.json`` (every parameter, seed, versions, device, dt, steps, wall time and
@@ -464,6 +444,10 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     stage are copied, and the run ends, bit for bit on the CPU, where a run of its own
     entangling ends (docs/protocol.md, "One entangled packing, several tests"). summary.json
     records the donor under ``entangled_from``; ``wall_time_s`` is this run's own time.
+
+    ``stages`` (a run plan, :mod:`rodwarp.experiments._plan`) replaces the paper's
+    :func:`~rodwarp.experiments._plan.plan` of ``params``: one stage with ``test`` set, names
+    unique.
 
     Returns
     -------
@@ -525,8 +509,8 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         rule.update(rod_model="elastic", rule=rule["rule"] + " (the input has curved rods: elastic)")
     model, solver, (box_lo, box_hi) = _build(params, rods, device, rule["rod_model"])
     sim_rods = model.rods  # the simulated rods (two vertices per rod for rigid rods)
-    stages = _stages(params)
-    protocol_dt = _default_dt(params, model, solver)
+    stages = _check_plan(tuple(stages) if stages is not None else plan(params))
+    protocol_dt = _default_dt(stages, model, solver)
     check_step_count(params, params.dt or protocol_dt, "--dt" if params.dt else "the default step")
 
     state = model.state()
@@ -543,9 +527,9 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         loop = LoopPosition.from_checkpoint(meta)
         if loop.mid_stage:
             stage = stages[loop.start_stage]
-            control = stage_control(model, stage.name, stage.amplitude, stage.freq, loop.stage_t0[stage.name])
+            control = stage.control(model, loop.stage_t0[stage.name])
         state.load_numpy({k[6:]: v for k, v in arrays.items() if k.startswith("state_")})
-    n_frames = 1 + sum(int(math.ceil(s.duration / params.save_every)) + 1 for s in stages)
+    n_frames = frames(stages, params.save_every)
     if branch is not None:
         _take_entangling(donor, outdir, ck[1], n_frames, sim_rods)
     rec = Recorder(outdir, model, solver, sim_rods, n_frames, checkpoint=ck,
@@ -584,7 +568,7 @@ def _donor_record(donor: Path, meta: dict) -> dict:
 
     m = rundir._read_manifest(donor) or {}
     return {"run": str(donor.resolve()), "run_id": m.get("run_id"), "time": meta["rows"][-1]["time"],
-            "steps": meta["steps"], "entangle_wall_s": meta["dts"].get("entangle", {}).get("wall_s")}
+            "steps": meta["steps"], "entangle_wall_s": meta["dts"].get(ENTANGLE, {}).get("wall_s")}
 
 
 def _read_donor_record(outdir: Path):
@@ -617,17 +601,18 @@ def _step_stages(params, model, solver, stages, state, other, control, loop, rec
 
     parameters = asdict(params)
     with progress_bar(progress, seconds=True, remaining=True, note=True) as update:
-        for si, (name, dur, amp, freq) in enumerate(stages):
+        for si, stage in enumerate(stages):
+            name, dur = stage.name, stage.duration
             if si < loop.start_stage:
                 continue
             resuming = si == loop.start_stage and loop.mid_stage
             j0 = loop.start_j if si == loop.start_stage else 0  # samples of this stage already taken
             if not resuming:
                 loop.stage_t0[name] = state.time
-                control = stage_control(model, name, amp, freq, state.time)
+                control = stage.control(model, state.time)
                 loop.dts[name] = {"steps": 0, "min": None, "max": None, "mean": None, "sum": 0.0, "refused": 0}
                 loop.next_ck = state.time + params.checkpoint_every
-                if name == "stability":
+                if stage.test:
                     state.wall_impulse.zero_()
                     floor = control.floor_height(state.time)
                     loop.pile_ref = vd.pile_reference(state.time, state.positions(), model.vertex_rod_np,
@@ -682,13 +667,13 @@ def _step_stages(params, model, solver, stages, state, other, control, loop, rec
                     t_mark = _add_wall(st, t_mark)
                     rec.checkpoint(state, loop, si, j - 1, True, parameters)
             loop.dts[name]["mean"] = loop.dts[name]["sum"] / max(loop.dts[name]["steps"], 1)
-            if name == "entangle":
-                rec.snapshot(AFTER_ENTANGLING, state.positions())
+            if stage.snapshot:
+                rec.snapshot(AFTER_ENTANGLING if name == ENTANGLE else f"after {name}", state.positions())
             if si + 1 < len(stages):
                 loop.next_ck = state.time + params.checkpoint_every
                 _add_wall(loop.dts[name], t_mark)
                 rec.checkpoint(state, loop, si + 1, 0, False, parameters,
-                               keep_as=rec.outdir / ENTANGLED if name == "entangle" else None)
+                               keep_as=rec.outdir / ENTANGLED if stage.keep else None)
             else:
                 _add_wall(loop.dts[name], t_mark)
     return state, control

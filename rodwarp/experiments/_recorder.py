@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from rodwarp.experiments import _verdict as vd
+from rodwarp.experiments._plan import ENTANGLE, TEST
 from rodwarp.rodset import contacts_per_rod, largest_cluster
 from rodwarp.rodset.files import atomic_path, save_figure
 
@@ -67,7 +68,7 @@ class Recorder:
             self.rows = meta["rows"]
             self.vtk = [tuple(e) for e in meta["vtk"]]
             self.frame = meta["frame"]
-            if "entangle" in done and "after_entangle" in arrays:
+            if ENTANGLE in done and "after_entangle" in arrays:
                 self.snapshots.append((AFTER_ENTANGLING, arrays["after_entangle"]))
         self.trajectory = Trajectory(self.outdir / "trajectory.zarr", n_frames, rods.offsets, rods.radii,
                                      resume=checkpoint is not None)
@@ -98,7 +99,7 @@ class Recorder:
         floor = 0.0 if floor is None else floor
         in_big = largest_cluster(model.n_rods, c)
         h = vd.centroid_height_above(x, model.mass_np, floor)
-        test = stage == "stability" and pile_ref is not None
+        test = stage == TEST and pile_ref is not None
         self.rows.append({
             "time": state.time, "stage": stage,
             "contacts_per_rod": contacts_per_rod(model.n_rods, c),
@@ -221,7 +222,7 @@ def plot_metrics(path, rows, summary):
 
     t = col("time")
     thr = summary["thresholds"]
-    test = [r for r in rows if r["stage"] == "stability" and r["height_kept"] != ""]
+    test = [r for r in rows if r["stage"] == TEST and r["height_kept"] != ""]
     t0 = summary["test_start"]["time"]
     tt = np.concatenate([[t0], col("time", test)])
     fig, ax = plt.subplots(4, 2, figsize=(10, 11), sharex=True)
@@ -253,7 +254,7 @@ def plot_metrics(path, rows, summary):
         for k in np.flatnonzero(ent):  # sample k covers the interval since the previous sample
             for a in (ax[0, 1], ax[1, 0]):
                 a.axvspan(tt[k], tt[k + 1], color="tab:green", alpha=0.12, lw=0)
-    if any(r["stage"] == "stability" for r in rows) and any(r["stage"] == "entangle" for r in rows):
+    if any(r["stage"] == TEST for r in rows) and any(r["stage"] == ENTANGLE for r in rows):
         # the test starts at test_start (the pile reference's time), not at its first sample,
         # which comes one save interval later: the marker and its label both sit at t0
         for a in ax.ravel():

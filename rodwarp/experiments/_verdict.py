@@ -34,6 +34,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from rodwarp.errors import RodwarpError
+from rodwarp.experiments._plan import TEST
 
 
 @dataclass(frozen=True)
@@ -169,7 +170,7 @@ def judge(times, t0: float, height_kept, cluster_fraction, rods_left=None,
 def judge_rows(rows, t0: float, thresholds: Thresholds = DEFAULT_THRESHOLDS) -> Verdict:
     """:func:`judge` on metric rows (dicts with ``time``, ``stage``, ``height_kept``,
     ``largest_cluster_fraction``, ``rods_left``) of the stage named ``stability``."""
-    test = [r for r in rows if r["stage"] == "stability" and float(r["time"]) > t0]
+    test = [r for r in rows if r["stage"] == TEST and float(r["time"]) > t0]
     if not test:
         raise RodwarpError("no samples of the stability test to judge; run a test longer than --save-every")
     col = lambda k: [float(r[k]) for r in test]  # noqa: E731
@@ -188,7 +189,7 @@ def judge_metrics_csv(path, t0: float | None = None, thresholds: Thresholds = DE
     if not rows or "height_kept" not in rows[0]:
         raise RodwarpError(f"{path} has no height_kept column: it was written by an older rodwarp; rerun the run")
     if t0 is None:
-        idx = next((i for i, r in enumerate(rows) if r["stage"] == "stability"), None)
+        idx = next((i for i, r in enumerate(rows) if r["stage"] == TEST), None)
         if idx is None:
             raise RodwarpError(f"{path} has no stability-test rows")
         t0 = float(rows[idx - 1]["time"]) if idx > 0 else float(rows[idx]["time"])

@@ -25,6 +25,10 @@ import numpy as np
 
 from rodwarp.errors import RodwarpError, StepTooLarge
 
+#: the fewest steps per period of a drive: the default step never exceeds 1 / (40 f), which the
+#: protocol's checks count on (rodwarp.experiments._plan)
+STEPS_PER_PERIOD = 40.0
+
 
 class StepBounds:
     """The step bounds, default and adaptive steps and the step guard of :class:`RodSolver`.
@@ -141,7 +145,7 @@ class StepBounds:
         dt = safety * self.step_bound(control=control, speed=speed)
         f = control.drive.frequency
         if f > 0:
-            dt = min(dt, 1.0 / (40.0 * f))
+            dt = min(dt, 1.0 / (STEPS_PER_PERIOD * f))
         return dt
 
     #: overlap (in diameters of the thinnest rod) above which the adaptive step shrinks. At
