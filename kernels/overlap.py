@@ -13,7 +13,8 @@ thread per rod.
 
 import warp as wp
 
-from rodwarp.kernels.friction import contact_side, side_response, vertex_edge
+from rodwarp.kernels.friction import contact_side, side_response
+from rodwarp.kernels.wall_contacts import vertex_edge
 from rodwarp.kernels.structs import ContactFrame, ContactSide, RodContacts, RodModel, StepParams, WallContacts, Walls
 from rodwarp.kernels.walls import wall_surface
 

@@ -9,7 +9,8 @@ Python launch overhead of three launches per sweep, which dominates for small sc
 import warp as wp
 
 from rodwarp.kernels.elastics import project_rigid_length, project_rod
-from rodwarp.kernels.friction import rigid_from_body, rigid_to_body, solve_rod_contact, solve_rod_walls
+from rodwarp.kernels.friction import rigid_from_body, rigid_to_body, solve_rod_contact
+from rodwarp.kernels.wall_contacts import solve_rod_walls
 from rodwarp.kernels.structs import (ContactFrame, RodContacts, RodFactors, RodModel, RodState, StepParams,
                                      WallContacts, Walls)
 

@@ -79,7 +79,8 @@ def _init_without_driver_warning() -> None:
 
 #: the kernel modules a simulation launches (:mod:`rodwarp.kernels`); ``fields`` and ``acn``
 #: are the analysis' own and load when it runs
-SIMULATION_MODULES = ("packing", "broadphase", "narrowphase", "frames", "elastics", "friction", "overlap",
+SIMULATION_MODULES = ("packing", "broadphase", "narrowphase", "frames", "elastics", "friction", "wall_contacts",
+                      "coloring", "overlap",
                       "solve")
 
 

@@ -31,7 +31,7 @@ import time
 import numpy as np
 import warp as wp
 
-from rodwarp.kernels import broadphase, friction, narrowphase
+from rodwarp.kernels import broadphase, coloring, narrowphase
 
 
 class ContactPipeline:
@@ -244,7 +244,7 @@ class ContactPipeline:
 
     def warm_start(self, state_in, state_out, n: int, warm: float) -> None:
         """Last step's impulses of the same keys into ``state_out`` (split along the new normals)."""
-        self._launch("narrowphase", friction.warm_start_rod_contacts, dim=n, device=self.model.device, inputs=[
+        self._launch("narrowphase", coloring.warm_start_rod_contacts, dim=n, device=self.model.device, inputs=[
             n, state_out.contact_key, state_out.contact_normal, state_in.contact_count, state_in.contact_key,
             state_in.contact_impulse, wp.float64(warm), state_out.contact_impulse])
 
@@ -259,9 +259,9 @@ class ContactPipeline:
         while True:
             owner.fill_(2**31 - 1)
             remaining.zero_()
-            self._launch("friction", friction.color_claim, dim=n, device=dev,
+            self._launch("friction", coloring.color_claim, dim=n, device=dev,
                          inputs=[n, state.contact_seg, m.arrays.seg_vertex, self._color, owner])
-            self._launch("friction", friction.color_commit, dim=n, device=dev,
+            self._launch("friction", coloring.color_commit, dim=n, device=dev,
                          inputs=[n, state.contact_seg, m.arrays.seg_vertex, rnd, owner, self._color, remaining])
             rnd += 1
             if int(remaining.numpy()[0]) == 0:

@@ -29,7 +29,7 @@ import warp as wp
 
 from rodwarp._warp import LaunchCache
 from rodwarp.errors import RodwarpError, SimulationBlowUp
-from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, overlap, solve
+from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, overlap, solve, wall_contacts
 from rodwarp.kernels.structs import ContactFrame, RodFactors, StepParams, WallContacts, Walls
 from rodwarp.sim._bounds import StepBounds
 from rodwarp.sim.contact_law import IMC_SHARPNESS
@@ -416,7 +416,7 @@ class RodSolver(StepBounds):
         self._n_wall_frames.zero_()
         if P:
             state_out.wall_impulse.assign(state_in.wall_impulse)
-            self._launch("friction", friction.prepare_wall_contacts, dim=N, device=dev, inputs=[
+            self._launch("friction", wall_contacts.prepare_wall_contacts, dim=N, device=dev, inputs=[
                 m.arrays, state_in.x, f.tangent, walls, params, wc, state_out.v, state_out.spin])
             needed = int(self._n_wall_frames.numpy()[0])
             if needed > self._wall_frames.shape[0]:
@@ -424,7 +424,7 @@ class RodSolver(StepBounds):
                 self._wall_key = wp.zeros(2 * needed, dtype=wp.int32, device=dev)
                 self._wall_frames = wp.empty(2 * needed, dtype=ContactFrame, device=dev)
                 wc = self._wall_contacts(state_out)
-                self._launch("friction", friction.fill_wall_frames, dim=int(self._n_active.numpy()[0]), device=dev,
+                self._launch("friction", wall_contacts.fill_wall_frames, dim=int(self._n_active.numpy()[0]), device=dev,
                              inputs=[m.arrays, state_in.x, f.tangent, walls, params, wc])
 
         f.blam.zero_()
@@ -549,7 +549,7 @@ class RodSolver(StepBounds):
                     self._launch("friction", friction.solve_rod_contacts, dim=n_contacts, device=dev,
                                  inputs=[ids, 0, *args])
             if n_active:
-                self._launch("friction", friction.solve_wall_contacts, dim=n_active, device=dev, inputs=[
+                self._launch("friction", wall_contacts.solve_wall_contacts, dim=n_active, device=dev, inputs=[
                     walls, params, wc, state_out.v, state_out.spin, self._residual])
             self._launch("elastics", elastics.rod_projection, dim=m.n_rods, device=dev, inputs=[
                 m.arrays, rs_in, state_out.v, state_out.spin, f, params.dt, self._sresidual])
@@ -623,7 +623,7 @@ class RodSolver(StepBounds):
                 contacts.count, self._frames, contacts.impulse, contacts.normal, params, v, spin, out])
         n = int(self._n_wall_frames.numpy()[0])
         if n:
-            wp.launch(friction.wall_contact_residual, dim=n, device=m.device, inputs=[
+            wp.launch(wall_contacts.wall_contact_residual, dim=n, device=m.device, inputs=[
                 walls, params, self._wall_contacts(state_out), v, spin, out])
         return float(out.numpy()[0])
 
