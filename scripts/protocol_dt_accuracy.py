@@ -22,12 +22,13 @@ def default_dt(alpha: float) -> float:
     import numpy as np
 
     from rodwarp.experiments import ProtocolParams, random_packing, rod_model_rule
+    from rodwarp.experiments._plan import plan
     from rodwarp.experiments._protocol import _build, _default_dt
 
     p = ProtocolParams(alpha=alpha)
     rods = random_packing(p.rods, p.length, p.diameter, np.asarray(p.box) * p.length, seed=p.seed)
     model, solver, _ = _build(p, rods, "cpu", rod_model_rule(p)["rod_model"])
-    return _default_dt(p, model, solver)
+    return _default_dt(plan(p), model, solver)
 
 
 def main(argv=None):

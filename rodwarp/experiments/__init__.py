@@ -11,8 +11,10 @@ One private module per concern, their public names re-exported here:
 
 =================  ==========================================================================
 ``_plan``          :func:`plan`, :class:`Stage` - the run plan: the stages, written once
-``_protocol``      :class:`ProtocolParams`, :func:`rod_model_rule`, :func:`run_protocol` - the
-                   plan's stages on one stepping loop; :func:`default_run_name`
+``_params``        :class:`ProtocolParams`, :func:`rod_model_rule`, :func:`option_table` - the
+                   parameters, every default stated once
+``_protocol``      :func:`run_protocol` - the plan's stages on one stepping loop;
+                   :func:`default_run_name`
 ``_recorder``      :class:`Recorder` - a run's samples (metrics rows, trajectory and VTK frames)
                    and checkpoints; :func:`plot_metrics`
 ``_packing``       :func:`random_packing` - the first stage, random sequential addition
@@ -32,9 +34,9 @@ from rodwarp._util import lazy_exports
 
 _WHERE = {
     # the protocol
-    "ProtocolParams": "_protocol", "RODS_PER_ALPHA": "_protocol", "RIGID_SAG": "_protocol",
+    "ProtocolParams": "_params", "RODS_PER_ALPHA": "_params", "RIGID_SAG": "_params",
     "SIDE_WALLS": "_plan", "Stage": "_plan", "plan": "_plan", "LoopPosition": "_protocol",
-    "option_table": "_protocol", "rod_model_rule": "_protocol", "run_protocol": "_protocol",
+    "option_table": "_params", "rod_model_rule": "_params", "run_protocol": "_protocol",
     "default_run_name": "_protocol",
     "Recorder": "_recorder", "plot_metrics": "_recorder",
     "random_packing": "_packing", "orientation_statistics": "_packing", "isotropic_directions": "_packing",

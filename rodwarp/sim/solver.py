@@ -28,10 +28,11 @@ import numpy as np
 import warp as wp
 
 from rodwarp._warp import LaunchCache
-from rodwarp.errors import RodwarpError, SimulationBlowUp
+from rodwarp.errors import RodwarpError
 from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, overlap, solve, wall_contacts
 from rodwarp.kernels.structs import ContactFrame, RodFactors, StepParams, WallContacts, Walls
 from rodwarp.sim._bounds import StepBounds
+from rodwarp.sim._diagnostics import SolverChecks
 from rodwarp.sim.contact_law import IMC_SHARPNESS
 from rodwarp.sim.contacts import ContactPipeline
 from rodwarp.sim.model import Model
@@ -78,7 +79,7 @@ class StepInfo:
     position_passes: int = 0
 
 
-class RodSolver(StepBounds):
+class RodSolver(StepBounds, SolverChecks):
     """Advance a :class:`~rodwarp.sim.model.Model` from ``state_in`` to ``state_out``.
 
     The step bounds, the default and adaptive steps and the step guard (``step_bound``,
@@ -564,81 +565,6 @@ class RodSolver(StepBounds):
             m.arrays, rs_in, state_out.v, f, params.dt, wp.float64(self.length_tolerance), self._sresidual])
         # the contact residual is kept squared on the device
         return math.sqrt(float(self._residual.numpy()[0])), float(self._sresidual.numpy()[0]), used
-
-    def _check_energy(self, state_in: State, state_out: State, dt: float, theta: float, control) -> None:
-        """Energy-jump test: kinetic + elastic energy may not grow 4x between checks beyond
-        what the scene can supply (all mass at the characteristic speed)."""
-        e = self.energy(state_out)
-        mech = e["kinetic"] + e["bending"] + e["stretching"] + e["twist"]
-        floor = 0.5 * self.model.total_mass() * self.characteristic_speed(control) ** 2
-        prev = self._last_mech
-        self._last_mech = mech
-        if not math.isfinite(mech):
-            raise self._blowup(state_in, dt, theta, "non-finite energy", control)
-        if prev is not None and mech > 4.0 * prev + floor:
-            raise self._blowup(state_in, dt, theta,
-                               f"energy jump from {prev:.3g} J to {mech:.3g} J within {self.energy_check_every} steps",
-                               control)
-
-    @property
-    def speed_limit(self) -> float:
-        return self.speed_limit_for(None)
-
-    def speed_limit_for(self, control) -> float:
-        if self._speed_limit is not None:
-            return self._speed_limit
-        return 20.0 * (self.characteristic_speed(control) + (self._v_elastic or 0.0))
-
-    def _blowup(self, state_in: State, dt: float, theta: float, what: str, control=None) -> SimulationBlowUp:
-        step = state_in.step_index + 1
-        t = state_in.time + dt
-        eb = self.explicit_bending_dt()
-        if theta == 0.0 and dt > eb:
-            cause = f"explicit bending at dt = {dt:.3g} s above its bound {eb:.3g} s; use bending='implicit' or a smaller step"
-        elif "overlap" in what:
-            cause = (f"contacts under-resolved (tunnelling or too few iterations: {self.iterations}); "
-                     f"lower dt (now {dt:.3g} s, contact bound {self.contact_dt(control):.3g} s) or raise iterations")
-        else:
-            cause = (f"step {dt:.3g} s too large for this scene (step bound {self.step_bound(control=control):.3g} s) "
-                     f"or too few iterations")
-        return SimulationBlowUp(f"simulation blew up at step {step} (t = {t:.6g} s): {what}; likely cause: {cause}",
-                                step=step, time=t, cause=cause)
-
-    # ------------------------------------------------------------------ diagnostics
-    def full_residual(self, state_out: State) -> float:
-        """Largest velocity change (m/s) one more exact local solve of any contact, rod-rod or
-        wall, would make after the last :meth:`step` (which wrote ``state_out``): the
-        residual of every contact (the step itself reports only its last sweep's largest change)."""
-        if self._last_solve is None:
-            raise RodwarpError("full_residual measures the last step: call step() first")
-        contacts, params, walls = self._last_solve
-        m = self.model
-        out = wp.zeros(1, dtype=wp.float64, device=m.device)
-        # the contacts read rigid rods as bodies, as inside the sweeps
-        v, spin = wp.clone(state_out.v), wp.clone(state_out.spin)
-        wp.launch(friction.rigid_bodies_to_sweeps, dim=m.n_rods, device=m.device, inputs=[
-            m.arrays, self.factors.tangent, v, spin, wp.zeros_like(self.factors.axial)])
-        if contacts.count:
-            wp.launch(friction.rod_contact_residual, dim=contacts.count, device=m.device, inputs=[
-                contacts.count, self._frames, contacts.impulse, contacts.normal, params, v, spin, out])
-        n = int(self._n_wall_frames.numpy()[0])
-        if n:
-            wp.launch(wall_contacts.wall_contact_residual, dim=n, device=m.device, inputs=[
-                walls, params, self._wall_contacts(state_out), v, spin, out])
-        return float(out.numpy()[0])
-
-    def energy(self, state: State) -> dict:
-        """Kinetic (translation and spin), potential (gravity), bending, stretching and twist
-        energy (J) of ``state``."""
-        m = self.model
-        rs = state.rod_state()
-        self._launch("checks", frames.step_frames, dim=m.n_rods, device=m.device, inputs=[m.arrays, rs, self.factors])
-        self._energy_out.zero_()
-        self._launch("checks", elastics.elastic_energy, dim=m.n_rods, device=m.device, inputs=[
-            m.arrays, rs, self.factors.btarget, self.factors.ref_twist, wp.vec3d(*m.gravity), self._energy_out])
-        k, p, b, s, tw = (float(x) for x in self._energy_out.numpy())
-        return {"kinetic": k, "potential": p, "bending": b, "stretching": s, "twist": tw,
-                "total": k + p + b + s + tw}
 
 
 def run(solver: RodSolver, state: State, duration: float, dt: float, *, control=None, callback=None,
