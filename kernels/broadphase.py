@@ -8,6 +8,7 @@ midpoint finds every candidate; the cost is linear in the number of segments.
 import warp as wp
 
 from rodwarp.kernels.narrowphase import closest_points_segments
+from rodwarp.kernels.structs import RodModel
 
 wp.set_module_options({"enable_backward": False})
 
@@ -121,10 +122,7 @@ def find_pairs_of_flagged(
     stale: wp.array(dtype=wp.int32),
     flag: wp.array(dtype=wp.int32),
     mid: wp.array(dtype=wp.vec3),
-    seg_vertex: wp.array(dtype=wp.int32),
-    vertex_rod: wp.array(dtype=wp.int32),
-    rod_radius: wp.array(dtype=wp.float64),
-    arc: wp.array(dtype=wp.float64),
+    model: RodModel,
     x: wp.array(dtype=wp.vec3d),
     query_radius: float,
     margin: wp.float64,
@@ -145,10 +143,10 @@ def find_pairs_of_flagged(
     while wp.hash_grid_query_next(query, sb):
         if sb == sa or (flag[sb] != 0 and sb < sa):
             continue
-        if within_reach(sa, sb, mid, seg_vertex, vertex_rod, rod_radius, arc, x, r2, margin):
+        if within_reach(sa, sb, mid, model.seg_vertex, model.vertex_rod, model.radius, model.arc, x, r2, margin):
             k = wp.atomic_add(count, 0, 1)
             if k < capacity:
                 pairs[k] = wp.vec2i(wp.min(sa, sb), wp.max(sa, sb))
-    i = seg_vertex[sa]
+    i = model.seg_vertex[sa]
     ref[2 * sa] = x[i]
     ref[2 * sa + 1] = x[i + 1]

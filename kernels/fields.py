@@ -69,40 +69,62 @@ def grid_range(lo: wp.float64, hi: wp.float64, origin: wp.float64, spacing: wp.f
     return wp.vec2i(wp.max(i0, 0), wp.min(i1, n - 1))
 
 
+@wp.struct
+class BallGrid:
+    """The voxel grid of ball centres: nx x ny x nz points from ``origin`` at ``spacing`` (m),
+    each the centre of a ball of ``radius`` (m)."""
+
+    nx: int
+    ny: int
+    nz: int
+    origin: wp.vec3d
+    spacing: wp.float64
+    radius: wp.float64
+
+
+@wp.struct
+class ClippedParts:
+    """The segments' parts inside each ball, ball t's from ``start[t]``: ``count[t]`` of them
+    (a counter while they are scattered); ends a, b, segment and rod ids, length."""
+
+    start: wp.array(dtype=wp.int32)
+    count: wp.array(dtype=wp.int32)
+    a: wp.array(dtype=wp.vec3d)
+    b: wp.array(dtype=wp.vec3d)
+    seg: wp.array(dtype=wp.int32)
+    rod: wp.array(dtype=wp.int32)
+    length: wp.array(dtype=wp.float64)
+
+
 @wp.kernel
 def scatter_clipped_segments(
     p0: wp.array(dtype=wp.vec3d),
     p1: wp.array(dtype=wp.vec3d),
     seg_rod: wp.array(dtype=wp.int32),
-    nx: int,
-    ny: int,
-    nz: int,
-    origin: wp.vec3d,
-    spacing: wp.float64,
-    radius: wp.float64,
+    grid: BallGrid,
     voxel_slot: wp.array(dtype=wp.int32),
     slot_lo: int,
     slot_hi: int,
     write: int,
-    start: wp.array(dtype=wp.int32),
-    fill: wp.array(dtype=wp.int32),
-    clip_a: wp.array(dtype=wp.vec3d),
-    clip_b: wp.array(dtype=wp.vec3d),
-    clip_seg: wp.array(dtype=wp.int32),
-    clip_rod: wp.array(dtype=wp.int32),
-    clip_len: wp.array(dtype=wp.float64),
+    parts: ClippedParts,
 ):
     """Segment s against every grid ball its bounding box (grown by R) reaches.
 
     For each ball (voxel whose slot lies in [slot_lo, slot_hi)) that the segment enters with
-    positive length: with ``write == 0`` count it in fill[slot - slot_lo]; otherwise also
-    write the clipped part at start[slot - slot_lo] + (its rank from fill).  Balls are
+    positive length: with ``write == 0`` count it in parts.count[slot - slot_lo]; otherwise
+    also write the clipped part at parts.start[slot - slot_lo] + (its rank from that count).  Balls are
     visited per segment rather than segments per ball: the segment's box holds few voxel
     centres, while a ball-centred hash query visits every midpoint in 27 cells.
     """
     s = wp.tid()
     a = p0[s]
     b = p1[s]
+    nx = grid.nx
+    ny = grid.ny
+    nz = grid.nz
+    origin = grid.origin
+    spacing = grid.spacing
+    radius = grid.radius
     rx = grid_range(wp.min(a[0], b[0]) - radius, wp.max(a[0], b[0]) + radius, origin[0], spacing, nx)
     ry = grid_range(wp.min(a[1], b[1]) - radius, wp.max(a[1], b[1]) + radius, origin[1], spacing, ny)
     rz = grid_range(wp.min(a[2], b[2]) - radius, wp.max(a[2], b[2]) + radius, origin[2], spacing, nz)
@@ -118,16 +140,16 @@ def scatter_clipped_segments(
                 tt = clip_to_ball(a, b, c, radius)
                 if tt[1] > tt[0]:
                     t = slot - slot_lo
-                    rank = wp.atomic_add(fill, t, wp.int32(1))
+                    rank = wp.atomic_add(parts.count, t, wp.int32(1))
                     if write != 0:
-                        w = int(start[t]) + int(rank)
+                        w = int(parts.start[t]) + int(rank)
                         ca = a + tt[0] * d
                         cb = a + tt[1] * d
-                        clip_a[w] = ca
-                        clip_b[w] = cb
-                        clip_len[w] = wp.length(cb - ca)
-                        clip_seg[w] = wp.int32(s)
-                        clip_rod[w] = seg_rod[s]
+                        parts.a[w] = ca
+                        parts.b[w] = cb
+                        parts.length[w] = wp.length(cb - ca)
+                        parts.seg[w] = wp.int32(s)
+                        parts.rod[w] = seg_rod[s]
 
 
 @wp.kernel
@@ -171,13 +193,7 @@ def sort_parts_by_segment(
 
 @wp.kernel
 def ball_fields(
-    start: wp.array(dtype=wp.int32),
-    count: wp.array(dtype=wp.int32),
-    clip_a: wp.array(dtype=wp.vec3d),
-    clip_b: wp.array(dtype=wp.vec3d),
-    clip_seg: wp.array(dtype=wp.int32),
-    clip_rod: wp.array(dtype=wp.int32),
-    clip_len: wp.array(dtype=wp.float64),
+    parts: ClippedParts,
     seg_diameter: wp.array(dtype=wp.float64),
     rods_out: wp.array(dtype=wp.int32),
     length_out: wp.array(dtype=wp.float64),
@@ -192,8 +208,13 @@ def ball_fields(
     rod).  e: sum of |G| over part pairs of distinct rods (pairs within one rod excluded).
     """
     t = wp.tid()
-    b = int(start[t])
-    m = int(count[t])
+    b = int(parts.start[t])
+    m = int(parts.count[t])
+    clip_a = parts.a
+    clip_b = parts.b
+    clip_seg = parts.seg
+    clip_rod = parts.rod
+    clip_len = parts.length
     rods = int(0)
     total = F0
     vol = F0

@@ -37,6 +37,8 @@ Normal
 import numpy as np
 import warp as wp
 
+from rodwarp.kernels.structs import RawContacts, RodModel
+
 wp.set_module_options({"enable_backward": False})
 
 F0 = wp.float64(0.0)
@@ -212,20 +214,12 @@ def narrowphase_pairs(
     pairs: wp.array(dtype=wp.vec2i),
     n_pairs: int,
     nseg: int,
-    seg_vertex: wp.array(dtype=wp.int32),
-    vertex_rod: wp.array(dtype=wp.int32),
-    rod_radius: wp.array(dtype=wp.float64),
+    model: RodModel,
     x: wp.array(dtype=wp.vec3d),
     v: wp.array(dtype=wp.vec3d),
     base_margin: wp.float64,
     dt: wp.float64,
-    capacity: int,
-    count: wp.array(dtype=wp.int32),
-    c_seg: wp.array(dtype=wp.vec2i),
-    c_key: wp.array(dtype=wp.int64),
-    c_st: wp.array(dtype=wp.vec2d),
-    c_normal: wp.array(dtype=wp.vec3d),
-    c_gap: wp.array(dtype=wp.float64),
+    out: RawContacts,
 ):
     """Narrowphase: exact capsule gap of each candidate pair; a contact when it is below the
     contact distance plus what both segments can close in one step (speculative).
@@ -240,10 +234,10 @@ def narrowphase_pairs(
         return
     sa = pairs[k][0]
     sb = pairs[k][1]
-    ia = seg_vertex[sa]
-    ib = seg_vertex[sb]
-    ra = rod_radius[vertex_rod[ia]]
-    rb = rod_radius[vertex_rod[ib]]
+    ia = model.seg_vertex[sa]
+    ib = model.seg_vertex[sb]
+    ra = model.radius[model.vertex_rod[ia]]
+    rb = model.radius[model.vertex_rod[ib]]
     reach = base_margin + segment_reach(v, ia, dt) + segment_reach(v, ib, dt)
     # the infinite lines' distance bounds the segments' from below: most candidates stop here
     da = x[ia + 1] - x[ia]
@@ -258,13 +252,13 @@ def narrowphase_pairs(
     if gap >= reach:
         return
     key = (wp.int64(sa) * wp.int64(nseg) + wp.int64(sb)) * wp.int64(3)
-    c = wp.atomic_add(count, 0, 1)
-    if c < capacity:
-        c_seg[c] = wp.vec2i(sa, sb)
-        c_key[c] = key
-        c_st[c] = wp.vec2d(pair.s, pair.t)
-        c_normal[c] = pair.normal
-        c_gap[c] = gap
+    c = wp.atomic_add(out.count, 0, 1)
+    if c < out.capacity:
+        out.seg[c] = wp.vec2i(sa, sb)
+        out.key[c] = key
+        out.st[c] = wp.vec2d(pair.s, pair.t)
+        out.normal[c] = pair.normal
+        out.gap[c] = gap
     # line contact: the two ends of the overlap
     p0 = x[ia]
     d1 = x[ia + 1] - p0
@@ -291,13 +285,13 @@ def narrowphase_pairs(
         g = dist - ra - rb
         if g >= reach or dist <= F0:
             continue
-        c = wp.atomic_add(count, 0, 1)
-        if c < capacity:
-            c_seg[c] = wp.vec2i(sa, sb)
-            c_key[c] = key + wp.int64(1 + end)
-            c_st[c] = wp.vec2d(s, t)
-            c_normal[c] = diff / dist
-            c_gap[c] = g
+        c = wp.atomic_add(out.count, 0, 1)
+        if c < out.capacity:
+            out.seg[c] = wp.vec2i(sa, sb)
+            out.key[c] = key + wp.int64(1 + end)
+            out.st[c] = wp.vec2d(s, t)
+            out.normal[c] = diff / dist
+            out.gap[c] = g
 
 
 @wp.kernel

@@ -21,9 +21,6 @@ F0 = wp.float64(0.0)
 
 @wp.kernel
 def gauss_seidel_sequential(
-    iterations: int,
-    tolerance: wp.float64,
-    length_tolerance: wp.float64,
     model: RodModel,
     state: RodState,
     contacts: RodContacts,
@@ -36,7 +33,8 @@ def gauss_seidel_sequential(
     spin: wp.array(dtype=wp.float64),
     out: wp.array(dtype=wp.float64),
 ):
-    """Launch with dim = 1. out = [contact residual (m/s), stretch residual (m), sweeps].
+    """Launch with dim = 1. out = [contact residual (m/s), stretch residual (m), sweeps]; the
+    sweeps and tolerances come in ``params``.
 
     Rigid rods move as bodies inside the sweeps (``rigid_to_body``) and get their length
     after them (``project_rigid_length``)."""
@@ -44,9 +42,11 @@ def gauss_seidel_sequential(
     sres = F0
     used = int(0)
     na = wall_contacts.n_active[0]
+    tolerance = params.tolerance
+    length_tolerance = params.length_tolerance
     for r in range(model.n_rods):
         rigid_to_body(r, model, factors.tangent, v, spin, factors.axial)
-    for it in range(iterations):
+    for it in range(params.iterations):
         cres = F0
         sres = F0
         for k in range(contacts.count):

@@ -179,6 +179,20 @@ class RodFactors:
 
 
 @wp.struct
+class RawContacts:
+    """The narrowphase's output, unsorted: up to ``capacity`` contact points, ``count[0]`` found
+    (may exceed the capacity: the host grows the arrays and runs it again)."""
+
+    capacity: int
+    count: wp.array(dtype=wp.int32)
+    seg: wp.array(dtype=wp.vec2i)
+    key: wp.array(dtype=wp.int64)
+    st: wp.array(dtype=wp.vec2d)
+    normal: wp.array(dtype=wp.vec3d)
+    gap: wp.array(dtype=wp.float64)
+
+
+@wp.struct
 class StepParams:
     dt: wp.float64
     mu: wp.float64  # rod-rod friction coefficient
@@ -188,6 +202,9 @@ class StepParams:
     contact_distance: wp.float64  # base speculative margin (m)
     warm: wp.float64  # fraction of last step's impulses reused
     relax: wp.float64  # over-relaxation of each contact's impulse update (1: plain Gauss-Seidel)
+    iterations: int  # most Gauss-Seidel sweeps (the single-launch solve of a sequential device)
+    tolerance: wp.float64  # stop sweeping below this velocity change (m/s); 0: never early
+    length_tolerance: wp.float64  # ... and with no edge length off by more than this (m)
     law: int  # contact law: 0 exact (Signorini and the Coulomb cone), 1 IMC (smooth penalty, smoothed friction)
     imc_k: wp.float64  # IMC contact stiffness k_c (N/m): energy k_c [softplus(K1 (-gap)) / K1]^2
     imc_k1: wp.float64  # IMC K1 = 15 / delta (1/m)

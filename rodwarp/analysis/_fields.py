@@ -46,6 +46,13 @@ class FieldParams:
     contact_tolerance: float
 
 
+def _parts(k, start, count, a, b, seg, rod, length):
+    """A :class:`rodwarp.kernels.fields.ClippedParts` of these arrays."""
+    p = k.ClippedParts()
+    p.start, p.count, p.a, p.b, p.seg, p.rod, p.length = start, count, a, b, seg, rod, length
+    return p
+
+
 def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float | None = None,
                    diameter: float | None = None, length: float | None = None, domain=None,
                    keep_outside: bool = False, contact_tolerance: float | None = None) -> FieldParams:
@@ -213,9 +220,11 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
     dummy_i = wp.empty(1, dtype=wp.int32, device=dev)
     dummy_f = wp.empty(1, dtype=wp.float64, device=dev)
     count = wp.zeros(nv, dtype=wp.int32, device=dev)
+    grid = k.BallGrid()
+    grid.nx, grid.ny, grid.nz, grid.origin, grid.spacing, grid.radius = nx, ny, nz, origin, h, R
     wp.launch(k.scatter_clipped_segments, dim=ns, device=dev,
-              inputs=[w_p0, w_p1, w_rod, nx, ny, nz, origin, h, R, w_slot, 0, nv, 0,
-                      dummy_i, count, dummy3, dummy3, dummy_i, dummy_i, dummy_f])
+              inputs=[w_p0, w_p1, w_rod, grid, w_slot, 0, nv, 0,
+                      _parts(k, dummy_i, count, dummy3, dummy3, dummy_i, dummy_i, dummy_f)])
     counts = count.numpy().astype(np.int64)
 
     out_n = np.zeros(nv, np.int32)
@@ -240,8 +249,8 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
         cl = wp.empty(total, dtype=wp.float64, device=dev)
         m = b1 - b0
         wp.launch(k.scatter_clipped_segments, dim=ns, device=dev,
-                  inputs=[w_p0, w_p1, w_rod, nx, ny, nz, origin, h, R, w_slot, int(b0), int(b1), 1,
-                          w_start, fill, ca, cbb, cs, cr, cl])
+                  inputs=[w_p0, w_p1, w_rod, grid, w_slot, int(b0), int(b1), 1,
+                          _parts(k, w_start, fill, ca, cbb, cs, cr, cl)])
         wp.launch(k.sort_parts_by_segment, dim=m, device=dev, inputs=[w_start, w_count, ca, cbb, cs, cr, cl])
         o_n = wp.empty(m, dtype=wp.int32, device=dev)
         o_len = wp.empty(m, dtype=wp.float64, device=dev)
@@ -249,7 +258,7 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
         o_S = wp.empty(m, dtype=wp.float64, device=dev)
         o_e = wp.empty(m, dtype=wp.float64, device=dev)
         wp.launch(k.ball_fields, dim=m, device=dev,
-                  inputs=[w_start, w_count, ca, cbb, cs, cr, cl, w_d, o_n, o_len, o_vol, o_S, o_e])
+                  inputs=[_parts(k, w_start, w_count, ca, cbb, cs, cr, cl), w_d, o_n, o_len, o_vol, o_S, o_e])
         out_n[b0:b1] = o_n.numpy()
         out_len[b0:b1] = o_len.numpy()
         out_vol[b0:b1] = o_vol.numpy()

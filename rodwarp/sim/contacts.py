@@ -32,6 +32,7 @@ import numpy as np
 import warp as wp
 
 from rodwarp.kernels import broadphase, coloring, narrowphase
+from rodwarp.kernels.structs import RawContacts
 
 
 class ContactPipeline:
@@ -87,6 +88,10 @@ class ContactPipeline:
         self._raw_st = wp.zeros(cap, dtype=wp.vec2d, device=d)
         self._raw_normal = wp.zeros(cap, dtype=wp.vec3d, device=d)
         self._raw_gap = wp.zeros(cap, dtype=wp.float64, device=d)
+        raw = self._raw = RawContacts()
+        raw.capacity, raw.count = cap, self._count
+        raw.seg, raw.key, raw.st, raw.normal, raw.gap = (self._raw_seg, self._raw_key, self._raw_st, self._raw_normal,
+                                                         self._raw_gap)
         self._order = wp.zeros(2 * cap, dtype=wp.int32, device=d)
         self._color = wp.zeros(cap, dtype=wp.int32, device=d)
         self.color_ids = wp.zeros(2 * cap, dtype=wp.int32, device=d)
@@ -129,9 +134,8 @@ class ContactPipeline:
             self._count.zero_()
             if n_pairs:
                 self._launch("narrowphase", narrowphase.narrowphase_pairs, dim=n_pairs, device=dev, inputs=[
-                    self.pairs, n_pairs, S, m.arrays.seg_vertex, m.arrays.vertex_rod, m.arrays.radius, state_in.x,
-                    state_out.v, wp.float64(base), wp.float64(dt), self._cap, self._count,
-                    self._raw_seg, self._raw_key, self._raw_st, self._raw_normal, self._raw_gap])
+                    self.pairs, n_pairs, S, m.arrays, state_in.x, state_out.v, wp.float64(base), wp.float64(dt),
+                    self._raw])
             n = int(self._count.numpy()[0])
             if n <= self._cap:
                 break
@@ -202,9 +206,8 @@ class ContactPipeline:
         while True:
             self._count.zero_()
             self._launch("broadphase", broadphase.find_pairs_of_flagged, dim=S, device=dev, inputs=[
-                self._grid.id, self._all, self._flag, self._mid, m.arrays.seg_vertex, m.arrays.vertex_rod,
-                m.arrays.radius, m.arrays.arc, state.x, float(self._query), wp.float64(margin), self.pairs_cap,
-                self._count, self.pairs, self._ref])
+                self._grid.id, self._all, self._flag, self._mid, m.arrays, state.x, float(self._query),
+                wp.float64(margin), self.pairs_cap, self._count, self.pairs, self._ref])
             n = int(self._count.numpy()[0])
             if n <= self.pairs_cap:
                 break
@@ -230,9 +233,8 @@ class ContactPipeline:
             self._launch("broadphase", broadphase.drop_pairs_of_flagged, dim=self.pairs_n, device=dev,
                          inputs=[self.pairs, self._flag, self._pairs_tmp, self._count])
         self._launch("broadphase", broadphase.find_pairs_of_flagged, dim=n_stale, device=dev, inputs=[
-            self._grid.id, self._stale, self._flag, self._mid, m.arrays.seg_vertex, m.arrays.vertex_rod,
-            m.arrays.radius, m.arrays.arc, state.x, float(self._query), wp.float64(self.pairs_margin),
-            self.pairs_cap, self._count, self._pairs_tmp, self._ref])
+            self._grid.id, self._stale, self._flag, self._mid, m.arrays, state.x, float(self._query),
+            wp.float64(self.pairs_margin), self.pairs_cap, self._count, self._pairs_tmp, self._ref])
         n = int(self._count.numpy()[0])
         if n > self.pairs_cap:
             return False

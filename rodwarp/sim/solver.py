@@ -390,6 +390,9 @@ class RodSolver(StepBounds, SolverChecks):
         params.contact_distance = wp.float64(m.contact_distance)
         params.warm = wp.float64(self.warm_start)
         params.relax = wp.float64(self.relax)
+        params.iterations = self.iterations
+        params.tolerance = wp.float64(self.tolerance)
+        params.length_tolerance = wp.float64(self.length_tolerance)
         law = m.contact_law
         params.law = int(law.imc)
         if law.imc:
@@ -442,7 +445,7 @@ class RodSolver(StepBounds, SolverChecks):
 
         if self.fused:
             self._launch("solve", solve.gauss_seidel_sequential, dim=1, device=dev, inputs=[
-                self.iterations, wp.float64(self.tolerance), wp.float64(self.length_tolerance), m.arrays, rs_in,
+                m.arrays, rs_in,
                 contacts, self._frames, walls, wc, f, params, state_out.v, state_out.spin, self._solve_out])
             res, sres, used = (float(x) for x in self._solve_out.numpy())
             used = int(used)
