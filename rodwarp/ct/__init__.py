@@ -10,25 +10,27 @@ centre of voxel ``(0, 0, 0)`` at the origin.  One private module per job, their 
 re-exported here (scikit-image's layout); segmentation is split by stage, in the order
 :func:`segment_volume` runs them:
 
-================  ============================================================================
-``_volume_io``    multi-page TIFF, folders of slices, zarr; voxel sizes from the metadata
-``_phantom``      :func:`render_phantom` (partial volume, blur, noise, artefacts) and its truth
-``_scenes``       phantom scenes in voxel units (random packings, bundles, arcs, wires)
-``_cases``        realistic-scan cases with their truth (:func:`make_case`)
-``_params``       :class:`SegmentParams`, :class:`SegmentResult`
-``_prepare``      0 - field-of-view mask, background trend, dark rods, anisotropic voxels
-``_levels``       1 - levels and binarisation (background, plateau, threshold, coarse radius)
-``_seeds``        2 - seeds: straight pieces of the skeleton, junctions removed
-``_tracing``      2 - cylinder fits and marching (``_bundles``: bundles of touching rods)
-``_pasting``      3 - pieces of one rod pasted, duplicates made one
-``_refine``       4 - axes, radii and ends against the greyscale (``_profile``: blurred rods)
-``_contacts``     5 - contact candidates confirmed by the image
-``_curved``       curved filaments traced as polylines (``shape="curved"``)
-``_segment``      :func:`segment_volume`, the driver
-``_score``        :func:`match_rods`, :func:`match_polylines`, :func:`score_contacts`
-``_report``       :func:`run_segment`: the files of ``rodwarp segment``
-``_checks``       :func:`check_phantom`, :func:`check_segment`: the commands' options, before any work
-================  ============================================================================
+===================  ============================================================================
+``_volume_io``       reading multi-page TIFF, folders of slices, zarr (:func:`read_volume`)
+``_volume_meta``     a volume's files, :func:`write_tiff`, voxel sizes from the metadata
+``_phantom``         a phantom's truth, files and command (:func:`make_phantom`)
+``_phantom_render``  :func:`render_phantom`: partial volume, blur, noise, artefacts
+``_scenes``          phantom scenes in voxel units (random packings, bundles, arcs, wires)
+``_cases``           realistic-scan cases with their truth (:func:`make_case`)
+``_params``          :class:`SegmentParams`, :class:`SegmentResult`
+``_prepare``         0 - field-of-view mask, background trend, dark rods, anisotropic voxels
+``_levels``          1 - levels and binarisation (background, plateau, threshold, coarse radius)
+``_seeds``           2 - seeds: straight pieces of the skeleton, junctions removed
+``_tracing``         2 - cylinder fits and marching (``_bundles``: bundles of touching rods)
+``_pasting``         3 - pieces of one rod pasted, duplicates made one
+``_refine``          4 - axes, radii and ends against the greyscale (``_profile``: blurred rods)
+``_contacts``        5 - contact candidates confirmed by the image
+``_curved``          curved filaments traced as polylines (``shape="curved"``)
+``_segment``         :func:`segment_volume`, the driver
+``_score``           :func:`match_rods`, :func:`match_polylines`, :func:`score_contacts`
+``_report``          :func:`run_segment`: the files of ``rodwarp segment``
+``_checks``          :func:`check_phantom`, :func:`check_segment`: the commands' options, before any work
+===================  ============================================================================
 
 Shared helpers: ``_reader`` (lazy volume access) and ``_voxels`` (geometry in voxel space).
 Nothing here imports warp; names load on first use.
@@ -38,13 +40,13 @@ from rodwarp._util import lazy_exports
 
 _WHERE = {
     # volume files
-    "read_volume": "_volume_io", "open_volume_lazy": "_volume_io", "write_tiff": "_volume_io",
-    "list_slices": "_volume_io", "check_volume": "_volume_io", "read_voxel_size": "_volume_io",
-    "read_voxel_unit": "_volume_io",
+    "read_volume": "_volume_io", "open_volume_lazy": "_volume_io", "write_tiff": "_volume_meta",
+    "list_slices": "_volume_meta", "check_volume": "_volume_io", "read_voxel_size": "_volume_meta",
+    "read_voxel_unit": "_volume_meta",
     # phantoms
-    "render_phantom": "_phantom", "occupancy": "_phantom", "phantom_truth": "_phantom",
+    "render_phantom": "_phantom_render", "occupancy": "_phantom_render", "phantom_truth": "_phantom",
     "write_phantom": "_phantom", "truth_paths": "_phantom", "make_phantom": "_phantom",
-    "capsule_volume": "_phantom", "DEFAULT_TOLERANCE_VOXELS": "_phantom", "SCENES": "_phantom",
+    "capsule_volume": "_phantom_render", "DEFAULT_TOLERANCE_VOXELS": "_phantom", "SCENES": "_phantom",
     "scene_isolated": "_scenes", "scene_crossing_pair": "_scenes", "scene_parallel_pair": "_scenes",
     "scene_random_packing": "_scenes", "scene_bundles": "_scenes", "scene_arcs": "_scenes",
     "scene_wire_tangle": "_scenes",

@@ -20,7 +20,8 @@ One private module per concern, their public names re-exported here:
 ``_packing``       :func:`random_packing` - the first stage, random sequential addition
 ``_verdict``       :func:`judge`, :class:`Thresholds`, :func:`judge_metrics_csv`, ... - stable or not
 ``_sweep``         :class:`SweepSpec`, :func:`run_sweep`, :func:`run_point` - the grid on Dask
-``_phase``         :func:`phase_diagram`, :func:`alpha_star` - figures and the alpha* estimate
+``_phase``         :func:`phase_diagram`, :func:`alpha_star` - the alpha* estimate and the
+                   figures (drawn in ``_phase_figures``)
 ``_checks``        :func:`check_protocol`, :func:`check_scheduler` - the options of ``simulate``
                    and ``sweep``, checked before any work
 =================  ==========================================================================
