@@ -84,3 +84,18 @@ def test_ct_roundtrip_finds_the_true_rods_and_contacts():
     dia, dia_true, dist = grab(rf"diameter: {NUM} voxels found, {NUM} true; mean centreline distance {NUM} voxels", out)
     assert dia_true == 6.0 and abs(dia - dia_true) / dia_true < 0.05
     assert dist < 0.5
+
+
+def test_pour_cylinder_keeps_every_rod_in_the_tube_and_the_short_rods_spread_when_it_is_lifted():
+    out = run_example("pour_cylinder.py")
+    h0, r0, tube = grab(rf"in the tube: height {NUM} cm, radius {NUM} cm \(tube {NUM} cm\), every rod inside: True", out)
+    h1, r1 = grab(rf"after the lift: height {NUM} cm, radius {NUM} cm", out)
+    assert r0 <= tube + 0.01 and 0 < h0 < 20  # poured, settled, inside the tube
+    assert h1 < 0.5 * h0 and r1 > 2 * tube  # alpha 20 does not stand: it spreads
+
+
+def test_custom_stage_runs_the_lift_between_entangling_and_the_test():
+    out = run_example("custom_stage.py")
+    assert "stages: entangle -> lift -> stability" in out
+    (t0,) = grab(rf"test started at t = {NUM} s", out)
+    assert abs(t0 - 0.4) < 1e-9  # after 0.2 s of entangling and 0.2 s of the lift
