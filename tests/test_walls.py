@@ -102,3 +102,17 @@ def test_walls_are_named_once_and_cylinders_need_a_radius():
     with pytest.raises(RodwarpError, match="radius must be a positive length"):
         Cylinder.make((0, 0, 0), (0, 0, 1), 0.0, name="c2")
     assert model.planes == []
+
+
+def test_a_model_is_final_once_a_state_or_solver_exists():
+    rods = RodSet.from_polylines([straight_rod((0.0, 0.0, 0.5), (1, 0, 0), 1.0, R)], R)
+    model = Model(rods, STEEL)
+    model.add_plane((0, 0, 1), 0.0, name="floor")
+    model.state()
+    with pytest.raises(RodwarpError, match="the model is final"):
+        model.add_wall(Cylinder.make((0, 0, 0), (0, 0, 1), 1.0))
+    assert [w.name for w in model.walls] == ["floor"]
+    other = Model(rods, STEEL)
+    RodSolver(other)
+    with pytest.raises(RodwarpError, match="the model is final"):
+        other.add_box((-1, -1, 0), (1, 1, 1))

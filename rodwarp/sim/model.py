@@ -225,6 +225,7 @@ class Model:
         self.device = _warp.resolve_device(device)
         self.rod_contacts = bool(rod_contacts)
         self.walls: list = []  # rodwarp.sim.walls kinds
+        self._final = False  # finalize(): no wall added once states or solvers exist
         self.box: np.ndarray | None = None if rods.box is None else np.asarray(rods.box, float)
         pin_in = np.zeros(rods.n_vertices, dtype=bool)
         if pinned is not None:
@@ -404,10 +405,26 @@ class Model:
         """Add a half-space wall {x : n . x >= offset}; returns the :class:`Plane`."""
         return self.add_wall(Plane.make(normal, offset, mu=mu, moving=moving, name=name))
 
+    def finalize(self) -> "Model":
+        """Fix the model: no wall may be added after this. Making a state or a solver finalizes
+        the model, so the states, the solver's buffers and every control see the same walls.
+        Returns the model."""
+        self._final = True
+        return self
+
     def add_wall(self, wall):
         """Add a wall of any kind (:mod:`rodwarp.sim.walls`: ``Plane.make(...)``,
         ``Cylinder.make(...)``); a wall without a friction coefficient takes the model's.
-        Returns the wall."""
+        Returns the wall.
+
+        Raises
+        ------
+        RodwarpError
+            After :meth:`finalize` (a state or a solver of the model exists): add every wall
+            first."""
+        if getattr(self, "_final", False):
+            raise RodwarpError(f"the model is final (a state or a solver of it exists): add the wall '{wall.name}' "
+                               f"before making states and solvers")
         if any(w.name == wall.name for w in self.walls):
             raise RodwarpError(f"the model already has a wall named '{wall.name}'; give another name")
         if wall.mu is None:
@@ -485,6 +502,7 @@ class Model:
         """A new :class:`~rodwarp.sim.state.State` at the rods' positions and velocities, t = 0."""
         from rodwarp.sim.state import State
 
+        self.finalize()
         s = State(self)
         s.x.assign(wp.array(self.rods.points, dtype=wp.vec3d, device=self.device))
         if self.rods.velocities is not None:

@@ -176,7 +176,7 @@ class RodSolver(StepBounds, SolverChecks):
                                "twist); use bending='implicit' or 'auto'")
         if coloring not in ("auto", "on", "off"):
             raise RodwarpError(f"coloring must be auto, on or off, got '{coloring}'")
-        self.model = model
+        self.model = model.finalize()
         self.iterations = int(iterations)
         self.tolerance = float(tolerance)
         self.length_tolerance = 1e-6 * float(model.rest_length_np[model.rest_length_np > 0].min())

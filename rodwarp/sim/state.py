@@ -32,7 +32,7 @@ class State:
     def __init__(self, model, contact_capacity: int = 0):
         d = model.device
         V = model.n_vertices
-        self.model = model
+        self.model = model.finalize()  # its walls are fixed from here: the wall buffers are sized once
         self.time = 0.0
         self.step_index = 0
         self.x = wp.zeros(V, dtype=wp.vec3d, device=d)
