@@ -14,7 +14,7 @@ PHANTOM_BYTES_PER_VOXEL = 34
 
 
 def check_phantom(*, rods, shape, voxel_size, out, blur, cnr, ring, cupping, streaks, n_rods, radius, aspect,
-                  touching, seed, fov=None, z_thickness=1, units=None) -> None:
+                  touching, seed, fov=None, z_thickness=1, units=None, dark=False) -> None:
     """Checks of ``rodwarp phantom``: values, the volume's memory and disk size, the output path.
 
     Artefact amplitudes are bounded where they would saturate the 16-bit image (``ring`` and
