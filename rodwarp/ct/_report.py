@@ -56,12 +56,11 @@ def _csv_text(header: list[str], rows) -> str:
 
 
 def write_rods_csv(path, rods: RodSet) -> Path:
-    """``rod,x,y,z,radius``, one row per vertex, in the rod set's units (the rod-set CSV format,
-    with the shortest decimals that read back exactly, for people reading the file)."""
-    rid = rods.rod_index
-    rows = ((int(rid[k]), *rods.points[k], rods.radii[rid[k]]) for k in range(rods.n_vertices))
-    write_text(path, _csv_text(["rod", "x", "y", "z", "radius"], rows))
-    return Path(path)
+    """``rod,x,y,z,radius``, one row per vertex, in the rod set's units: the rod-set CSV format,
+    written by its one writer (:func:`rodwarp.rodset.save_csv`)."""
+    from rodwarp.rodset._formats import save_csv
+
+    return save_csv(rods, path)
 
 
 def write_contacts_csv(path, rods: RodSet) -> Path:
