@@ -70,15 +70,9 @@ def check_segment(*, stack, voxel_size, units, diameter, out, chunk, contact_tol
     if not Path(stack).exists():
         fail(f"CT stack '{stack}' does not exist; pass a multi-page TIFF, a folder of slices or a zarr array")
     if voxel_size is not None:
-        parts = [p for p in str(voxel_size).split(",") if p.strip()]
-        if len(parts) not in (1, 3):
-            fail(f"--voxel-size takes one value or three (z,y,x), got '{voxel_size}'")
-        for p in parts:
-            try:
-                val = float(p)
-            except ValueError:
-                fail(f"--voxel-size must be numbers, got '{voxel_size}'")
-            number("--voxel-size", val, gt=0, hint=f"in --units {units or 'mm'}")
+        from rodwarp.ct._report import parse_voxel_size_text
+
+        parse_voxel_size_text(voxel_size)  # the one parser: one value or three (z,y,x), positive and finite
     if units is not None and units not in UNITS:
         fail(f"--units must be one of {', '.join(UNITS)}, got '{units}'")
     number("--min-fill", min_fill, gt=0, le=1)
