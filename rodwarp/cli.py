@@ -20,7 +20,7 @@ import typer
 
 from rodwarp._util import version_line
 from rodwarp.analysis import AnalyzeOptions, fields_help
-from rodwarp.ct import SegmentParams, make_phantom
+from rodwarp.ct import PhantomOptions, SegmentParams, make_phantom
 from rodwarp.errors import RodwarpError, SimulationBlowUp
 from rodwarp.experiments import ProtocolParams, SweepSpec, option_table
 
@@ -29,7 +29,10 @@ from rodwarp.experiments import ProtocolParams, SweepSpec, option_table
 # the parameter dataclasses' field metadata too
 _A = AnalyzeOptions()
 _S = SegmentParams()
-_PH = {k: p.default for k, p in inspect.signature(make_phantom).parameters.items()}
+_PH = option_table(PhantomOptions)
+#: `rodwarp phantom`'s options in --help order: PhantomOptions fields, and the command's own
+_PHANTOM_OPTIONS = ("shape", "voxel_size", "units", "out", "blur", "cnr", "ring", "cupping", "streaks", "fov", "dark",
+                    "z_thickness", "n_rods", "radius", "aspect", "touching", "seed", "overwrite")
 _P = option_table(ProtocolParams)
 _W = option_table(SweepSpec)
 _FROM_TABLE = object()
@@ -287,51 +290,30 @@ def analyze(
 
 @app.command(epilog="Example: rodwarp phantom random --shape 256 256 256 --n-rods 200 --cnr 5 --out ct/stack.tif")
 @_friendly
+@_field_options(PhantomOptions, _PH, _PHANTOM_OPTIONS)
 def phantom(
     rods: str = typer.Argument(..., help="Rod set (npz, zarr, CSV), a simulate output directory, or a scene in "
                                          "voxel units: 'random' (straight rods, see --n-rods), 'bundles' "
                                          "(bundles of touching parallel rods), 'arcs' (gently curved rods), "
                                          "'wires' (a nest-like tangle of curved wires)."),
     shape: tuple[int, int, int] = typer.Option(..., help="Volume shape Z Y X (slices, rows, columns)."),
-    voxel_size: float = typer.Option(_PH["voxel_size"],
-                                     help="Voxel edge length in the rods' units (--units; 1 for voxel-unit rods). "
-                                          "The TIFF and the truth JSON record it in that unit; the rods must be "
-                                          "at least a voxel thick and fit --shape."),
-    units: Optional[str] = typer.Option(_PH["units"], help="Unit of a CSV rod set (m, mm, um, voxel; default m) "
-                                                           "and of --voxel-size; converts npz/zarr rod sets."),
     out: Path = typer.Option(..., help="Output TIFF (ground truth written beside it)."),
-    blur: float = typer.Option(_PH["blur"], help="Gaussian point-spread sigma (voxels)."),
-    cnr: float = typer.Option(_PH["cnr"], help="Contrast-to-noise ratio (foreground - background) / noise sigma."),
-    ring: float = typer.Option(_PH["ring"], help="Ring artefact amplitude (fraction of the contrast, 0 to 1)."),
-    cupping: float = typer.Option(_PH["cupping"], help="Cupping: relative intensity drop at the slice edge "
-                                                       "(negative: a bright rim, as beam hardening shows)."),
-    streaks: float = typer.Option(_PH["streaks"], help="Metal streak amplitude (fraction of the contrast, 0 to 1)."),
-    fov: Optional[float] = typer.Option(_PH["fov"], help="Field of view: radius (voxels) of the reconstruction "
-                                                         "circle; 0 outside it."),
-    dark: bool = typer.Option(_PH["dark"], help="Dark rods on a bright background (grey values swapped)."),
-    z_thickness: int = typer.Option(_PH["z_thickness"], help="Slices this many times thicker than the voxels are "
-                                                             "wide (anisotropic voxels; the TIFF records the spacing)."),
-    n_rods: int = typer.Option(_PH["n_rods"], help="'random', 'arcs', 'wires': number of rods; 'bundles': of bundles."),
-    radius: float = typer.Option(_PH["radius"], help="Scenes: rod radius (voxels, at least 0.5)."),
-    aspect: float = typer.Option(_PH["aspect"], help="'random': aspect ratio length / diameter."),
-    touching: float = typer.Option(_PH["touching"], help="'random': fraction of rods touching another."),
-    seed: int = typer.Option(_PH["seed"], help="Seed of the noise and of the scenes."),
     overwrite: bool = typer.Option(False, help="Replace --out even when it is not a rodwarp phantom, or lies in "
                                                "another command's run folder (an earlier phantom is always "
                                                "replaced)."),
+    **fields,
 ):
     """Synthetic 16-bit CT of a rod set: partial volume, blur, noise and artefacts, with ground truth."""
+    from dataclasses import asdict
+
     from rodwarp.ct import check_phantom
 
-    check_phantom(rods=rods, shape=shape, voxel_size=voxel_size, out=out, blur=blur, cnr=cnr, ring=ring,
-                    cupping=cupping, streaks=streaks, n_rods=n_rods, radius=radius, aspect=aspect,
-                    touching=touching, seed=seed, fov=fov, z_thickness=z_thickness, units=units)
+    opts = asdict(PhantomOptions(**fields))
+    check_phantom(rods=rods, shape=shape, out=out, **opts)
     from rodwarp.ct._phantom_owner import check_phantom_out
 
     check_phantom_out(out, overwrite=overwrite)
-    rs = make_phantom(rods, shape, out, voxel_size=voxel_size, blur=blur, cnr=cnr, ring=ring, cupping=cupping,
-                      streaks=streaks, fov=fov, dark=dark, z_thickness=z_thickness, n_rods=n_rods, radius=radius,
-                      aspect=aspect, touching=touching, seed=seed, units=units)
+    rs = make_phantom(rods, shape, out, **opts)
     typer.echo(f"{rs.n_rods} rods, {len(rs.contacts) if rs.contacts is not None else 0} contacts -> {out}")
 
 

@@ -16,6 +16,7 @@ import pytest
 from typer.testing import CliRunner
 
 from rodwarp.cli import app
+from rodwarp.experiments._outputs import SIMULATE_OUTPUTS, SWEEP_OUTPUTS
 from rodwarp.rodset.rundir import MANIFEST
 
 runner = CliRunner()
@@ -281,12 +282,12 @@ def test_a_sweep_of_another_protocol_is_refused_naming_what_differs(tmp_path):
     sw = tmp_path / "sw"
     first = SweepSpec(alphas=[20.0], freqs=[1.0], duration=0.02, entangle_duration=0.02,
                       overrides={"save_every": 0.01})
-    rundir.claim(sw, "sweep", protocol(first), rundir.SWEEP_OUTPUTS, append=True).complete()
+    rundir.claim(sw, "sweep", protocol(first), SWEEP_OUTPUTS, append=True).complete()
     (sw / "results.csv").write_text("id\nx\n")
     # more points of the same protocol: allowed (another grid, device, share-entangling)
     same = SweepSpec(alphas=[40.0, 20.0], freqs=[1.0, 10.0], duration=0.02, entangle_duration=0.02, device="cpu",
                      share_entangling=False, overrides={"save_every": 0.01})
-    rundir.check(sw, "sweep", protocol(same), rundir.SWEEP_OUTPUTS, append=True)
+    rundir.check(sw, "sweep", protocol(same), SWEEP_OUTPUTS, append=True)
     res = runner.invoke(app, ["sweep", "--alpha", "20", "--freq", "1", "--duration", "0.05", "--entangle-duration",
                               "0.02", "--save-every", "0.01", "--out", str(sw), "--quiet"])
     line = _err(res)
@@ -310,7 +311,7 @@ def test_a_legacy_sweep_folder_is_compared_through_its_sweep_json(tmp_path):
     assert _legacy_protocol(sw) == protocol(spec)
     other = SweepSpec(alphas=[20.0], freqs=[1.0], duration=0.5, entangle_duration=0.02)
     with pytest.raises(Exception, match="another protocol"):
-        rundir.check(sw, "sweep", protocol(other), rundir.SWEEP_OUTPUTS, append=True, legacy=_legacy_protocol(sw))
+        rundir.check(sw, "sweep", protocol(other), SWEEP_OUTPUTS, append=True, legacy=_legacy_protocol(sw))
 
 
 # ---------------------------------------------------------------- failed starts
@@ -339,7 +340,7 @@ def test_failed_run_with_outputs_names_the_whole_cause_and_no_resume_without_che
 
     out = tmp_path / "run"
     cause = "the disk filled while writing trajectory.zarr at t = 0.35 s; " + "x" * 30 + " free some space please"
-    rundir.claim(out, "simulate", {"seed": 0}, rundir.SIMULATE_OUTPUTS)
+    rundir.claim(out, "simulate", {"seed": 0}, SIMULATE_OUTPUTS)
     (out / "metrics.csv").write_text("time\n0\n")
     rundir.mark_failed(out, OSError(cause))
     res = runner.invoke(app, [*SHORT, "--out", str(out)])

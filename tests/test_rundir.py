@@ -9,6 +9,7 @@ import json
 import os
 import subprocess
 import uuid
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -263,3 +264,20 @@ def test_manifest_is_written_first(tmp_path, monkeypatch):
     m = _manifest(out)
     assert m["complete"] is False and m["kind"] == "simulate" and uuid.UUID(m["run_id"])
     assert m["parameters"]["n_rods"] == 12 and os.path.exists(out / "initial.npz")
+
+
+def test_the_run_folder_layer_knows_no_command():
+    """Each command registers its folder contract; rundir itself names none (no string literal
+    outside docstrings is a command's name)."""
+    import ast
+
+    from rodwarp.rodset import rundir
+
+    tree = ast.parse(Path(rundir.__file__).read_text())
+    docstrings = {id(n.body[0].value) for n in ast.walk(tree)
+                  if isinstance(n, (ast.Module, ast.FunctionDef, ast.ClassDef)) and n.body
+                  and isinstance(n.body[0], ast.Expr) and isinstance(n.body[0].value, ast.Constant)}
+    literals = {n.value for n in ast.walk(tree)
+                if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docstrings}
+    assert not literals & {"simulate", "analyze", "segment", "sweep", "phantom", "phase-diagram"}
+    assert {"simulate", "analyze", "segment", "sweep"} <= set(rundir.OUTPUTS)  # registered on import

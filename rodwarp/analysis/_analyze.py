@@ -24,6 +24,7 @@ import numpy as np
 
 from rodwarp._util import progress_bar, versions
 from rodwarp.analysis._fieldset import Fields
+from rodwarp.analysis._outputs import ANALYZE_OUTPUTS
 from rodwarp.errors import RodwarpError
 from rodwarp.rodset import RodSet
 from rodwarp.rodset import load as load_rods
@@ -193,7 +194,7 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
                           extent=float(np.max(fp.domain[1] - fp.domain[0])))
     # the folder is taken only once the input is known to be good: a bad input leaves an
     # earlier analysis alone
-    run = rundir.claim(out, "analyze", {"input": str(Path(src).resolve()), **asdict(opts)}, rundir.ANALYZE_OUTPUTS,
+    run = rundir.claim(out, "analyze", {"input": str(Path(src).resolve()), **asdict(opts)}, ANALYZE_OUTPUTS,
                        overwrite=overwrite, replace_same_kind=True)
     cluster = None
     if kind == "rods":

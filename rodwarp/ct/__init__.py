@@ -45,7 +45,7 @@ _WHERE = {
     "read_voxel_unit": "_volume_meta",
     # phantoms
     "render_phantom": "_phantom_render", "occupancy": "_phantom_render", "phantom_truth": "_phantom",
-    "write_phantom": "_phantom", "truth_paths": "_phantom", "make_phantom": "_phantom",
+    "write_phantom": "_phantom", "truth_paths": "_phantom", "make_phantom": "_phantom", "PhantomOptions": "_phantom",
     "capsule_volume": "_phantom_render", "DEFAULT_TOLERANCE_VOXELS": "_phantom", "SCENES": "_phantom",
     "scene_isolated": "_scenes", "scene_crossing_pair": "_scenes", "scene_parallel_pair": "_scenes",
     "scene_random_packing": "_scenes", "scene_bundles": "_scenes", "scene_arcs": "_scenes",

@@ -14,7 +14,7 @@ PHANTOM_BYTES_PER_VOXEL = 34
 
 
 def check_phantom(*, rods, shape, voxel_size, out, blur, cnr, ring, cupping, streaks, n_rods, radius, aspect,
-                  touching, seed, fov=None, z_thickness=1, units=None) -> None:
+                  touching, seed, fov=None, z_thickness=1, units=None, dark=False) -> None:
     """Checks of ``rodwarp phantom``: values, the volume's memory and disk size, the output path.
 
     Artefact amplitudes are bounded where they would saturate the 16-bit image (``ring`` and
@@ -70,15 +70,9 @@ def check_segment(*, stack, voxel_size, units, diameter, out, chunk, contact_tol
     if not Path(stack).exists():
         fail(f"CT stack '{stack}' does not exist; pass a multi-page TIFF, a folder of slices or a zarr array")
     if voxel_size is not None:
-        parts = [p for p in str(voxel_size).split(",") if p.strip()]
-        if len(parts) not in (1, 3):
-            fail(f"--voxel-size takes one value or three (z,y,x), got '{voxel_size}'")
-        for p in parts:
-            try:
-                val = float(p)
-            except ValueError:
-                fail(f"--voxel-size must be numbers, got '{voxel_size}'")
-            number("--voxel-size", val, gt=0, hint=f"in --units {units or 'mm'}")
+        from rodwarp.ct._report import parse_voxel_size_text
+
+        parse_voxel_size_text(voxel_size)  # the one parser: one value or three (z,y,x), positive and finite
     if units is not None and units not in UNITS:
         fail(f"--units must be one of {', '.join(UNITS)}, got '{units}'")
     number("--min-fill", min_fill, gt=0, le=1)

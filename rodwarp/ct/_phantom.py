@@ -16,6 +16,7 @@ This module does not import warp.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,7 @@ from rodwarp.ct._phantom_render import _to_voxels, capsule_volume, occupancy, re
 from rodwarp.rodset import UNITS, Contacts, RodSet
 
 __all__ = ["render_phantom", "occupancy", "phantom_truth", "write_phantom", "truth_paths", "make_phantom",
+           "PhantomOptions",
            "capsule_volume", "DEFAULT_TOLERANCE_VOXELS", "SCENES"]
 
 #: Largest surface gap (voxels) counted as a true contact. Scenes make gaps of exactly 0 or >= 2.
@@ -154,10 +156,38 @@ def write_phantom(path_tif, volume: np.ndarray, rods: RodSet, contacts: Contacts
 SCENES = ("random", "bundles", "arcs", "wires")
 
 
-def make_phantom(rods: str, shape, out, *, voxel_size: float = 1.0, blur: float = 1.0, cnr: float = 10.0,
-                 ring: float = 0.0, cupping: float = 0.0, streaks: float = 0.0, fov: float | None = None,
-                 dark: bool = False, z_thickness: int = 1, n_rods: int = 100, radius: float = 3.0,
-                 aspect: float = 30.0, touching: float = 0.5, seed: int = 0, units: str | None = None) -> RodSet:
+def _opt(default, help: str):
+    return field(default=default, metadata={"help": help})
+
+
+@dataclass(frozen=True)
+class PhantomOptions:
+    """The options of :func:`make_phantom` (``rodwarp phantom``): every default and help line
+    stated once; the command takes its options from here."""
+
+    voxel_size: float = _opt(1.0, "Voxel edge length in the rods' units (--units; 1 for voxel-unit rods). The TIFF "
+                                  "and the truth JSON record it in that unit; the rods must be at least a voxel "
+                                  "thick and fit --shape.")
+    units: str | None = _opt(None, "Unit of a CSV rod set (m, mm, um, voxel; default m) and of --voxel-size; "
+                                   "converts npz/zarr rod sets.")
+    blur: float = _opt(1.0, "Gaussian point-spread sigma (voxels).")
+    cnr: float = _opt(10.0, "Contrast-to-noise ratio (foreground - background) / noise sigma.")
+    ring: float = _opt(0.0, "Ring artefact amplitude (fraction of the contrast, 0 to 1).")
+    cupping: float = _opt(0.0, "Cupping: relative intensity drop at the slice edge (negative: a bright rim, as "
+                               "beam hardening shows).")
+    streaks: float = _opt(0.0, "Metal streak amplitude (fraction of the contrast, 0 to 1).")
+    fov: float | None = _opt(None, "Field of view: radius (voxels) of the reconstruction circle; 0 outside it.")
+    dark: bool = _opt(False, "Dark rods on a bright background (grey values swapped).")
+    z_thickness: int = _opt(1, "Slices this many times thicker than the voxels are wide (anisotropic voxels; the "
+                               "TIFF records the spacing).")
+    n_rods: int = _opt(100, "'random', 'arcs', 'wires': number of rods; 'bundles': of bundles.")
+    radius: float = _opt(3.0, "Scenes: rod radius (voxels, at least 0.5).")
+    aspect: float = _opt(30.0, "'random': aspect ratio length / diameter.")
+    touching: float = _opt(0.5, "'random': fraction of rods touching another.")
+    seed: int = _opt(0, "Seed of the noise and of the scenes.")
+
+
+def make_phantom(rods: str, shape, out, **options) -> RodSet:
     """Render a rod set, or a named scene, as a 16-bit CT stack with its ground truth (``rodwarp phantom``).
 
     Parameters
@@ -184,6 +214,8 @@ def make_phantom(rods: str, shape, out, *, voxel_size: float = 1.0, blur: float 
         Unit of a CSV rod set (m, mm, um, voxel; default m, as a CSV does not record it); an
         npz/zarr rod set in metric units is converted to it. ``voxel_size`` is in this unit.
 
+    The options (all keywords) are the fields of :class:`PhantomOptions`, with their defaults.
+
     Returns
     -------
     RodSet
@@ -200,6 +232,12 @@ def make_phantom(rods: str, shape, out, *, voxel_size: float = 1.0, blur: float 
 
     from rodwarp.ct import _scenes as sc
     from rodwarp.rodset import detect_contacts, load
+
+    o = PhantomOptions(**options)
+    voxel_size, blur, cnr, ring, cupping, streaks, fov, dark = (o.voxel_size, o.blur, o.cnr, o.ring, o.cupping,
+                                                                o.streaks, o.fov, o.dark)
+    z_thickness, n_rods, radius, aspect, touching, seed, units = (o.z_thickness, o.n_rods, o.radius, o.aspect,
+                                                                  o.touching, o.seed, o.units)
 
     # scenes are built in voxel widths along every axis; thick slices span z_thickness of them
     full = (shape[0] * z_thickness, shape[1], shape[2])

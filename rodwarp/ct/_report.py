@@ -21,6 +21,7 @@ import numpy as np
 from rodwarp._util import progress_bar, versions
 from rodwarp.errors import RodwarpError
 from rodwarp.rodset import UNITS, RodSet
+from rodwarp.ct._outputs import SEGMENT_OUTPUTS
 from rodwarp.rodset.files import save_figure, write_json, write_text
 
 
@@ -55,12 +56,11 @@ def _csv_text(header: list[str], rows) -> str:
 
 
 def write_rods_csv(path, rods: RodSet) -> Path:
-    """``rod,x,y,z,radius``, one row per vertex, in the rod set's units (the rod-set CSV format,
-    with the shortest decimals that read back exactly, for people reading the file)."""
-    rid = rods.rod_index
-    rows = ((int(rid[k]), *rods.points[k], rods.radii[rid[k]]) for k in range(rods.n_vertices))
-    write_text(path, _csv_text(["rod", "x", "y", "z", "radius"], rows))
-    return Path(path)
+    """``rod,x,y,z,radius``, one row per vertex, in the rod set's units: the rod-set CSV format,
+    written by its one writer (:func:`rodwarp.rodset.save_csv`)."""
+    from rodwarp.rodset._formats import save_csv
+
+    return save_csv(rods, path)
 
 
 def write_contacts_csv(path, rods: RodSet) -> Path:
@@ -301,7 +301,7 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     vs = parse_voxel_size_text(voxel_size)
     outdir = Path(out) if out is not None else default_out(stack)
     # the folder's owner is checked before the (long) work: a refusal costs nothing and touches nothing
-    rundir.check(outdir, "segment", {}, rundir.SEGMENT_OUTPUTS, overwrite=overwrite, replace_same_kind=True)
+    rundir.check(outdir, "segment", {}, SEGMENT_OUTPUTS, overwrite=overwrite, replace_same_kind=True)
     volume = open_volume_lazy(stack)
     source = "--voxel-size"
     if vs is None:
@@ -351,7 +351,7 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     # and a kill while the outputs are written leaves this folder marked incomplete
     run = rundir.claim(outdir, "segment", {"input": str(stack.resolve()), "voxel_size_zyx": list(vs), "units": units,
                                            "voxel_size_source": source, **asdict(p)},
-                       rundir.SEGMENT_OUTPUTS, overwrite=overwrite, replace_same_kind=True)
+                       SEGMENT_OUTPUTS, overwrite=overwrite, replace_same_kind=True)
     s = write_outputs(outdir, result, volume, voxel_size=spacing, units=units, summary=summary, figures=figures,
                       grid_scale=grid)
     s["wall_time_s"] = time.perf_counter() - t0

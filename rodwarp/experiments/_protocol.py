@@ -34,6 +34,7 @@ import numpy as np
 
 from rodwarp.errors import RodwarpError
 
+from rodwarp.experiments._outputs import SIMULATE_OUTPUTS  # noqa: E402
 from rodwarp.experiments._plan import ENTANGLE, SIDE_WALLS, frames, plan  # noqa: E402
 
 from rodwarp.experiments._params import (RIGID_SAG, RODS_PER_ALPHA, ProtocolParams, _straight,  # noqa: E402,F401
@@ -295,7 +296,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     donor = Path(entangled_from) if entangled_from is not None and not resume else None
     # the donor is checked before the folder is taken: a refused branch leaves --out untouched
     branch = _entangled_point(params, donor, outdir) if donor is not None else None
-    run = rundir.claim(outdir, "simulate", asdict(params), rundir.SIMULATE_OUTPUTS, resume=resume,
+    run = rundir.claim(outdir, "simulate", asdict(params), SIMULATE_OUTPUTS, resume=resume,
                        overwrite=overwrite, resumable=any((outdir / "checkpoints").glob("ckpt_*.npz")),
                        need_bytes=output_bytes(params))
     device = _warp.resolve_device(params.device)

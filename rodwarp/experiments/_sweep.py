@@ -32,6 +32,7 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 from rodwarp.errors import RodwarpError
+from rodwarp.experiments._outputs import SWEEP_OUTPUTS
 from rodwarp.experiments._cluster import LOCAL_CLUSTER, _connect, _local_cluster  # noqa: F401 (tests import them here)
 from rodwarp.experiments._protocol import ProtocolParams
 from rodwarp.rodset.files import read_csv_rows, write_json, write_text
@@ -482,13 +483,13 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
     output_location(out, "--out")
     # the folder is checked before the scheduler is contacted: a refusal costs nothing
     legacy = _legacy_protocol(out)
-    rundir.check(out, "sweep", protocol(spec), rundir.SWEEP_OUTPUTS, overwrite=overwrite, append=True,
+    rundir.check(out, "sweep", protocol(spec), SWEEP_OUTPUTS, overwrite=overwrite, append=True,
                  legacy=legacy)
     if scheduler:
         scheduler = check_scheduler(scheduler)
     # a sweep adds points to the folder's sweep of the same protocol and is refused for any
     # other (results of two protocols never share a results.csv or a phase diagram)
-    run = rundir.claim(out, "sweep", protocol(spec), rundir.SWEEP_OUTPUTS, overwrite=overwrite, append=True,
+    run = rundir.claim(out, "sweep", protocol(spec), SWEEP_OUTPUTS, overwrite=overwrite, append=True,
                        legacy=legacy)
     (out / "points").mkdir(parents=True, exist_ok=True)
     csv_path = out / "results.csv"

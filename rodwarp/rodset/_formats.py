@@ -80,18 +80,20 @@ def save(rods: RodSet, path: str | os.PathLike) -> Path:
 
 
 def save_csv(rods: RodSet, path: str | os.PathLike) -> Path:
-    """Write ``rod,x,y,z,radius`` (one row per vertex, ``%.17g``: floats round-trip exactly)
-    atomically, in ``rods.units`` (which the CSV does not record); returns the path."""
+    """Write ``rod,x,y,z,radius`` (one row per vertex) atomically, in ``rods.units`` (which the
+    CSV does not record); returns the path. Values are the shortest decimals that read back to
+    the same floats (Python's repr): exact, and readable (0.1, not 0.10000000000000001). The
+    one writer of the format: ``RodSet.to_csv`` and segmentation's ``rods.csv`` use it."""
     rods.validate()
     path = Path(path)
-    table = np.empty((rods.n_vertices, 5), dtype=np.float64)
-    table[:, 0] = rods.rod_index
-    table[:, 1:4] = rods.points
-    table[:, 4] = np.repeat(rods.radii, rods.vertex_counts)
+    rid = rods.rod_index
+    radius = np.repeat(rods.radii, rods.vertex_counts)
+    lines = ["rod,x,y,z,radius\n"]
+    for k, (x, y, z) in enumerate(rods.points.tolist()):
+        lines.append(f"{int(rid[k])},{x!r},{y!r},{z!r},{float(radius[k])!r}\n")
     with atomic_path(path) as tmp:
         with open(tmp, "w", newline="") as fh:
-            fh.write("rod,x,y,z,radius\n")
-            np.savetxt(fh, table, fmt=["%d", "%.17g", "%.17g", "%.17g", "%.17g"], delimiter=",")
+            fh.write("".join(lines))
     return path
 
 

@@ -550,7 +550,7 @@ class RodSet:
         Parameters
         ----------
         path : path-like
-            Destination. Values use ``%.17g`` so floats round-trip exactly. Coordinates and
+            Destination. Values are the shortest decimals that round-trip exactly. Coordinates and
             radius are in ``self.units``, which the CSV does not record.
 
         Returns

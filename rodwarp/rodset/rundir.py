@@ -5,8 +5,9 @@
 the run writes, and ``complete`` (false while the run is going, true once its last output is
 written). One rule for every command that writes a folder:
 
-* the manifest's ``outputs`` are bare names from the command's own fixed list
-  (:data:`OUTPUTS`); a manifest naming anything else (an absolute path, ``..``, a
+* the manifest's ``outputs`` are bare names from the command's own fixed list, which each
+  command registers here (:func:`register_command`, :data:`OUTPUTS`): this layer knows no
+  command of its own; a manifest naming anything else (an absolute path, ``..``, a
   subfolder, a name no command writes, an unknown command) makes the folder *refused*,
   whatever the options: rodwarp deletes only names it wrote itself, inside the folder;
 * a new run in a folder holding another run (a manifest, or outputs of a run from before
@@ -47,24 +48,35 @@ from rodwarp.validation import disk_fits, output_location
 MANIFEST = "rodwarp-run.json"
 FORMAT = "rodwarp-run"
 
-#: what ``rodwarp simulate`` writes in its folder (``analysis`` is a later analyze run of it)
-SIMULATE_OUTPUTS = ("summary.json", "metrics.csv", "metrics.png", "trajectory.zarr", "trajectory.pvd", "vtk",
-                    "initial.npz", "entangled.npz", "entangled_from.json", "final.npz", "snapshots.png",
-                    "checkpoints", "analysis")
-#: what ``rodwarp analyze`` writes in its folder
-ANALYZE_OUTPUTS = ("fields.zarr", "summary.json", "rods.npz", "histograms.png", "slices.png", "zprofiles.png",
-                   "tangles.png", "distributions.png")
-#: what ``rodwarp segment`` writes in its folder (``analysis`` is a later analyze run of it)
-SEGMENT_OUTPUTS = ("rods.npz", "rods.csv", "contacts.csv", "summary.json", "qa_slices.png", "qa_projection.png",
-                   "analysis")
-#: what ``rodwarp sweep`` writes in its folder, with the files of ``rodwarp phase-diagram``
-#: (names with ``*`` are patterns of bare names: one figure per group of points)
-SWEEP_OUTPUTS = ("sweep.json", "results.csv", "points", "alpha_star.csv", "power_law.csv", "phase_*.png")
-#: each command's outputs: the only names a manifest of that command may list
-OUTPUTS = {"simulate": SIMULATE_OUTPUTS, "analyze": ANALYZE_OUTPUTS, "segment": SEGMENT_OUTPUTS,
-           "sweep": SWEEP_OUTPUTS}
-#: outputs only a simulation writes (an analysis never replaces a folder holding them)
-_SIMULATION_ONLY = ("final.npz", "trajectory.zarr", "metrics.csv", "checkpoints")
+#: each command's outputs, as the command registered them (:func:`register_command`): the only
+#: names a manifest of that command may list
+OUTPUTS: dict[str, tuple] = {}
+#: each command's other traits (:func:`register_command`)
+_TRAITS: dict[str, dict] = {}
+
+
+def register_command(kind: str, outputs, *, legacy_marker: str | None = None, exclusive=(),
+                     resumable: bool = False) -> None:
+    """Declare a command's folder contract; each command registers its own (rodwarp's package
+    import registers them all).
+
+    Parameters
+    ----------
+    kind : str
+        The command's name, as manifests record it.
+    outputs : sequence of str
+        Every name it writes in its folder: bare names, or ``*`` patterns of bare names.
+    legacy_marker : str, optional
+        An output that marks a run of this command from before manifests (no other command's
+        ``exclusive`` outputs beside it).
+    exclusive : sequence of str
+        Outputs only this command writes: a folder holding them is never taken for another
+        command's legacy run.
+    resumable : bool
+        Its runs continue with ``--resume`` (suggested when a folder holds an unfinished one).
+    """
+    OUTPUTS[kind] = tuple(outputs)
+    _TRAITS[kind] = {"legacy_marker": legacy_marker, "exclusive": tuple(exclusive), "resumable": bool(resumable)}
 #: subfolders whose hidden temporary files are cleaned too
 _TEMP_DIRS = ("", "vtk", "checkpoints")
 
@@ -340,9 +352,11 @@ def _decide(path: Path, kind: str, parameters: dict, outputs, *, resume: bool, o
     if old is None and not present:
         return None, present, None, False
     same = old is not None and old.get("kind") == kind and not old.get("unreadable")
-    if old is None and kind == "analyze":
-        # an analysis from before manifests: its fields, and nothing of a simulation
-        same = "fields.zarr" in present and not any((path / o).exists() for o in _SIMULATION_ONLY)
+    marker = _TRAITS[kind]["legacy_marker"]
+    if old is None and marker is not None:
+        # a run of this command from before manifests: its marker, and nothing only another writes
+        others = [o for k, t in _TRAITS.items() if k != kind for o in t["exclusive"]]
+        same = marker in present and not any((path / o).exists() for o in others)
     if overwrite:
         return old, present, None, False
     if append and same:
@@ -357,7 +371,7 @@ def _decide(path: Path, kind: str, parameters: dict, outputs, *, resume: bool, o
         return old, present, None, False
     what = _describe(old) if old is not None else f"outputs of an earlier run ({', '.join(present[:4])})"
     hint = " --resume to continue it," if (old is not None and not old.get("complete") and resumable
-                                           and old.get("kind") == kind == "simulate") else ""
+                                           and old.get("kind") == kind and _TRAITS[kind]["resumable"]) else ""
     raise RodwarpError(f"{path} holds {what}; pass --overwrite to replace it,{hint} or choose another {name}")
 
 
