@@ -66,14 +66,17 @@ def _run_catching(fn):
             return None, f"{type(e).__name__}: {e}"
 
 
-def _step_cost(model, solver, state, dt: float, k: int, repeats: int, device: str) -> dict:
-    """Seconds per step: K steps from ``state`` (restored each repeat), repeated, after one untimed run."""
+def _step_cost(model, solver, state, dt: float, k: int, repeats: int, device: str, points=None) -> dict:
+    """Seconds per step: K steps from ``state`` and its contact ``points`` (restored each
+    repeat), repeated, after one untimed run."""
     snap = common.new_state_like(model, state)
+    snap_points = common.copy_contacts(solver, points if points is not None else solver.contacts())
     a = common.new_state_like(model, state)
     b = common.new_state_like(model, state)
 
     def restore():
         a.copy_from(snap)
+        common.restore_contacts(solver, snap_points)
 
     def go():
         common.advance(solver, a, b, dt, k)
@@ -329,11 +332,11 @@ def _cantilever_dt(quick: bool, device: str) -> dict:
     return out
 
 
-def _pile_metrics(model, state) -> dict:
+def _pile_metrics(model, state, points) -> dict:
     from rodwarp.rodset import contacts_per_rod
     from rodwarp.sim import centroid_height, rod_contacts
 
-    c = rod_contacts(model, state)
+    c = rod_contacts(model, state, points)
     x = state.positions()
     r = model.radius_np[model.vertex_rod_np]
     wall = min((float(np.min(x @ p.normal - p.offset - r)) for p in model.planes), default=0.0)
@@ -361,17 +364,18 @@ def _pile_dt(quick: bool, device: str) -> dict:
 
         def go():
             t = time.perf_counter()
-            holder["state"] = run(solver, model.state(), n * dt, dt)
+            holder["points"] = solver.contacts()
+            holder["state"] = run(solver, model.state(), n * dt, dt, contacts=holder["points"])
             return time.perf_counter() - t
 
         wall, err = _run_catching(go)
         row = {"dt_s": dt, "dt_over_default": f, "steps": n, "failure": err}
         if err is None:
             st = holder["state"]
-            row.update(_pile_metrics(model, st))
+            row.update(_pile_metrics(model, st, holder["points"]))
             row["run_wall_s_single"] = wall
-            row["last_step_contacts"] = int(st.contact_count)
-            cost = _step_cost(model, solver, st, dt, 10, repeats, device)
+            row["last_step_contacts"] = int(holder["points"].count)
+            cost = _step_cost(model, solver, st, dt, 10, repeats, device, points=holder["points"])
             row["cost_s_per_sim_s"] = common.scale_spread(cost, 1.0 / dt)
         rows.append(row)
         log(f"pile dt {f:g} x default ({dt:.3g} s): " + (f"Z {row['Z']:.2f}, h {row['centroid_height_m']:.4f} m"
@@ -408,15 +412,16 @@ def _cabin(quick: bool, device: str) -> dict:
     of its ends after 1 s against the sweep cap. (The log cabin used here before rolling rods
     no longer stands: round logs on a tilt roll apart, with or without friction.)"""
     from rodwarp.testing.scenes import leaning_rod
-    from rodwarp.sim import STEEL, Model, RodSolver, run
+    from rodwarp.sim import STEEL, ModelBuilder, RodSolver, run
 
     its = [10, 20, 40, 80, 160, 320, 640]
     repeats = common.n_repeats(quick)
     rows = []
     for it in its:
-        model = Model(leaning_rod(60.0), STEEL, gravity=(0, 0, -9.81), mu=0.5, rod_contacts=False, device=device)
-        model.add_plane((0, 0, 1), 0.0, name="floor")
-        model.add_plane((1, 0, 0), 0.0, name="wall")
+        builder = ModelBuilder(leaning_rod(60.0), STEEL, gravity=(0, 0, -9.81), mu=0.5, rod_contacts=False, device=device)
+        builder.add_plane((0, 0, 1), 0.0, name="floor")
+        builder.add_plane((1, 0, 0), 0.0, name="wall")
+        model = builder.finalize()
         solver = RodSolver(model, iterations=it)
         dt = solver.default_dt()
         x0 = model.rods.points.copy()
@@ -451,6 +456,7 @@ def _pile_iterations(quick: bool, device: str) -> dict:
     rows = []
     for it in its:
         solver = RodSolver(model, iterations=it)
+        common.restore_contacts(solver, tile["contact_points"])
         a = common.new_state_like(model, snap)
         b = common.new_state_like(model, snap)
         res, sweeps, rod_pen, wall_pen = [], [], [], []
@@ -458,12 +464,12 @@ def _pile_iterations(quick: bool, device: str) -> dict:
         def cb(s, info):
             res.append(info.contact_residual)
             sweeps.append(info.iterations)
-            m = _pile_metrics(model, s)
+            m = _pile_metrics(model, s, solver.default_contacts)
             rod_pen.append(max(0.0, -(m["min_rod_gap_m"] or 0.0)))
             wall_pen.append(max(0.0, -m["min_wall_gap_m"]))
 
         _, err = _run_catching(lambda: common.advance(solver, a, b, dt, k, callback=cb))
-        cost = _step_cost(model, solver, snap, dt, 10, repeats, device)
+        cost = _step_cost(model, solver, snap, dt, 10, repeats, device, points=tile["contact_points"])
         rows.append({"iterations": it, "failure": err, "steps": k,
                      "residual_median": float(np.median(res)) if res else None,
                      "residual_max": float(np.max(res)) if res else None,

@@ -167,8 +167,8 @@ def _point(n_tiles: int, quick: bool, device: str, limit_s: float, rate: list) -
     solver = RodSolver(model)
     dt = solver.default_dt()
     A = model.state()
-    B = State(model, A.contact_capacity)
-    solver.step(A, B, None, dt)  # untimed: allocations, first-step energy evaluation
+    B = State(model)
+    solver.step(A, B, dt=dt)  # untimed: allocations, first-step energy evaluation
     x = A.positions()
     cd = model.contact_distance
 
@@ -184,7 +184,7 @@ def _point(n_tiles: int, quick: bool, device: str, limit_s: float, rate: list) -
         s.reset_timings()
         common.sync(device)
         t = time.perf_counter()
-        s.step(A, B, None, dt)
+        s.step(A, B, dt=dt)
         common.sync(device)
         wall = time.perf_counter() - t
         tm = s.timings
@@ -235,9 +235,10 @@ def _point(n_tiles: int, quick: bool, device: str, limit_s: float, rate: list) -
     res = {mode: {"search_s": common.spread(samples[mode]), "broadphase_s": common.spread(samples[mode + "_bp"]),
                   "step_s": common.spread(samples[mode + "_step"])} for mode in ("rebuild", "reuse")}
     builds_ok = (not hook) or solver.pair_builds >= repeats
-    n = B.contact_count
-    seg = B.contact_seg.numpy()[:n].astype(np.int64)
-    gap = B.contact_gap.numpy()[:n]
+    last = solver.default_contacts.last
+    n = last.count
+    seg = last.seg.numpy()[:n].astype(np.int64)
+    gap = last.gap.numpy()[:n]
     keep = gap < cd
     rw_pairs, rw_gaps = seg[keep], gap[keep]
 

@@ -44,15 +44,16 @@ THETA, MU, R = 10.0, 0.4, 0.01
 
 def _incline(nu: float, rod_model: str, sweeps: int) -> dict:
     from rodwarp.rodset import RodSet
-    from rodwarp.sim import STEEL, ContactLaw, Model, RodSolver, run
+    from rodwarp.sim import STEEL, ContactLaw, ModelBuilder, RodSolver, run
     from rodwarp.sim.contact_law import imc_creep_speed
     from rodwarp.testing.scenes import straight_rod, tilted_gravity
 
     rods = RodSet.from_polylines([straight_rod((0.0, 0.0, R), (1, 0, 0), 1.0, R)], R)
     law = ContactLaw("imc", nu=nu) if nu else ContactLaw("exact")
-    model = Model(rods, STEEL, gravity=tilted_gravity(9.81, THETA), mu=MU, rod_contacts=False, rod_model=rod_model,
-                  rolling=False, contact_law=law)
-    model.add_plane((0, 0, 1), 0.0, mu=MU, name="floor")
+    builder = ModelBuilder(rods, STEEL, gravity=tilted_gravity(9.81, THETA), mu=MU, rod_contacts=False, rod_model=rod_model,
+                           rolling=False, contact_law=law)
+    builder.add_plane((0, 0, 1), 0.0, mu=MU, name="floor")
+    model = builder.finalize()
     solver = RodSolver(model, iterations=sweeps, tolerance=0.0)
     state = model.state()
     run(solver, state, 0.02, 1e-3)  # compile and settle outside the timing

@@ -40,18 +40,19 @@ RIGID_SEEDS = (0, 1, 2, 3)
 
 def _rodwarp(rod_model: str, device: str, steps: int, seed: int = 0) -> dict:
     from rodwarp.experiments import random_packing
-    from rodwarp.sim import STEEL, Model, RodSolver, State
+    from rodwarp.sim import STEEL, ModelBuilder, RodSolver, State
 
     rods = random_packing(N_RODS, LENGTH, DIAMETER, BOX, seed=seed, device=device)
-    model = Model(rods, STEEL, gravity=(0, 0, -0.5), mu=0.2, rod_model=rod_model, device=device)
-    model.add_box((0, 0, 0), BOX, walls=("floor", "ceiling", "x-", "x+", "y-", "y+"))
+    builder = ModelBuilder(rods, STEEL, gravity=(0, 0, -0.5), mu=0.2, rod_model=rod_model, device=device)
+    builder.add_box((0, 0, 0), BOX, walls=("floor", "ceiling", "x-", "x+", "y-", "y+"))
+    model = builder.finalize()
     solver = RodSolver(model, allow_unstable=True)  # dt fixed at 1e-3 like the peer's protocol
     control = model.control()
     a, b = model.state(), State(model)
     times, res, sweeps, nc = [], [], [], []
     for _ in range(steps):
         t0 = time.thread_time()
-        info = solver.step(a, b, control, DT)
+        info = solver.step(a, b, control, dt=DT)
         common.sync(device)
         times.append(time.thread_time() - t0)
         a, b = b, a

@@ -51,19 +51,22 @@ def _steps_for(n_rods: int, quick: bool) -> int:
 
 
 def _measure(model, solver, snapshot, dt: float, k: int, repeats: int, device: str) -> dict:
-    """Throughput (profiling off) and stage split (profiling on) of K steps from ``snapshot``."""
+    """Throughput (profiling off) and stage split (profiling on) of K steps from ``snapshot``
+    (a state and its contact points)."""
+    snapshot, snap_points = snapshot
     a = common.new_state_like(model, snapshot)
     b = common.new_state_like(model, snapshot)
     infos = []
 
     def restore():
         a.copy_from(snapshot)
+        common.restore_contacts(solver, snap_points)
         infos.clear()
 
     def k_steps():
         x, y = a, b
         for _ in range(k):
-            info = solver.step(x, y, None, dt)
+            info = solver.step(x, y, dt=dt)
             infos.append(info)
             x, y = y, x
 
@@ -118,7 +121,6 @@ def _measure(model, solver, snapshot, dt: float, k: int, repeats: int, device: s
 
 
 def _pile_point(n_rods: int, quick: bool, device: str, iteration_set) -> dict:
-    from rodwarp.sim.state import State
     from rodwarp.sim.solver import RodSolver
 
     repeats = common.n_repeats(quick)
@@ -134,8 +136,7 @@ def _pile_point(n_rods: int, quick: bool, device: str, iteration_set) -> dict:
     b = common.new_state_like(model, a)
     a, b, info = common.advance(solver, a, b, dt, n_warm)
     warm_s = time.perf_counter() - t
-    snapshot = State(model, a.contact_capacity)
-    snapshot.copy_from(a)
+    snapshot = (common.new_state_like(model, a), common.copy_contacts(solver))
     k = _steps_for(n_rods, quick)
     log(f"pile N={n_rods}: packed in {pack_s:.1f} s, warm-up {n_warm} steps in {warm_s:.1f} s, "
         f"{info.n_contacts} contacts; timing {k} steps x {repeats}")

@@ -533,7 +533,8 @@ def _pe_state(rods):
 
 
 def _pile(ea, quick: bool, device: str) -> dict:
-    from rodwarp.sim.model import STEEL, Model
+    from rodwarp.sim.builder import ModelBuilder
+    from rodwarp.sim.model import STEEL
     from rodwarp.experiments import random_packing
     from rodwarp.sim.solver import RodSolver
 
@@ -544,8 +545,9 @@ def _pile(ea, quick: bool, device: str) -> dict:
     box = np.array(p["box_m"], float)
     # 1. the falling pile, simulated by rodwarp up to the hand-over time
     rods = random_packing(N, p["length_m"], p["diameter_m"], box, seed=p["seed"], device=device, n_vertices=V)
-    model = Model(rods, STEEL, gravity=(0.0, 0.0, -9.81), mu=p["rod_rod_mu"], device=device)
-    model.add_box(np.zeros(3), box, walls=("floor", "x-", "x+", "y-", "y+"), mu=p["floor_mu"])
+    builder = ModelBuilder(rods, STEEL, gravity=(0.0, 0.0, -9.81), mu=p["rod_rod_mu"], device=device)
+    builder.add_box(np.zeros(3), box, walls=("floor", "x-", "x+", "y-", "y+"), mu=p["floor_mu"])
+    model = builder.finalize()
     planes = list(model.planes)
     solver = RodSolver(model)
     ddt = solver.default_dt()
@@ -565,6 +567,7 @@ def _pile(ea, quick: bool, device: str) -> dict:
     nrw = int(math.ceil(T / ddt))
     rdt = T / nrw
     snap = common.new_state_like(model, a)
+    snap_points = common.copy_contacts(solver)
     x = common.new_state_like(model, snap)
     y = common.new_state_like(model, snap)
     x, y, info = common.advance(solver, x, y, rdt, nrw)
@@ -576,6 +579,7 @@ def _pile(ea, quick: bool, device: str) -> dict:
 
     def restore():
         x.copy_from(snap)
+        common.restore_contacts(solver, snap_points)
 
     def go():
         common.advance(solver, x, y, rdt, k_time)

@@ -58,6 +58,7 @@ def _measure(model, dt: float, quick: bool, device: str, budget: float) -> dict:
 
     solver = RodSolver(model)
     snap = model.state()
+    no_contacts = solver.contacts()
     a = common.new_state_like(model, snap)
     b = common.new_state_like(model, snap)
     t = time.perf_counter()
@@ -66,6 +67,7 @@ def _measure(model, dt: float, quick: bool, device: str, budget: float) -> dict:
     preroll = (time.perf_counter() - t) / 2
     # one more untimed step gives a cleaner per-step estimate than the pre-roll
     a.copy_from(snap)
+    common.restore_contacts(solver, no_contacts)
     t = time.perf_counter()
     common.advance(solver, a, b, dt, 1)
     common.sync(device)
@@ -79,13 +81,14 @@ def _measure(model, dt: float, quick: bool, device: str, budget: float) -> dict:
 
     def restore():
         a.copy_from(snap)
+        common.restore_contacts(solver, no_contacts)
         infos.clear()
         solver.invalidate_pairs()  # every window starts with a pair-list rebuild
 
     def k_steps():
         x, y = a, b
         for _ in range(k):
-            infos.append(solver.step(x, y, None, dt))
+            infos.append(solver.step(x, y, dt=dt))
             x, y = y, x
 
     solver.timings = None
@@ -114,7 +117,7 @@ def _measure(model, dt: float, quick: bool, device: str, budget: float) -> dict:
     restore()
     solver.invalidate_pairs()
     solver.reset_timings()
-    solver.step(a, b, None, dt)
+    solver.step(a, b, dt=dt)
     rebuild = dict(solver.timings)
     solver.timings = None
 

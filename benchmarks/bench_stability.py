@@ -102,7 +102,8 @@ def _kinked(points, offsets, amplitude: float, rng) -> np.ndarray:
 
 def scene(alpha: float, n_vertices: int, extensible: bool, device: str, seed: int = 0):
     """The small falling pile of the module docstring."""
-    from rodwarp.sim.model import STEEL, Model
+    from rodwarp.sim.builder import ModelBuilder
+    from rodwarp.sim.model import STEEL
     from rodwarp.experiments import random_packing
     from rodwarp.rodset import RodSet
 
@@ -111,8 +112,9 @@ def scene(alpha: float, n_vertices: int, extensible: bool, device: str, seed: in
     rods = random_packing(N_RODS, common.LENGTH, d, box, seed=seed, n_vertices=n_vertices, device=device)
     pts = _kinked(rods.points, rods.offsets, NOISE * d, np.random.default_rng(seed + 1))
     noisy = RodSet(pts, rods.offsets, rods.radii, rest_points=rods.points, box=rods.box)
-    model = Model(noisy, STEEL, gravity=(0.0, 0.0, -9.81), mu=0.2, extensible=extensible, device=device)
-    model.add_box(np.zeros(3), box, walls=("floor", "x-", "x+", "y-", "y+"))
+    builder = ModelBuilder(noisy, STEEL, gravity=(0.0, 0.0, -9.81), mu=0.2, extensible=extensible, device=device)
+    builder.add_box(np.zeros(3), box, walls=("floor", "x-", "x+", "y-", "y+"))
+    model = builder.finalize()
     return model
 
 
@@ -131,7 +133,7 @@ def _trial(model, bending: str, dt: float, duration: float) -> dict:
         warnings.simplefilter("ignore")
         try:
             for _ in range(n):
-                info = solver.step(a, b, None, dt)
+                info = solver.step(a, b, dt=dt)
                 out["max_contacts"] = max(out["max_contacts"], int(info.n_contacts))
                 a, b = b, a
         except SimulationBlowUp as e:

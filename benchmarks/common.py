@@ -159,16 +159,29 @@ def loglog_slope(xs, ys) -> float | None:
 def new_state_like(model, state):
     from rodwarp.sim.state import State
 
-    s = State(model, state.contact_capacity)
+    s = State(model)
     s.copy_from(state)
     return s
+
+
+def copy_contacts(solver, points=None):
+    """A copy of ``points`` (default the solver's :attr:`default_contacts`, those a step without
+    contacts uses): with a state copy, a snapshot that replays bit for bit."""
+    out = solver.contacts()
+    out.copy_from(solver.default_contacts if points is None else points)
+    return out
+
+
+def restore_contacts(solver, snapshot) -> None:
+    """Put a :func:`copy_contacts` snapshot back as the solver's default contacts."""
+    solver.default_contacts.copy_from(snapshot)
 
 
 def advance(solver, a, b, dt: float, n: int, callback=None):
     """``n`` steps ping-ponging states ``a`` and ``b``; returns (current, scratch, last StepInfo)."""
     info = None
     for _ in range(n):
-        info = solver.step(a, b, None, dt)
+        info = solver.step(a, b, dt=dt)
         a, b = b, a
         if callback is not None:
             callback(a, info)
@@ -194,12 +207,14 @@ def protocol_box(n_rods: int, alpha: float) -> np.ndarray:
 def pile_model(n_rods: int, diameter: float, box, *, seed: int = 0, device: str = "cpu", mu: float = 0.2,
                n_vertices: int = 10):
     """Random (RSA) steel packing in ``box`` with floor and four side walls, gravity -z."""
-    from rodwarp.sim.model import STEEL, Model
+    from rodwarp.sim.builder import ModelBuilder
+    from rodwarp.sim.model import STEEL
     from rodwarp.experiments import random_packing
 
     rods = random_packing(n_rods, LENGTH, diameter, box, seed=seed, device=device, n_vertices=n_vertices)
-    model = Model(rods, STEEL, gravity=(0.0, 0.0, -9.81), mu=mu, device=device)
-    model.add_box(np.zeros(3), np.asarray(box, float), walls=("floor", "x-", "x+", "y-", "y+"))
+    builder = ModelBuilder(rods, STEEL, gravity=(0.0, 0.0, -9.81), mu=mu, device=device)
+    builder.add_box(np.zeros(3), np.asarray(box, float), walls=("floor", "x-", "x+", "y-", "y+"))
+    model = builder.finalize()
     return model
 
 
@@ -229,7 +244,7 @@ def settled_tile(device: str = "cpu", diameter: float = TILE["diameter"], durati
     b = new_state_like(model, a)
     a, b, info = advance(solver, a, b, dt, int(round(duration / dt)))
     wall = time.perf_counter() - t0
-    z = contacts_per_rod(model.n_rods, rod_contacts(model, a))
+    z = contacts_per_rod(model.n_rods, rod_contacts(model, a, solver.default_contacts))
     log(f"settled tile: {model.n_rods} rods, d = {diameter} m, {duration} s in {wall:.1f} s, Z = {z:.2f}")
     return {
         "rest_points": model.rods.points.copy(),
@@ -246,6 +261,7 @@ def settled_tile(device: str = "cpu", diameter: float = TILE["diameter"], durati
         "wall_s": wall,
         "model": model,
         "state": a,
+        "contact_points": copy_contacts(solver),  # the warm start of the state's last step
     }
 
 
@@ -283,11 +299,13 @@ def tiled_rods(tile: dict, n_tiles: int, gap: float = 0.05, velocities: bool = F
 
 def tiled_model(tile: dict, n_tiles: int, device: str = "cpu", velocities: bool = False):
     """Model of ``n_tiles`` settled tiles: steel, mu 0.2, gravity -z, floor and the outer walls."""
-    from rodwarp.sim.model import STEEL, Model
+    from rodwarp.sim.builder import ModelBuilder
+    from rodwarp.sim.model import STEEL
 
     rods = tiled_rods(tile, n_tiles, velocities=velocities)
-    model = Model(rods, STEEL, gravity=(0.0, 0.0, -9.81), mu=0.2, device=device)
-    model.add_box(rods.box[0], rods.box[1], walls=("floor", "x-", "x+", "y-", "y+"))
+    builder = ModelBuilder(rods, STEEL, gravity=(0.0, 0.0, -9.81), mu=0.2, device=device)
+    builder.add_box(rods.box[0], rods.box[1], walls=("floor", "x-", "x+", "y-", "y+"))
+    model = builder.finalize()
     return model
 
 

@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from rodwarp import STEEL, RodSet
-from rodwarp.sim import Model, RodSolver, run
+from rodwarp.sim import ModelBuilder, RodSolver, run
 
 g, r, mu, theta = 9.81, 0.01, 0.4, math.radians(30.0)
 gravity = (g * math.sin(theta), 0.0, -g * math.cos(theta))   # downhill is +x
@@ -24,9 +24,10 @@ exact = 2 / 3 * g * math.sin(theta)                           # m/s^2
 s = np.linspace(-0.5, 0.5, 10)
 rod = np.stack([0 * s, s, r + 0 * s], axis=1)                # along y: across the slope, on z = 0
 for rod_model in ("elastic", "rigid"):
-    model = Model(RodSet.from_polylines([rod], r), STEEL, gravity=gravity, mu=mu,
-                  rod_contacts=False, rod_model=rod_model)
-    model.add_plane((0, 0, 1), 0.0, mu=mu, name="floor")
+    builder = ModelBuilder(RodSet.from_polylines([rod], r), STEEL, gravity=gravity, mu=mu,
+                           rod_contacts=False, rod_model=rod_model)
+    builder.add_plane((0, 0, 1), 0.0, mu=mu, name="floor")
+    model = builder.finalize()
     t, x, v, w = [], [], [], []
 
     def record(state, info):

@@ -2,7 +2,7 @@
 
 Host-side API (SI units throughout)::
 
-    from rodwarp import RodSet, Model, RodSolver, Control, State
+    from rodwarp import RodSet, ModelBuilder, Model, RodSolver, Control, State, ContactPoints
 
 Subpackages, each with a flat public face: :mod:`rodwarp.rodset` (the rod set, its formats and
 contacts, files, run folders), :mod:`rodwarp.sim` (the engine), :mod:`rodwarp.analysis`
@@ -23,10 +23,10 @@ from rodwarp.experiments import _outputs as _experiment_outputs  # noqa: E402,F4
 
 __version__ = "0.1.0"
 
-__all__ = ["RodSet", "Contacts", "load", "Model", "State", "Control", "Material", "STEEL", "RodSolver", "StepInfo",
-           "RodwarpError", "SimulationBlowUp", "__version__"]
+__all__ = ["RodSet", "Contacts", "load", "ModelBuilder", "Model", "State", "ContactPoints", "Control", "Material",
+           "STEEL", "RodSolver", "StepInfo", "RodwarpError", "SimulationBlowUp", "__version__"]
 
-_SIM = ("Model", "State", "Control", "Drive", "Material", "STEEL", "Plane", "RodSolver", "StepInfo", "run")
+_SIM = ("ModelBuilder", "Model", "State", "ContactPoints", "Control", "Drive", "Material", "STEEL", "Plane", "RodSolver", "StepInfo", "run")
 
 
 def __getattr__(name):

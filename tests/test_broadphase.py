@@ -5,7 +5,7 @@ import pytest
 
 from rodwarp.experiments._packing import random_packing
 from rodwarp.rodset._geometry import segment_distance
-from rodwarp.sim import STEEL, Model, RodSolver, State
+from rodwarp.sim import STEEL, ModelBuilder, RodSolver, State
 
 
 def shaken_pile(seed=0, n_rods=60):
@@ -13,8 +13,9 @@ def shaken_pile(seed=0, n_rods=60):
     move fast while the rest settle, which is what the partial refresh is for."""
     d = 0.01
     rods = random_packing(n_rods, 0.4, d, (0.4, 0.4, 0.6), seed=seed)
-    model = Model(rods, STEEL, gravity=(0, 0, -9.81), mu=0.2, rod_model="elastic")
-    model.add_box((0, 0, 0), (0.4, 0.4, 0.8), walls=("floor", "ceiling", "x-", "x+", "y-", "y+"), moving=True)
+    builder = ModelBuilder(rods, STEEL, gravity=(0, 0, -9.81), mu=0.2, rod_model="elastic")
+    builder.add_box((0, 0, 0), (0.4, 0.4, 0.8), walls=("floor", "ceiling", "x-", "x+", "y-", "y+"), moving=True)
+    model = builder.finalize()
     control = model.control()
     control.set_drive(0.01, 20.0)
     return model, control
@@ -28,7 +29,7 @@ def run(model, control, n, *, full_every_step: bool, record=None):
         if full_every_step:
             solver.invalidate_pairs()
         dt = solver.adaptive_dt(control, vmax, prev)
-        info, dt, _ = solver.adaptive_step(a, b, control, dt)
+        info, dt, _ = solver.adaptive_step(a, b, control, None, dt)
         if record is not None:
             record(solver, a, info, dt)
         a, b = b, a
@@ -49,7 +50,7 @@ def test_partial_refresh_gives_the_same_trajectory_as_a_full_rebuild_every_step(
     model, control = shaken_pile()
     fast, a = run(model, control, 150, full_every_step=False)
     ref, b = run(model, control, 150, full_every_step=True)
-    assert fast.contacts.refreshes > 20  # the partial refresh did the work
+    assert fast.collision.refreshes > 20  # the partial refresh did the work
     assert fast.pair_builds < 0.3 * ref.pair_builds
     np.testing.assert_array_equal(a.x.numpy(), b.x.numpy())
     np.testing.assert_array_equal(a.v.numpy(), b.v.numpy())
@@ -65,7 +66,7 @@ def test_the_refreshed_list_holds_every_pair_within_its_guaranteed_reach():
     checked = []
 
     def record(solver, state_in, info, dt):
-        c = solver.contacts
+        c = solver.collision
         x = state_in.x.numpy()
         # the invariant the reach rests on: no segment has moved by more than tau since its
         # pairs were last found
@@ -102,6 +103,6 @@ def test_refresh_limits_fall_back_to_a_full_rebuild(monkeypatch, fraction):
     model, control = shaken_pile(seed=2, n_rods=30)
     solver, _ = run(model, control, 60, full_every_step=False)
     if fraction == 0.0:
-        assert solver.contacts.refreshes == 0 and solver.pair_builds > 5
+        assert solver.collision.refreshes == 0 and solver.pair_builds > 5
     else:
-        assert solver.contacts.refreshes > 0
+        assert solver.collision.refreshes > 0

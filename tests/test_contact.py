@@ -8,6 +8,7 @@ import pytest
 
 from rodwarp.errors import RodwarpError, SimulationBlowUp
 from rodwarp.rodset import RodSet
+from rodwarp.sim.builder import ModelBuilder
 from rodwarp.sim.model import STEEL, Material, Model  # noqa: F401
 from rodwarp.sim.solver import RodSolver, run
 from rodwarp.testing.scenes import log_cabin, straight_rod, straightened, tilted_gravity
@@ -62,8 +63,9 @@ def test_rod_across_rails_tilted_along_them_rolls(theta):
 
 def cabin_drift(mu, duration=2.0):
     rods = log_cabin(layers=4, rods_per_layer=2)
-    model = Model(rods, STEEL, gravity=tilted_gravity(G, 5.0, downhill=(1, 1, 0)), mu=mu)
-    model.add_plane((0, 0, 1), 0.0, mu=mu, name="floor")
+    builder = ModelBuilder(rods, STEEL, gravity=tilted_gravity(G, 5.0, downhill=(1, 1, 0)), mu=mu)
+    builder.add_plane((0, 0, 1), 0.0, mu=mu, name="floor")
+    model = builder.finalize()
     solver = RodSolver(model)
     x0 = rods.points.copy()
     state = run(solver, model.state(), duration, solver.default_dt())
@@ -84,9 +86,10 @@ def ladder_slip(phi, mu, rod_model, duration=1.0, iterations=40):
     """Largest slip (m) of the rod's ends along the floor and the wall over ``duration``."""
     from rodwarp.testing.scenes import leaning_rod
 
-    model = Model(leaning_rod(phi), STEEL, gravity=(0, 0, -G), mu=mu, rod_contacts=False, rod_model=rod_model)
-    model.add_plane((0, 0, 1), 0.0, name="floor")
-    model.add_plane((1, 0, 0), 0.0, name="wall")
+    builder = ModelBuilder(leaning_rod(phi), STEEL, gravity=(0, 0, -G), mu=mu, rod_contacts=False, rod_model=rod_model)
+    builder.add_plane((0, 0, 1), 0.0, name="floor")
+    builder.add_plane((1, 0, 0), 0.0, name="wall")
+    model = builder.finalize()
     solver = RodSolver(model, iterations=iterations)
     x0 = model.rods.points.copy()
     state = run(solver, model.state(), duration, solver.default_dt())
@@ -179,8 +182,9 @@ def test_no_tunnelling_of_thin_fast_rod(factor):
 def test_step_above_bound_is_refused_or_flagged():
     r = 0.01
     rods = RodSet.from_polylines([straight_rod((0, 0, r), (1, 0, 0), 1.0, r)], r)
-    model = Model(rods, STEEL, gravity=(0, 0, -G))
-    model.add_plane((0, 0, 1), 0.0)
+    builder = ModelBuilder(rods, STEEL, gravity=(0, 0, -G))
+    builder.add_plane((0, 0, 1), 0.0)
+    model = builder.finalize()
     solver = RodSolver(model)
     bound = solver.max_stable_dt()
     with pytest.raises(RodwarpError, match="stability bound"):

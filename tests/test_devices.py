@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rodwarp.experiments import random_packing
-from rodwarp.sim import STEEL, Model, State
+from rodwarp.sim import STEEL, Model, ModelBuilder, State
 from rodwarp.sim.model import Material
 from rodwarp.sim.solver import RodSolver, run
 from rodwarp.testing.scenes import TEST_DENSITY, TEST_YOUNG, cantilever
@@ -16,33 +16,36 @@ from rodwarp.testing.scenes import TEST_DENSITY, TEST_YOUNG, cantilever
 
 def small_pile(device, coloring, steps=60, seed=3):
     rods = random_packing(40, 1.0, 0.02, (0.6, 0.6, 1.2), seed=seed, device="cpu")
-    model = Model(rods, STEEL, gravity=(0, 0, -9.81), device=device)
-    model.add_box((0, 0, 0), (0.6, 0.6, 1.2), walls=("floor", "x-", "x+", "y-", "y+"))
+    builder = ModelBuilder(rods, STEEL, gravity=(0, 0, -9.81), device=device)
+    builder.add_box((0, 0, 0), (0.6, 0.6, 1.2), walls=("floor", "x-", "x+", "y-", "y+"))
+    model = builder.finalize()
     solver = RodSolver(model, iterations=20, tolerance=0.0, coloring=coloring)
     a = model.state()
     b = State(model)
+    points = solver.contacts()
     dt = solver.default_dt()
     colors = []
     for _ in range(steps):
-        info = solver.step(a, b, None, dt)
+        solver.collide(a, None, dt, points)
+        info = solver.step(a, b, None, points, dt)
         a, b = b, a
         if solver.coloring and info.n_contacts:
             colors.append(solver.colors_used)
-            check_coloring(model, a, solver)
+            check_coloring(model, points, solver)
     return model, a, colors
 
 
-def check_coloring(model, state, solver):
-    n = state.contact_count
-    seg = state.contact_seg.numpy()[:n]
-    ids = solver.contacts.color_ids.numpy()
-    for c0, c1 in solver.contacts.color_ranges:
+def check_coloring(model, points, solver):
+    n = points.count
+    seg = points.last.seg.numpy()[:n]
+    ids = solver.collision.color_ids.numpy()
+    for c0, c1 in solver.collision.color_ranges:
         members = ids[c0:c1]
         va = model.seg_vertex_np[seg[members, 0]]
         vb = model.seg_vertex_np[seg[members, 1]]
         verts = np.concatenate([va, va + 1, vb, vb + 1])
         assert len(np.unique(verts)) == len(verts), "two contacts of one colour share a vertex"
-    covered = np.sort(np.concatenate([ids[c0:c1] for c0, c1 in solver.contacts.color_ranges]))
+    covered = np.sort(np.concatenate([ids[c0:c1] for c0, c1 in solver.collision.color_ranges]))
     assert np.array_equal(covered, np.arange(n))
 
 

@@ -19,6 +19,7 @@ import pytest
 
 from rodwarp.errors import RodwarpError, SimulationBlowUp
 from rodwarp.rodset import RodSet
+from rodwarp.sim.builder import ModelBuilder
 from rodwarp.sim.model import STEEL, Model
 from rodwarp.sim.solver import RodSolver, run
 from rodwarp.testing.scenes import log_cabin, straight_rod, straightened
@@ -51,7 +52,7 @@ def step_until_blowup(solver, state, dt, n, callback=None):
         for _ in range(n):
             good = a.positions(), a.velocities(), a.step_index, a.time
             try:
-                infos.append(solver.step(a, b, None, dt))
+                infos.append(solver.step(a, b, dt=dt))
             except SimulationBlowUp as e:
                 return a, good, infos, e
             a, b = b, a
@@ -117,15 +118,16 @@ def test_explicit_bending_on_a_fine_kinked_rod_fails_below_its_bound_and_is_dete
 def test_step_above_bound_is_refused_by_step_and_run_before_anything_changes(bending, reason):
     r = 0.01
     rods = RodSet.from_polylines([straight_rod((0, 0, r), (1, 0, 0), 1.0, r)], r)
-    model = Model(rods, STEEL, gravity=(0, 0, -G))
-    model.add_plane((0, 0, 1), 0.0)
+    builder = ModelBuilder(rods, STEEL, gravity=(0, 0, -G))
+    builder.add_plane((0, 0, 1), 0.0)
+    model = builder.finalize()
     solver = RodSolver(model, bending=bending)
     bound = solver.max_stable_dt()
     a = model.state()
     b = model.state()
     x0 = a.positions()
     with pytest.raises(RodwarpError) as err:
-        solver.step(a, b, None, 1.5 * bound)
+        solver.step(a, b, dt=1.5 * bound)
     msg = str(err.value)
     assert "stability bound" in msg and reason in msg
     assert f"dt <= {bound:.3g} s" in msg and "allow_unstable=True" in msg
@@ -146,7 +148,7 @@ def test_non_positive_or_non_finite_step_is_refused_even_when_unstable_steps_are
     solver = RodSolver(model, allow_unstable=True)
     a = model.state()
     with pytest.raises(RodwarpError, match="positive number"):
-        solver.step(a, model.state(), None, dt)
+        solver.step(a, model.state(), None, None, dt)
     assert a.step_index == 0
 
 
@@ -181,8 +183,9 @@ def heavy_on_thin(iterations, position_sweeps=4):
     rb, rt = 0.5 / 300, 0.01
     rods = RodSet.from_polylines([straight_rod((0, 0, rb), (0, 1, 0), 1.0, rb),
                                   straight_rod((0, 0, 2 * rb + rt), (1, 0, 0), 1.0, rt)], np.array([rb, rt]))
-    model = Model(rods, STEEL, gravity=(0, 0, -G), mu=0.2)
-    model.add_plane((0, 0, 1), 0.0)
+    builder = ModelBuilder(rods, STEEL, gravity=(0, 0, -G), mu=0.2)
+    builder.add_plane((0, 0, 1), 0.0)
+    model = builder.finalize()
     return model, RodSolver(model, iterations=iterations, position_sweeps=position_sweeps)
 
 
@@ -208,8 +211,9 @@ def test_too_few_iterations_under_a_heavy_rod_are_detected_as_penetration():
 
 def stack(iterations, layers=12):
     r = 0.005
-    model = Model(log_cabin(layers=layers, rods_per_layer=2, radius=r, spacing=0.6), STEEL, gravity=(0, 0, -G), mu=0.2)
-    model.add_plane((0, 0, 1), 0.0)
+    builder = ModelBuilder(log_cabin(layers=layers, rods_per_layer=2, radius=r, spacing=0.6), STEEL, gravity=(0, 0, -G), mu=0.2)
+    builder.add_plane((0, 0, 1), 0.0)
+    model = builder.finalize()
     return model, RodSolver(model, iterations=iterations)
 
 

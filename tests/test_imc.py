@@ -17,7 +17,7 @@ from scipy.optimize import brentq
 
 from rodwarp.errors import RodwarpError
 from rodwarp.rodset import RodSet
-from rodwarp.sim import STEEL, ContactLaw, Model, RodSolver, run
+from rodwarp.sim import STEEL, ContactLaw, Model, ModelBuilder, RodSolver, run
 from rodwarp.sim.contact_law import imc_creep_speed, imc_force
 from rodwarp.testing.scenes import straight_rod, tilted_gravity
 
@@ -31,9 +31,10 @@ def rod_on_incline(theta_deg, rod_model, nu=1e-3, mu=MU):
     """A 1 m steel rod along the slope's x, lying on the floor, spin locked (IMC's centreline
     friction), gravity tilted by ``theta_deg``."""
     rods = RodSet.from_polylines([straight_rod((0.0, 0.0, R), (1, 0, 0), 1.0, R)], R)
-    model = Model(rods, STEEL, gravity=tilted_gravity(G, theta_deg), mu=mu, rod_contacts=False, rod_model=rod_model,
-                  rolling=False, contact_law=ContactLaw("imc", nu=nu))
-    model.add_plane((0, 0, 1), 0.0, mu=mu, name="floor")
+    builder = ModelBuilder(rods, STEEL, gravity=tilted_gravity(G, theta_deg), mu=mu, rod_contacts=False, rod_model=rod_model,
+                           rolling=False, contact_law=ContactLaw("imc", nu=nu))
+    builder.add_plane((0, 0, 1), 0.0, mu=mu, name="floor")
+    model = builder.finalize()
     return model
 
 
@@ -132,8 +133,9 @@ def test_rod_on_an_incline_above_the_friction_angle_slides_at_g_sin_minus_mu_cos
 
 def test_the_exact_law_sticks_where_imc_creeps():
     rods = RodSet.from_polylines([straight_rod((0.0, 0.0, R), (1, 0, 0), 1.0, R)], R)
-    model = Model(rods, STEEL, gravity=tilted_gravity(G, 10.0), mu=MU, rod_contacts=False, rolling=False)
-    model.add_plane((0, 0, 1), 0.0, mu=MU, name="floor")
+    builder = ModelBuilder(rods, STEEL, gravity=tilted_gravity(G, 10.0), mu=MU, rod_contacts=False, rolling=False)
+    builder.add_plane((0, 0, 1), 0.0, mu=MU, name="floor")
+    model = builder.finalize()
     t, v = mean_velocity(model, 0.3)
     assert abs(v[-1]) < 1e-10
 

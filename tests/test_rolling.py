@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from rodwarp.rodset import RodSet
-from rodwarp.sim import STEEL, Model, RodSolver, run
+from rodwarp.sim import STEEL, Model, ModelBuilder, RodSolver, run
 from rodwarp.testing.scenes import straight_rod, tilted_gravity
 
 G = 9.81
@@ -21,8 +21,9 @@ MODELS = ("elastic", "rigid")
 
 def rod_on_floor(direction, theta_deg, mu, rod_model, center=(0.0, 0.0, R)):
     rods = RodSet.from_polylines([straight_rod(center, direction, 1.0, R)], R)
-    model = Model(rods, STEEL, gravity=tilted_gravity(G, theta_deg), mu=mu, rod_contacts=False, rod_model=rod_model)
-    model.add_plane((0, 0, 1), 0.0, mu=mu, name="floor")
+    builder = ModelBuilder(rods, STEEL, gravity=tilted_gravity(G, theta_deg), mu=mu, rod_contacts=False, rod_model=rod_model)
+    builder.add_plane((0, 0, 1), 0.0, mu=mu, name="floor")
+    model = builder.finalize()
     return model
 
 
@@ -148,8 +149,9 @@ def tipping_acceleration(rod_model, r, phi_deg=60.0, L=1.0):
     bottom = np.array([0.0, 0.0, r])
     top = bottom + L * np.array([math.cos(phi), 0.0, math.sin(phi)])
     rods = RodSet.from_polylines([np.linspace(bottom, top, 10)], r)
-    model = Model(rods, STEEL, gravity=(0, 0, -G), mu=1.0, rod_contacts=False, rod_model=rod_model)
-    model.add_plane((0, 0, 1), 0.0, mu=1.0, name="floor")
+    builder = ModelBuilder(rods, STEEL, gravity=(0, 0, -G), mu=1.0, rod_contacts=False, rod_model=rod_model)
+    builder.add_plane((0, 0, 1), 0.0, mu=1.0, name="floor")
+    model = builder.finalize()
     solver = RodSolver(model, iterations=40, tolerance=0)
     angles, ts = [], []
 

@@ -7,7 +7,7 @@ import pytest
 
 from rodwarp.errors import RodwarpError
 from rodwarp.rodset import RodSet
-from rodwarp.sim import STEEL, Model, RodSolver, State
+from rodwarp.sim import STEEL, Model, ModelBuilder, RodSolver, State
 from rodwarp.testing.scenes import log_cabin, straight_rod
 
 G = 9.81
@@ -17,8 +17,9 @@ def cabin(drop=0.0, layers=6):
     """Rigid rods stacked in crossed layers (d = 2 cm), on a level floor or ``drop`` m above it."""
     rods = log_cabin(layers=layers, rods_per_layer=2)
     rods = rods.with_points(rods.points + np.array([0.0, 0.0, drop]))
-    model = Model(rods, STEEL, gravity=(0, 0, -G), mu=0.2, rod_model="rigid")
-    model.add_plane((0, 0, 1), 0.0, name="floor")
+    builder = ModelBuilder(rods, STEEL, gravity=(0, 0, -G), mu=0.2, rod_model="rigid")
+    builder.add_plane((0, 0, 1), 0.0, name="floor")
+    model = builder.finalize()
     return model
 
 
@@ -28,7 +29,7 @@ def advance(solver, state, control, n):
     dts, infos, vmax, prev = [], [], float(np.abs(state.v.numpy()).max()), None
     for _ in range(n):
         dt = solver.adaptive_dt(control, vmax, prev)
-        info, dt, _ = solver.adaptive_step(state, other, control, dt)
+        info, dt, _ = solver.adaptive_step(state, other, control, None, dt)
         state, other = other, state
         vmax, prev = info.max_speed, dt
         dts.append(dt)
@@ -68,7 +69,7 @@ def test_a_fast_impact_at_the_adaptive_step_never_tunnels():
     for _ in range(400):
         dt = solver.adaptive_dt(control, vmax, prev)
         assert dt * vmax <= 1.0 * d * 1.0001  # the fastest vertex crosses at most a diameter (safety 1)
-        info, dt, r = solver.adaptive_step(a, b, control, dt)
+        info, dt, r = solver.adaptive_step(a, b, control, None, dt)
         refused += r
         a, b = b, a
         vmax, prev = info.max_speed, dt
@@ -102,8 +103,9 @@ def test_wall_contacts_beyond_the_first_frame_list_are_all_solved():
     list of wall frames holds (16); the list grows within the step and the rod rests."""
     r = 0.01
     rods = RodSet.from_polylines([straight_rod((0, 0, r), (1, 0, 0), 1.0, r, n_vertices=60)], r)
-    model = Model(rods, STEEL, gravity=(0, 0, -G), mu=0.3)
-    model.add_plane((0, 0, 1), 0.0, name="floor")
+    builder = ModelBuilder(rods, STEEL, gravity=(0, 0, -G), mu=0.3)
+    builder.add_plane((0, 0, 1), 0.0, name="floor")
+    model = builder.finalize()
     solver = RodSolver(model)
     with pytest.raises(RodwarpError, match="call step"):
         solver.full_residual(model.state())
@@ -124,26 +126,29 @@ def _settle(seed, fine: bool):
     from rodwarp.sim import centroid_height, rod_contacts
 
     rods = random_packing(50, 0.5, 0.01, (0.6, 0.6, 0.6), seed=seed)
-    model = Model(rods, STEEL, gravity=(0, 0, -G), mu=0.3, rod_model="rigid")
-    model.add_box((0, 0, 0), (0.6, 0.6, 0.6), walls=("floor", "x-", "x+", "y-", "y+"))
+    builder = ModelBuilder(rods, STEEL, gravity=(0, 0, -G), mu=0.3, rod_model="rigid")
+    builder.add_box((0, 0, 0), (0.6, 0.6, 0.6), walls=("floor", "x-", "x+", "y-", "y+"))
+    model = builder.finalize()
     solver = RodSolver(model)
     control = model.control()
-    a, b = model.state(), State(model)
+    a, b, points = model.state(), State(model), solver.contacts()
     T, vmax, prev, dts = 1.6, 0.0, None, []
     if fine is False:
         while a.time < T - 1e-12:
             dt = min(solver.adaptive_dt(control, vmax, prev), T - a.time)
-            info = solver.step(a, b, control, dt)
+            solver.collide(a, control, dt, points)
+            info = solver.step(a, b, control, points, dt)
             a, b = b, a
             vmax, prev = info.max_speed, dt
             dts.append(dt)
     else:
         n = int(round(T / (fine / 10)))
         for _ in range(n):
-            solver.step(a, b, control, T / n)
+            solver.collide(a, control, T / n, points)
+            solver.step(a, b, control, points, T / n)
             a, b = b, a
         dts = [T / n] * n
-    c = rod_contacts(model, a)
+    c = rod_contacts(model, a, points)
     return (contacts_per_rod(model.n_rods, c), largest_cluster_fraction(model.n_rods, c), centroid_height(model, a),
             np.median(dts))
 
@@ -188,7 +193,7 @@ def test_post_stabilisation_removes_an_overlap_and_stops_at_its_tolerance(sweeps
     model = Model(rods, STEEL, gravity=(0, 0, 0), mu=0.2, rod_model="rigid")
     solver = RodSolver(model, position_sweeps=sweeps, position_tolerance=tolerance)
     a, b = model.state(), State(model)
-    info = solver.step(a, b, model.control(), 1e-4)
+    info = solver.step(a, b, model.control(), dt=1e-4)
     slop = solver.slop * d
     expected = slop + (0.2 * d - slop) * 0.2 ** passes
     assert abs(info.max_overlap - expected) < 1e-6 * d

@@ -109,13 +109,13 @@ def test_a_centroid_below_the_floor_is_refused():
 
 def test_floor_height_follows_the_wall_and_the_drive():
     from rodwarp.rodset import RodSet
-    from rodwarp.sim import Model
+    from rodwarp.sim import Model, ModelBuilder
 
     rods = RodSet.from_straight([[0, 0, 3.0]], [[1, 0, 0]], 1.0, 0.01)
-    model = Model(rods, rod_contacts=False)
-    assert model.control().floor_height(0.0) is None
-    model.add_box([-1, -1, 2.5], [1, 1, 4.0], walls=("floor",), moving=True)
-    control = model.control()
+    assert Model(rods, rod_contacts=False).control().floor_height(0.0) is None
+    builder = ModelBuilder(rods, rod_contacts=False)
+    builder.add_box([-1, -1, 2.5], [1, 1, 4.0], walls=("floor",), moving=True)
+    control = builder.finalize().control()
     control.set_drive(0.001, 10.0)
     assert control.floor_height(0.0) == pytest.approx(2.5)
     assert control.floor_height(0.025) == pytest.approx(2.501)  # a quarter period: the crest

@@ -43,11 +43,12 @@ from rodwarp.experiments._params import (RIGID_SAG, RODS_PER_ALPHA, ProtocolPara
 
 def _build(params: ProtocolParams, rods, device, rod_model: str):
     """Model and solver of the experiment (deterministic given the parameters and rods)."""
-    from rodwarp.sim import Material, Model, RodSolver
+    from rodwarp.sim import Material, ModelBuilder, RodSolver
 
     g_eff = params.effective_gravity
-    model = Model(rods, Material(params.young, params.density), gravity=(0.0, 0.0, -g_eff), mu=params.mu,
-                  rod_model=rod_model, rolling=params.spin, contact_law=params.contact_law_object(), device=device)
+    builder = ModelBuilder(rods, Material(params.young, params.density), gravity=(0.0, 0.0, -g_eff), mu=params.mu,
+                           rod_model=rod_model, rolling=params.spin, contact_law=params.contact_law_object(),
+                           device=device)
     bb = rods.bounding_box()
     if rods.box is not None:
         # the input's container, widened to its rods: rods lying on (or sunk into) the box's
@@ -56,7 +57,8 @@ def _build(params: ProtocolParams, rods, device, rod_model: str):
         hi = np.maximum(np.asarray(rods.box[1], float), bb[1])
     else:  # an input without a container: the floor under its lowest point, walls around it
         lo, hi = bb[0], bb[1]
-    model.add_box(lo, hi + np.array([0, 0, 0.5 * params.length]), walls=("floor", *SIDE_WALLS), moving=True)
+    builder.add_box(lo, hi + np.array([0, 0, 0.5 * params.length]), walls=("floor", *SIDE_WALLS), moving=True)
+    model = builder.finalize()
     return model, RodSolver(model, iterations=params.iterations), (lo, hi)
 
 
@@ -341,6 +343,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
 
     state = model.state()
     other = State(model)
+    points = solver.contacts()
     control = None
     if ck is None:
         floor0 = model.control().floor_height(0.0)
@@ -354,7 +357,9 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         if loop.mid_stage:
             stage = stages[loop.start_stage]
             control = stage.control(model, loop.stage_t0[stage.name])
-        state.load_numpy({k[6:]: v for k, v in arrays.items() if k.startswith("state_")})
+        saved = {k[6:]: v for k, v in arrays.items() if k.startswith("state_")}
+        state.load_numpy(saved)
+        points.load_numpy(saved)
     n_frames = frames(stages, params.save_every)
     if branch is not None:
         _take_entangling(donor, outdir, ck[1], n_frames, sim_rods)
@@ -364,10 +369,11 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     # the verdict's pile reference measures the input rods (a rigid rod's two-vertex chord may
     # differ from its polyline's length in the last bits)
     longest = float(np.max(rods.rod_lengths()))
-    state, control = _step_stages(params, model, solver, stages, state, other, control, loop, rec, longest, progress)
+    state, control = _step_stages(params, model, solver, stages, (state, other, points), control, loop, rec, longest,
+                                  progress)
 
     wall = time.perf_counter() - t_wall
-    c = rod_contacts(model, state)
+    c = rod_contacts(model, state, points)
     final = sim_rods.with_points(state.positions(), velocities=state.velocities())
     final.contacts = c
     final.attrs.update({"time": state.time})
@@ -408,12 +414,13 @@ def _read_donor_record(outdir: Path):
 ENTANGLED_FROM = "entangled_from.json"
 
 
-def _step_stages(params, model, solver, stages, state, other, control, loop, rec, longest: float, progress: bool):
+def _step_stages(params, model, solver, stages, engine, control, loop, rec, longest: float, progress: bool):
     """Step through ``stages`` from ``loop``'s position, sampling and checkpointing on the way.
 
     Every step is the adaptive step (:meth:`RodSolver.adaptive_dt`, or ``params.dt``),
     shortened so that equal steps land exactly on the next sample time; a sample is taken on
     landing and a checkpoint whenever ``checkpoint_every`` of simulated time has passed.
+    ``engine`` is (state, the other state it ping-pongs with, the contact points);
     ``longest`` is the longest rod (m), for the pile reference at the start of the test.
 
     Returns
@@ -426,6 +433,7 @@ def _step_stages(params, model, solver, stages, state, other, control, loop, rec
     from rodwarp.experiments._recorder import AFTER_ENTANGLING
 
     parameters = asdict(params)
+    state, other, points = engine
     with progress_bar(progress, seconds=True, remaining=True, note=True) as update:
         for si, stage in enumerate(stages):
             name, dur = stage.name, stage.duration
@@ -439,7 +447,7 @@ def _step_stages(params, model, solver, stages, state, other, control, loop, rec
                 loop.dts[name] = {"steps": 0, "min": None, "max": None, "mean": None, "sum": 0.0, "refused": 0}
                 loop.next_ck = state.time + params.checkpoint_every
                 if stage.test:
-                    state.wall_impulse.zero_()
+                    points.clear_wall_impulses()
                     floor = control.floor_height(state.time)
                     loop.pile_ref = vd.pile_reference(state.time, state.positions(), model.vertex_rod_np,
                                                       model.mass_np, model.n_rods, 0.0 if floor is None else floor,
@@ -449,7 +457,7 @@ def _step_stages(params, model, solver, stages, state, other, control, loop, rec
             n_samples = max(1, int(math.ceil(dur / params.save_every - 1e-9)))
             update(name, state.time - t_s0, dur)
             if si == 0 and j0 == 0 and not loop.mid_stage:
-                rec.sample(name, state, None, control, loop)
+                rec.sample(name, state, points, None, control, loop)
             t0 = t_mark = time.perf_counter()
             steps0 = loop.steps
             j = j0 + 1
@@ -464,9 +472,10 @@ def _step_stages(params, model, solver, stages, state, other, control, loop, rec
                 landing = n_left == 1
                 dt = left / n_left
                 if params.dt:
-                    info, dt_taken, refused = solver.step(state, other, control, dt), dt, 0
+                    solver.collide(state, control, dt, points)
+                    info, dt_taken, refused = solver.step(state, other, control, points, dt), dt, 0
                 else:
-                    info, dt_taken, refused = solver.adaptive_step(state, other, control, dt)
+                    info, dt_taken, refused = solver.adaptive_step(state, other, control, points, dt)
                 if refused:
                     # the guard refused dt at the predictor's speeds: a shorter step, not on the sample
                     landing, dt = False, dt_taken
@@ -484,21 +493,21 @@ def _step_stages(params, model, solver, stages, state, other, control, loop, rec
                 loop.stepper["dt"] = dt
                 loop.stepper["overlap"] = info.max_overlap
                 if landing:
-                    rec.sample(name, state, info, control, loop)
+                    rec.sample(name, state, points, info, control, loop)
                     j += 1
                     rate = (loop.steps - steps0) / max(time.perf_counter() - t0, 1e-9)
                     update(name, state.time - t_s0, dur, note=f"{rate:.0f} steps/s")
                 if state.time >= loop.next_ck - 1e-12 and j <= n_samples:
                     loop.next_ck += params.checkpoint_every
                     t_mark = _add_wall(st, t_mark)
-                    rec.checkpoint(state, loop, si, j - 1, True, parameters)
+                    rec.checkpoint(state, points, loop, si, j - 1, True, parameters)
             loop.dts[name]["mean"] = loop.dts[name]["sum"] / max(loop.dts[name]["steps"], 1)
             if stage.snapshot:
                 rec.snapshot(AFTER_ENTANGLING if name == ENTANGLE else f"after {name}", state.positions())
             if si + 1 < len(stages):
                 loop.next_ck = state.time + params.checkpoint_every
                 _add_wall(loop.dts[name], t_mark)
-                rec.checkpoint(state, loop, si + 1, 0, False, parameters,
+                rec.checkpoint(state, points, loop, si + 1, 0, False, parameters,
                                keep_as=rec.outdir / ENTANGLED if stage.keep else None)
             else:
                 _add_wall(loop.dts[name], t_mark)

@@ -74,13 +74,15 @@ class Recorder:
                                      resume=checkpoint is not None)
         (self.outdir / "vtk").mkdir(exist_ok=True)
 
-    def sample(self, stage: str, state, info, control, loop) -> None:
+    def sample(self, stage: str, state, points, info, control, loop) -> None:
         """Take the sample of ``state`` (the state just reached, at a sample time).
 
         Parameters
         ----------
         stage : str
-            ``entangle`` or ``stability``.
+            The stage's name (``experiments.ENTANGLE``, ``experiments.TEST``, ...).
+        points : ContactPoints
+            The contact points of the step that reached ``state``.
         info : StepInfo or None
             The step that reached ``state`` (None for the initial state).
         control : Control
@@ -93,7 +95,7 @@ class Recorder:
 
         model = self.model
         pile_ref = loop.pile_ref
-        c = rod_contacts(model, state)
+        c = rod_contacts(model, state, points)
         x = state.positions()
         floor = control.floor_height(state.time)
         floor = 0.0 if floor is None else floor
@@ -157,9 +159,10 @@ class Recorder:
         """Keep the positions ``x`` (V, 3) m for ``snapshots.png`` under ``title``."""
         self.snapshots.append((title, x))
 
-    def checkpoint(self, state, loop, stage: int, j: int, mid_stage: bool, parameters: dict,
+    def checkpoint(self, state, points, loop, stage: int, j: int, mid_stage: bool, parameters: dict,
                    keep_as=None) -> None:
-        """Write a checkpoint: the engine state, the samples so far and the loop's position.
+        """Write a checkpoint: the engine state and its contact points (the warm start), the
+        samples so far and the loop's position.
 
         Parameters
         ----------
@@ -174,7 +177,8 @@ class Recorder:
         """
         from rodwarp.rodset.trajectory import save_checkpoint, write_checkpoint_file
 
-        arrays = {f"state_{key}": val for key, val in state.to_numpy().items()}
+        # the contact points keep the names they had inside the state, so every checkpoint loads
+        arrays = {f"state_{key}": val for key, val in {**state.to_numpy(), **points.to_numpy()}.items()}
         for title, x in self.snapshots:
             if title == AFTER_ENTANGLING:
                 arrays["after_entangle"] = x

@@ -184,14 +184,15 @@ class StepBounds:
             dt = min(dt, growth * previous)
         return dt
 
-    def adaptive_step(self, state_in, state_out, control, dt: float, min_fraction: float = 1.0 / 64):
-        """:meth:`step` by ``dt``, retried at half the guard's bound while the guard refuses it.
+    def adaptive_step(self, state_in, state_out, control, contacts, dt: float, min_fraction: float = 1.0 / 64):
+        """:meth:`collide` and :meth:`step` by ``dt``, retried at half the guard's bound while the
+        guard refuses it (``contacts`` as for :meth:`step`; None: the solver's own).
 
         The adaptive step sizes a step from the speeds the last one ended with; the guard
         checks the speeds after this step's predictor (gravity, explicit bending, torques),
         which an impact or a bending wave can raise. A refused step leaves ``state_in``
-        untouched, so the retry starts from the same state: deterministic, and resume stays
-        bit for bit.
+        untouched (and the contacts' last impulses), so the retry starts from the same state:
+        deterministic, and resume stays bit for bit.
 
         Returns
         -------
@@ -202,7 +203,10 @@ class StepBounds:
         first = dt
         while True:
             try:
-                return self.step(state_in, state_out, control, dt), dt, refused
+                if contacts is None:
+                    return self.step(state_in, state_out, control, None, dt), dt, refused
+                self.collide(state_in, control, dt, contacts)
+                return self.step(state_in, state_out, control, contacts, dt), dt, refused
             except StepTooLarge as e:
                 refused += 1
                 dt = 0.5 * min(dt, e.bound)

@@ -72,7 +72,7 @@ class SolverChecks:
         residual of every contact (the step itself reports only its last sweep's largest change)."""
         if self._last_solve is None:
             raise RodwarpError("full_residual measures the last step: call step() first")
-        contacts, params, walls = self._last_solve
+        contacts, params, walls, wc = self._last_solve
         m = self.model
         out = wp.zeros(1, dtype=wp.float64, device=m.device)
         # the contacts read rigid rods as bodies, as inside the sweeps
@@ -85,7 +85,7 @@ class SolverChecks:
         n = int(self._n_wall_frames.numpy()[0])
         if n:
             wp.launch(wall_contacts.wall_contact_residual, dim=n, device=m.device, inputs=[
-                walls, params, self._wall_contacts(state_out), v, spin, out])
+                walls, params, wc, v, spin, out])
         return float(out.numpy()[0])
 
     def energy(self, state: State) -> dict:

@@ -33,6 +33,145 @@ import warp as wp
 
 from rodwarp.kernels import broadphase, coloring, narrowphase
 from rodwarp.kernels.structs import RawContacts
+from rodwarp.sim.state import cached_view
+
+
+#: per-point arrays of :class:`ContactBuffers` and their types (``contact_<name>`` in a checkpoint)
+_POINT_DTYPES = {"seg": wp.vec2i, "st": wp.vec2d, "normal": wp.vec3d, "gap": wp.float64, "impulse": wp.vec3d}
+_POINT_ARRAYS = tuple(_POINT_DTYPES)
+
+
+class ContactBuffers:
+    """One set of contact points on the device, and the wall impulses of the same step.
+
+    Attributes
+    ----------
+    count : int
+        Contact points held.
+    key : wp.array of int64 (2 capacity,)
+        Sort key of each point (segment pair and point); twice the room for the radix sort.
+    seg, st, normal, gap : wp.array (capacity,)
+        Segment pair, closest-point parameters, unit normal (from the second segment to the
+        first) and surface gap (m) at the start of the step.
+    impulse : wp.array of vec3d (capacity,)
+        The point's impulse (N s) once solved.
+    wall_impulse : wp.array of vec3d (V * P,)
+        Impulses (N s) of the vertex-wall contacts (P walls of the model, at least one slot).
+    """
+
+    def __init__(self, model, capacity: int):
+        self.model = model
+        self.count = 0
+        self.wall_impulse = wp.zeros(model.n_vertices * max(len(model.walls), 1), dtype=wp.vec3d, device=model.device)
+        self.allocate(capacity)
+
+    def allocate(self, capacity: int) -> None:
+        """(Re)allocate room for ``capacity`` points (their content is discarded)."""
+        d = self.model.device
+        self.capacity = capacity
+        # keys need 2x room for wp.utils.radix_sort_pairs
+        self.key = wp.zeros(2 * capacity, dtype=wp.int64, device=d)
+        for name, dtype in _POINT_DTYPES.items():
+            setattr(self, name, wp.zeros(capacity, dtype=dtype, device=d))
+
+    def view(self):
+        """The :class:`~rodwarp.kernels.structs.RodContacts` struct of these points (kept while
+        the arrays stay the same, so the solver's recorded launches replay)."""
+        from rodwarp.kernels.structs import RodContacts
+
+        c = cached_view(self.__dict__, "_view", RodContacts, seg=self.seg, st=self.st, normal=self.normal,
+                        gap=self.gap, impulse=self.impulse)
+        if c.count != self.count:
+            c.count = self.count
+        return c
+
+    def copy_from(self, other: "ContactBuffers") -> None:
+        if self.capacity != other.capacity:
+            self.allocate(other.capacity)
+        for name in _POINT_ARRAYS + ("key", "wall_impulse"):
+            getattr(self, name).assign(getattr(other, name))
+        self.count = other.count
+
+
+
+class ContactPoints:
+    """The contact points of a step, from :meth:`RodSolver.collide`, and the solver's memory of
+    the last step's impulses (warm start).
+
+    ``solver.collide(state_in, control, dt, contacts)`` fills :attr:`next` with the points of the
+    coming step; ``solver.step(state_in, state_out, control, contacts, dt)`` solves them and, once
+    the step passes its checks, makes them :attr:`last`. A step that fails leaves :attr:`last`
+    as it was, so a retry from the same state warm-starts from the same impulses (bit for bit).
+
+    Attributes
+    ----------
+    last : ContactBuffers
+        The points and impulses of the last successful step (what a checkpoint saves, what
+        :func:`rodwarp.sim.rod_contacts` measures).
+    next : ContactBuffers
+        The points found for the coming step.
+    predicted_speed : float
+        Fastest vertex speed (m/s) after the coming step's velocity predictor, which sets the
+        reach of the speculative contacts (NaN when the predictor gave a non-finite speed).
+    """
+
+    def __init__(self, model, capacity: int = 16):
+        self.model = model
+        self.last = ContactBuffers(model, max(capacity, 16))
+        self.next = ContactBuffers(model, max(capacity, 16))
+        self.predicted_speed = 0.0
+        self.collided_for = None  # what collide() filled ``next`` for: (state, step index, time, control, dt)
+
+    @property
+    def count(self) -> int:
+        """Contact points of the last successful step."""
+        return self.last.count
+
+    @property
+    def wall_impulse(self):
+        """Impulses (N s) of the last step's vertex-wall contacts, (V * P,) with P walls."""
+        return self.last.wall_impulse
+
+    def commit(self) -> None:
+        """Make the solved :attr:`next` points the :attr:`last` ones (the step succeeded)."""
+        self.last, self.next = self.next, self.last
+        self.collided_for = None
+
+    def clear_wall_impulses(self) -> None:
+        """Forget the walls' impulses (a test that switches walls: no warm start from them)."""
+        self.last.wall_impulse.zero_()
+
+    def copy_from(self, other: "ContactPoints") -> None:
+        """Make these contacts an exact copy of ``other``'s last step (same model)."""
+        self.last.copy_from(other.last)
+        self.collided_for = None
+
+    def to_numpy(self) -> dict:
+        """The last step's points and impulses as NumPy (for checkpoints; the names are those of
+        the checkpoints written before contacts left the State, so old ones load)."""
+        c = self.last
+        out = {f"contact_{name}": getattr(c, name).numpy()[:c.count] for name in ("key",) + _POINT_ARRAYS}
+        out["wall_impulse"] = c.wall_impulse.numpy()
+        return out
+
+    def load_numpy(self, data: dict) -> None:
+        """Restore from :meth:`to_numpy` output (exactly; other keys are ignored)."""
+        d = self.model.device
+        c = self.last
+        c.wall_impulse = wp.array(data["wall_impulse"], dtype=wp.vec3d, device=d)
+        n = int(len(data["contact_key"]))
+        c.allocate(max(16, 2 * n))
+        if n:
+            keys = np.zeros(2 * c.capacity, dtype=np.int64)
+            keys[:n] = data["contact_key"]
+            c.key.assign(wp.array(keys, dtype=wp.int64, device=d))
+            for name in _POINT_ARRAYS:
+                a = getattr(c, name)
+                full = a.numpy()
+                full[:n] = data[f"contact_{name}"]
+                a.assign(wp.array(full, dtype=a.dtype, device=d))
+        c.count = n
+        self.collided_for = None
 
 
 class ContactPipeline:
@@ -105,8 +244,10 @@ class ContactPipeline:
             tm[stage] = tm.get(stage, 0.0) + time.perf_counter() - t0
         return out
 
-    def detect(self, state_in, state_out, vmax: float, dt: float) -> int:
-        """Contacts of this step into ``state_out`` (sorted by key); returns their number."""
+    def detect(self, state_in, out: "ContactBuffers", v_pred, vmax: float, dt: float) -> int:
+        """Contact points of a step of ``dt`` s from ``state_in`` into ``out`` (sorted by key),
+        reaching as far as the predicted velocities ``v_pred`` (largest ``vmax``, m/s) can
+        carry each segment; returns their number."""
         m = self.model
         dev = m.device
         S = m.n_segments
@@ -134,21 +275,21 @@ class ContactPipeline:
             self._count.zero_()
             if n_pairs:
                 self._launch("narrowphase", narrowphase.narrowphase_pairs, dim=n_pairs, device=dev, inputs=[
-                    self.pairs, n_pairs, S, m.arrays, state_in.x, state_out.v, wp.float64(base), wp.float64(dt),
+                    self.pairs, n_pairs, S, m.arrays, state_in.x, v_pred, wp.float64(base), wp.float64(dt),
                     self._raw])
             n = int(self._count.numpy()[0])
             if n <= self._cap:
                 break
             self.grow(2 * n)
-        if state_out.contact_capacity < max(n, 1):
-            state_out.allocate_contacts(2 * n)
+        if out.capacity < max(n, 1):
+            out.allocate(2 * n)
         if n == 0:
             return 0
         self._time("narrowphase", self._sort, n)
-        wp.copy(state_out.contact_key, self._raw_key, count=n)
+        wp.copy(out.key, self._raw_key, count=n)
         self._launch("narrowphase", narrowphase.gather_contacts, dim=n, device=dev, inputs=[
             self._order, n, self._raw_seg, self._raw_st, self._raw_normal, self._raw_gap,
-            state_out.contact_seg, state_out.contact_st, state_out.contact_normal, state_out.contact_gap])
+            out.seg, out.st, out.normal, out.gap])
         return n
 
     def _sort(self, n: int) -> None:
@@ -244,13 +385,12 @@ class ContactPipeline:
         self.refreshed_segments += n_stale
         return True
 
-    def warm_start(self, state_in, state_out, n: int, warm: float) -> None:
-        """Last step's impulses of the same keys into ``state_out`` (split along the new normals)."""
+    def warm_start(self, last: "ContactBuffers", out: "ContactBuffers", n: int, warm: float) -> None:
+        """``last`` step's impulses of the same keys into ``out`` (split along the new normals)."""
         self._launch("narrowphase", coloring.warm_start_rod_contacts, dim=n, device=self.model.device, inputs=[
-            n, state_out.contact_key, state_out.contact_normal, state_in.contact_count, state_in.contact_key,
-            state_in.contact_impulse, wp.float64(warm), state_out.contact_impulse])
+            n, out.key, out.normal, last.count, last.key, last.impulse, wp.float64(warm), out.impulse])
 
-    def color(self, state, n: int) -> None:
+    def color(self, contacts: "ContactBuffers", n: int) -> None:
         """Partition contacts into independent sets (no shared vertex) for race-free Gauss-Seidel."""
         m = self.model
         dev = m.device
@@ -262,9 +402,9 @@ class ContactPipeline:
             owner.fill_(2**31 - 1)
             remaining.zero_()
             self._launch("friction", coloring.color_claim, dim=n, device=dev,
-                         inputs=[n, state.contact_seg, m.arrays.seg_vertex, self._color, owner])
+                         inputs=[n, contacts.seg, m.arrays.seg_vertex, self._color, owner])
             self._launch("friction", coloring.color_commit, dim=n, device=dev,
-                         inputs=[n, state.contact_seg, m.arrays.seg_vertex, rnd, owner, self._color, remaining])
+                         inputs=[n, contacts.seg, m.arrays.seg_vertex, rnd, owner, self._color, remaining])
             rnd += 1
             if int(remaining.numpy()[0]) == 0:
                 break

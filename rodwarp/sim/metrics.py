@@ -20,7 +20,7 @@ from rodwarp.sim.model import Model
 from rodwarp.sim.state import State
 
 
-def rod_contacts(model: Model, state: State, tolerance: float | None = None) -> Contacts:
+def rod_contacts(model: Model, state: State, points, tolerance: float | None = None) -> Contacts:
     """The contacts of the packing in ``state``: rod pairs whose surface gap is below ``tolerance``.
 
     Gaps are re-evaluated at the state's positions for the pairs the last step detected
@@ -28,6 +28,10 @@ def rod_contacts(model: Model, state: State, tolerance: float | None = None) -> 
 
     Parameters
     ----------
+    state : State
+        The state the last step wrote.
+    points : ContactPoints
+        The contact points of that step (``points.last``; :meth:`RodSolver.collide`).
     tolerance : float, optional
         Contact distance (m); default ``model.contact_distance`` (d / 10).
 
@@ -37,18 +41,19 @@ def rod_contacts(model: Model, state: State, tolerance: float | None = None) -> 
         One entry per touching rod pair (the closest of its segment pairs).
     """
     tol = model.contact_distance if tolerance is None else tolerance
-    n = state.contact_count
+    last = points.last
+    n = last.count
     if n == 0:
         return Contacts(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0))
     dev = model.device
     gap = wp.zeros(n, dtype=wp.float64, device=dev)
     scratch = wp.zeros(1, dtype=wp.float64, device=dev)
     wp.launch(narrowphase.contact_overlap, dim=n, device=dev, inputs=[
-        n, state.contact_seg, model.arrays.seg_vertex, model.arrays.vertex_rod, model.arrays.radius, state.x, gap,
+        n, last.seg, model.arrays.seg_vertex, model.arrays.vertex_rod, model.arrays.radius, state.x, gap,
         scratch])
     g = gap.numpy()
-    seg = state.contact_seg.numpy()[:n]
-    st = state.contact_st.numpy()[:n]
+    seg = last.seg.numpy()[:n]
+    st = last.st.numpy()[:n]
     x = state.x.numpy()
     va = model.seg_vertex_np[seg[:, 0]]
     vb = model.seg_vertex_np[seg[:, 1]]

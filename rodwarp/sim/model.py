@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import warp as wp
@@ -35,6 +36,9 @@ from rodwarp.errors import RodwarpError
 from rodwarp.rodset import RodSet
 from rodwarp.sim.contact_law import ContactLaw
 from rodwarp.sim.walls import Plane
+
+if TYPE_CHECKING:
+    from rodwarp.sim.state import State
 
 ROD_MODELS = ("elastic", "rigid")
 
@@ -186,6 +190,14 @@ class Model:
         it with ``rolling=False``.
     device : str
         ``cpu``, ``cuda``, ``cuda:N`` or ``auto``.
+    walls : sequence of walls
+        Every wall the scene can have (:mod:`rodwarp.sim.walls`); a wall without a friction
+        coefficient takes ``mu``. Usually given by :class:`~rodwarp.sim.builder.ModelBuilder`.
+    box : (2, 3) float, optional
+        Container corners (m) that size the broadphase's hash grid; default ``rods.box``.
+
+    A model does not change once built: build the scene with
+    :class:`~rodwarp.sim.builder.ModelBuilder` and call its ``finalize()``.
     """
 
     def __init__(
@@ -204,6 +216,8 @@ class Model:
         rolling: bool = True,
         contact_law: ContactLaw | str = "exact",
         device: str = "cpu",
+        walls=(),
+        box=None,
     ):
         _warp.init()
         if rods.units != "m":
@@ -224,9 +238,10 @@ class Model:
         self.damping = float(damping)
         self.device = _warp.resolve_device(device)
         self.rod_contacts = bool(rod_contacts)
-        self.walls: list = []  # rodwarp.sim.walls kinds
-        self._final = False  # finalize(): no wall added once states or solvers exist
-        self.box: np.ndarray | None = None if rods.box is None else np.asarray(rods.box, float)
+        self.walls = self._checked_walls(walls)
+        if box is None and rods.box is not None:
+            box = rods.box
+        self.box: np.ndarray | None = None if box is None else np.asarray(box, float)
         pin_in = np.zeros(rods.n_vertices, dtype=bool)
         if pinned is not None:
             idx = np.asarray(pinned, dtype=np.int64).ravel()
@@ -370,6 +385,20 @@ class Model:
         else:
             st.rod_inv_iperp = f64(np.zeros(N))
 
+    def _checked_walls(self, walls) -> tuple:
+        """The walls as the model keeps them (a tuple: fixed), each with a friction coefficient."""
+        out, names = [], set()
+        for w in walls:
+            if w.name in names:
+                raise RodwarpError(f"the model already has a wall named '{w.name}'; give another name")
+            names.add(w.name)
+            if w.mu is None:
+                w.mu = self.mu
+            elif not (w.mu >= 0 and math.isfinite(w.mu)):
+                raise RodwarpError(f"wall friction coefficient must be >= 0, got {w.mu}")
+            out.append(w)
+        return tuple(out)
+
     @staticmethod
     def _as_rigid(rods: RodSet, pinned: np.ndarray):
         """Two-vertex rods (the end points) of straight input rods; refuses curved ones."""
@@ -400,73 +429,10 @@ class Model:
         return out, np.repeat(fixed, 2)
 
     # ------------------------------------------------------------------ walls
-    def add_plane(self, normal, offset: float, *, mu: float | None = None, moving: bool = False,
-                  name: str = "plane") -> Plane:
-        """Add a half-space wall {x : n . x >= offset}; returns the :class:`Plane`."""
-        return self.add_wall(Plane.make(normal, offset, mu=mu, moving=moving, name=name))
-
-    def finalize(self) -> "Model":
-        """Fix the model: no wall may be added after this. Making a state or a solver finalizes
-        the model, so the states, the solver's buffers and every control see the same walls.
-        Returns the model."""
-        self._final = True
-        return self
-
-    def add_wall(self, wall):
-        """Add a wall of any kind (:mod:`rodwarp.sim.walls`: ``Plane.make(...)``,
-        ``Cylinder.make(...)``); a wall without a friction coefficient takes the model's.
-        Returns the wall.
-
-        Raises
-        ------
-        RodwarpError
-            After :meth:`finalize` (a state or a solver of the model exists): add every wall
-            first."""
-        if getattr(self, "_final", False):
-            raise RodwarpError(f"the model is final (a state or a solver of it exists): add the wall '{wall.name}' "
-                               f"before making states and solvers")
-        if any(w.name == wall.name for w in self.walls):
-            raise RodwarpError(f"the model already has a wall named '{wall.name}'; give another name")
-        if wall.mu is None:
-            wall.mu = self.mu
-        elif not (wall.mu >= 0 and math.isfinite(wall.mu)):
-            raise RodwarpError(f"wall friction coefficient must be >= 0, got {wall.mu}")
-        self.walls.append(wall)
-        return wall
-
     @property
     def planes(self) -> list[Plane]:
         """The plane walls (read only; :attr:`walls` holds every wall)."""
         return [w for w in self.walls if w.kind == "plane"]
-
-    def add_box(self, lower, upper, *, walls=("floor", "x-", "x+", "y-", "y+"), mu: float | None = None,
-                moving: bool = False):
-        """Add the walls of an axis-aligned container (z up).
-
-        Parameters
-        ----------
-        lower, upper : (3,) float
-            Container corners (m).
-        walls : sequence of str
-            Which of ``floor``, ``ceiling``, ``x-``, ``x+``, ``y-``, ``y+`` to add. Walls a run
-            removes later (the stability test keeps only the floor) are switched off in its
-            :class:`~rodwarp.sim.control.Control`, not removed here.
-        """
-        lo = np.asarray(lower, float)
-        hi = np.asarray(upper, float)
-        if np.any(hi <= lo):
-            raise RodwarpError(f"box upper corner {hi.tolist()} must exceed lower corner {lo.tolist()}")
-        spec = {
-            "floor": ((0, 0, 1), lo[2]), "ceiling": ((0, 0, -1), -hi[2]),
-            "x-": ((1, 0, 0), lo[0]), "x+": ((-1, 0, 0), -hi[0]),
-            "y-": ((0, 1, 0), lo[1]), "y+": ((0, -1, 0), -hi[1]),
-        }
-        for w in walls:
-            if w not in spec:
-                raise RodwarpError(f"unknown wall '{w}'; use floor, ceiling, x-, x+, y-, y+")
-            n, off = spec[w]
-            self.add_plane(n, off, mu=mu, moving=moving, name=w)
-        self.box = np.stack([lo, hi])
 
     def control(self):
         """A new :class:`~rodwarp.sim.control.Control`: every wall in place, no drive, no torque."""
@@ -502,7 +468,6 @@ class Model:
         """A new :class:`~rodwarp.sim.state.State` at the rods' positions and velocities, t = 0."""
         from rodwarp.sim.state import State
 
-        self.finalize()
         s = State(self)
         s.x.assign(wp.array(self.rods.points, dtype=wp.vec3d, device=self.device))
         if self.rods.velocities is not None:

@@ -6,15 +6,22 @@ One step of :meth:`RodSolver.step` (all on the model's device):
    curvature of curved rods in the current material frame;
 2. velocity predictor, one thread per rod: damping, gravity, applied torques and, for
    symplectic (explicit) bending, the bending force;
-3. contacts at the start-of-step positions (:class:`~rodwarp.sim.contacts.ContactPipeline`):
-   speculative, sorted, warm-started; walls of the control within reach, warm-started;
+3. the rod-rod contacts that :meth:`RodSolver.collide` found at the start-of-step positions
+   (:class:`~rodwarp.sim.contacts.ContactPoints`: speculative, sorted), warm-started; walls of the
+   control within reach, found and warm-started here (one fused pass per rod);
 4. ``iterations`` Gauss-Seidel sweeps over rod-rod contacts, wall contacts and exact per-rod
    solves of bending, twist and edge-length constraints; every block uses the same mass
    metric, so the converged step is implicit Euler with exact Coulomb contact and its fixed
    point is the static equilibrium;
 5. x' = x + dt v', theta' = theta + dt omega', directors transported with their edges.
 
-``state_in`` is never modified, so a step that fails its checks leaves the last good state.
+As in Newton, contacts come from a collide step and are passed to the step::
+
+    contacts = solver.collide(state_in, control, dt, contacts)
+    solver.step(state_in, state_out, control, contacts, dt)
+
+``state_in`` and the contacts' last impulses are never modified by a step that fails its
+checks, so a retry starts from the last good state (bit for bit).
 """
 
 from __future__ import annotations
@@ -24,20 +31,19 @@ import time
 import warnings
 from dataclasses import dataclass
 
-import numpy as np
 import warp as wp
 
 from rodwarp._warp import LaunchCache
 from rodwarp.errors import RodwarpError
-from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, overlap, solve, wall_contacts
-from rodwarp.kernels.structs import ContactFrame, RodFactors, StepParams, WallContacts, Walls
+from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, solve, wall_contacts
+from rodwarp.kernels.structs import ContactFrame, RodFactors, StepParams
 from rodwarp.sim._bounds import StepBounds
 from rodwarp.sim._diagnostics import SolverChecks
+from rodwarp.sim._launches import SolveLaunches
 from rodwarp.sim.contact_law import IMC_SHARPNESS
-from rodwarp.sim.contacts import ContactPipeline
+from rodwarp.sim.contacts import ContactPipeline, ContactPoints
 from rodwarp.sim.model import Model
-from rodwarp.sim.state import State, cached_view
-from rodwarp.sim.walls import device_rows
+from rodwarp.sim.state import State
 
 
 @dataclass
@@ -79,7 +85,7 @@ class StepInfo:
     position_passes: int = 0
 
 
-class RodSolver(StepBounds, SolverChecks):
+class RodSolver(StepBounds, SolverChecks, SolveLaunches):
     """Advance a :class:`~rodwarp.sim.model.Model` from ``state_in`` to ``state_out``.
 
     The step bounds, the default and adaptive steps and the step guard (``step_bound``,
@@ -176,7 +182,7 @@ class RodSolver(StepBounds, SolverChecks):
                                "twist); use bending='implicit' or 'auto'")
         if coloring not in ("auto", "on", "off"):
             raise RodwarpError(f"coloring must be auto, on or off, got '{coloring}'")
-        self.model = model.finalize()
+        self.model = model
         self.iterations = int(iterations)
         self.tolerance = float(tolerance)
         self.length_tolerance = 1e-6 * float(model.rest_length_np[model.rest_length_np > 0].min())
@@ -224,7 +230,14 @@ class RodSolver(StepBounds, SolverChecks):
             # whose candidate list would otherwise hold every rod within a fifth of a length
             dmin = model.min_diameter
             skin = dmin + 0.2 * min(float(model.rest_length_np.max()), 20.0 * dmin)
-        self.contacts = ContactPipeline(model, skin, self._launch, lambda: self.timings)
+        self.collision = ContactPipeline(model, skin, self._launch, lambda: self.timings)
+        self._own_contacts: ContactPoints | None = None  # for step() called without contacts
+        # collide()'s copy of the velocity predictor (the speculative reach), and the zero rest
+        # curvature it reads: explicit bending, the only bending in the predictor, is for
+        # straight rods, whose targets are zero
+        self._v_pred = wp.zeros(V, dtype=wp.vec3d, device=d)
+        self._spin_pred = wp.zeros(V, dtype=wp.float64, device=d)
+        self._zero_target = wp.zeros(V, dtype=wp.vec3d, device=d)
         self._wall_gap = wp.zeros(V * max(len(model.walls), 1), dtype=wp.float64, device=d)
         self._wall_normal = wp.zeros(V * max(len(model.walls), 1), dtype=wp.vec3d, device=d)
         self._active = wp.zeros(max(model.n_rods, 1), dtype=wp.int32, device=d)
@@ -251,19 +264,31 @@ class RodSolver(StepBounds, SolverChecks):
 
     @property
     def skin(self) -> float:
-        return self.contacts.skin
+        return self.collision.skin
 
     @property
     def pair_builds(self) -> int:
-        return self.contacts.builds
+        return self.collision.builds
 
     @property
     def colors_used(self) -> int:
-        return self.contacts.colors_used
+        return self.collision.colors_used
 
     def invalidate_pairs(self) -> None:
-        """Force the broadphase to rebuild its pair list at the next step (benchmarks)."""
-        self.contacts.pairs_n = None
+        """Force the broadphase to rebuild its pair list at the next collide (benchmarks)."""
+        self.collision.pairs_n = None
+
+    def contacts(self, capacity: int = 16) -> ContactPoints:
+        """New, empty :class:`~rodwarp.sim.contacts.ContactPoints` for this solver's model."""
+        return ContactPoints(self.model, capacity)
+
+    @property
+    def default_contacts(self) -> ContactPoints:
+        """The contact points :meth:`step` collides into and solves when it is given none (their
+        warm start carries over from one such step to the next)."""
+        if self._own_contacts is None:
+            self._own_contacts = self.contacts()
+        return self._own_contacts
 
     def _control(self, control):
         if control is not None:
@@ -288,32 +313,65 @@ class RodSolver(StepBounds, SolverChecks):
         self.timings = {}
 
     # ------------------------------------------------------------------ step
-    def _walls(self, control, t: float, dt: float) -> Walls:
-        """The Walls bundle of this step: per-wall arrays copied only when the control's walls
-        change; the drive enters as three scalars."""
-        m = self.model
-        P = len(m.walls)
-        key = (id(control), P, tuple(control.on.tolist()), tuple(control.drive.direction.tolist()))
-        w = self._walls_struct
-        if w is None or self._walls_key != key:
-            dev = m.device
-            rows = device_rows(m.walls, control.on, control.drive.direction)
-            w = self._walls_struct = Walls()
-            w.n = P
-            for name, a in rows.items():
-                dtype = wp.vec4d if a.ndim == 2 else (wp.int32 if a.dtype == np.int32 else wp.float64)
-                setattr(w, name, wp.array(a, dtype=dtype, device=dev))
-            w.drive_dir = wp.vec3d(*control.drive.direction)
-            self._walls_key = key
-        d0 = control.drive.displacement(t)
-        d1 = control.drive.displacement(t + dt)
-        w.drive_disp = wp.float64(d0)
-        w.drive_vel = wp.float64((d1 - d0) / dt)
-        return w
+    def _touching(self, contacts: ContactPoints, control) -> bool:
+        """Whether the coming step starts touching something: rod contacts in the last step, or
+        a wall in place (it decides the bending integration, :meth:`theta_for`)."""
+        return contacts.last.count > 0 or (len(self.model.walls) > 0 and bool(control.walls_in_place()))
 
-    def step(self, state_in: State, state_out: State, control=None, dt: float | None = None, *,
-             check: bool = True) -> StepInfo:
-        """Advance ``state_in`` by ``dt`` seconds into ``state_out`` under ``control``.
+    def collide(self, state: State, control=None, dt: float | None = None, contacts: ContactPoints | None = None
+                ) -> ContactPoints:
+        """Rod-rod contact points of a step of ``dt`` s from ``state``, into ``contacts``.
+
+        The points are speculative: a pair is kept when its gap is below the contact distance
+        plus what both segments can close in the step at the velocities of the step's own
+        predictor (gravity, damping, explicit bending), so no pair tunnels. They are sorted by
+        key, so the visiting order, and the result, are the same on every run and device.
+
+        Parameters
+        ----------
+        state : State
+            The state the step starts from.
+        control : Control, optional
+            Walls in place, drive and torques (default: every wall in place, no drive).
+        dt : float
+            The step (s) about to be taken.
+        contacts : ContactPoints, optional
+            Where to put them (their last step's impulses warm-start the coming step); default
+            a new :meth:`contacts`.
+
+        Returns
+        -------
+        ContactPoints
+            ``contacts``, for :meth:`step`.
+        """
+        if dt is None or not (dt > 0 and math.isfinite(dt)):
+            raise RodwarpError(f"collide needs the coming step dt (s) as a positive number, got {dt}")
+        m = self.model
+        dev = m.device
+        control = self._control(control)
+        contacts = self.contacts() if contacts is None else contacts
+        if contacts.model is not m:
+            raise RodwarpError("these contacts belong to another model: make them with solver.contacts()")
+        theta = self.theta_for(dt, self._touching(contacts, control))
+        self._launch("elastics", elastics.velocity_predictor, dim=m.n_rods, device=dev, inputs=[
+            m.arrays, state.rod_state(), self._zero_target, control.torque(), wp.vec3d(*m.gravity),
+            wp.float64(m.damping), wp.float64(dt), int(theta == 0.0), self._v_pred, self._spin_pred])
+        self._scalar.zero_()
+        self._launch("checks", broadphase.max_speed, dim=m.n_vertices, device=dev, inputs=[self._v_pred, self._scalar])
+        sc = self._scalar.numpy()
+        vmax = float(sc[0]) if sc[1] == 0.0 else math.nan
+        contacts.predicted_speed = vmax
+        n = 0
+        if m.rod_contacts and m.n_segments > 1 and math.isfinite(vmax):
+            n = self.collision.detect(state, contacts.next, self._v_pred, vmax, dt)
+        contacts.next.count = n
+        contacts.collided_for = (id(state), state.step_index, state.time, id(control), dt)
+        return contacts
+
+    def step(self, state_in: State, state_out: State, control=None, contacts: ContactPoints | None = None,
+             dt: float | None = None, *, check: bool = True) -> StepInfo:
+        """Advance ``state_in`` by ``dt`` seconds into ``state_out`` under ``control``, solving
+        the ``contacts`` that :meth:`collide` found for this step.
 
         Parameters
         ----------
@@ -321,30 +379,43 @@ class RodSolver(StepBounds, SolverChecks):
             Distinct states of this model; ``state_in`` is not modified.
         control : Control, optional
             Walls in place, drive and torques; default: every wall in place, no drive.
+        contacts : ContactPoints, optional
+            From ``collide(state_in, control, dt, contacts)``; on success their points become
+            the last step's (warm start of the next). None: the solver collides itself, with
+            contacts of its own.
         dt : float
             Time step (s).
 
         Raises
         ------
         RodwarpError
-            ``dt`` above the step bound (unless ``allow_unstable``).
+            ``dt`` above the step bound (unless ``allow_unstable``), or ``contacts`` not
+            collided for this state, control and step.
         SimulationBlowUp
             Non-finite or runaway velocities, or rods overlapping deeper than
-            ``penetration_limit`` diameters; ``state_in`` is left untouched.
+            ``penetration_limit`` diameters; ``state_in`` and the contacts' last step are left
+            untouched.
         """
+        if isinstance(contacts, (int, float)):
+            raise RodwarpError("step(state_in, state_out, control, contacts, dt): the fourth argument is the "
+                               "contacts from solver.collide(...); pass the step as dt=")
         if dt is None:
             raise RodwarpError("step needs a time step dt (s)")
         m = self.model
         dev = m.device
         control = self._control(control)
-        if check:
-            if not (dt > 0 and math.isfinite(dt)):
-                raise RodwarpError(f"time step must be a positive number, got {dt}")
-            if self._v_elastic is None:
-                e = self.energy(state_in)
-                self._v_elastic = math.sqrt(2.0 * (e["bending"] + e["stretching"] + e["twist"]) / m.total_mass())
+        if check and not (dt > 0 and math.isfinite(dt)):
+            raise RodwarpError(f"time step must be a positive number, got {dt}")
+        if contacts is None:
+            contacts = self.collide(state_in, control, dt, self.default_contacts)
+        elif contacts.collided_for != (id(state_in), state_in.step_index, state_in.time, id(control), dt):
+            raise RodwarpError("these contacts were not collided for this step: call "
+                               "solver.collide(state_in, control, dt, contacts) right before solver.step")
+        if check and self._v_elastic is None:
+            e = self.energy(state_in)
+            self._v_elastic = math.sqrt(2.0 * (e["bending"] + e["stretching"] + e["twist"]) / m.total_mass())
         P = len(m.walls)
-        touching = state_in.contact_count > 0 or (P > 0 and bool(control.walls_in_place()))
+        touching = self._touching(contacts, control)
         theta = self.theta_for(dt, touching)
         if theta == 0.0 and touching and not self._warned_explicit:
             self._warned_explicit = True
@@ -353,11 +424,7 @@ class RodSolver(StepBounds, SolverChecks):
                           stacklevel=2)
         fdt = wp.float64(dt)
         V, N = m.n_vertices, m.n_rods
-        state_in.ensure_wall_storage()
-        state_out.ensure_wall_storage()
-        if self._wall_gap.shape[0] != V * max(P, 1):
-            self._wall_gap = wp.zeros(V * max(P, 1), dtype=wp.float64, device=dev)
-            self._wall_normal = wp.zeros(V * max(P, 1), dtype=wp.vec3d, device=dev)
+        last, cur = contacts.last, contacts.next
         f = self.factors
         f.implicit_bending = int(theta != 0.0)
         rs_in = state_in.rod_state()
@@ -366,20 +433,16 @@ class RodSolver(StepBounds, SolverChecks):
         self._launch("elastics", elastics.velocity_predictor, dim=N, device=dev, inputs=[
             m.arrays, rs_in, f.btarget, control.torque(), wp.vec3d(*m.gravity), wp.float64(m.damping), fdt,
             int(theta == 0.0), state_out.v, state_out.spin])
-
-        self._scalar.zero_()
-        self._launch("checks", broadphase.max_speed, dim=V, device=dev, inputs=[state_out.v, self._scalar])
-        sc = self._scalar.numpy()
-        if sc[1] != 0.0:
+        # the predictor's fastest speed was measured by collide (the same kernel on the same input)
+        vmax = contacts.predicted_speed
+        if not math.isfinite(vmax):
             raise self._blowup(state_in, dt, theta, "non-finite velocity after the elastic predictor", control)
-        vmax = float(sc[0])
         if check:
             # the guard follows the motion: the bound at the speeds this step starts from
             self.check_dt(dt, control, speed=vmax)
 
-        n_contacts = self.contacts.detect(state_in, state_out, vmax, dt) if m.rod_contacts and m.n_segments > 1 else 0
-        state_out.contact_count = n_contacts
-        contacts = state_out.rod_contacts(n_contacts)
+        n_contacts = cur.count
+        contacts_view = cur.view()
 
         params = self._params
         params.dt = fdt
@@ -406,20 +469,20 @@ class RodSolver(StepBounds, SolverChecks):
             if self._frames.shape[0] < n_contacts:
                 self._frames = wp.empty(2 * n_contacts, dtype=ContactFrame, device=dev)
             self._launch("friction", friction.prepare_rod_contacts, dim=n_contacts, device=dev, inputs=[
-                m.arrays, state_in.x, contacts, f.tangent, params, self._frames])
-            self.contacts.warm_start(state_in, state_out, n_contacts, self.warm_start)
+                m.arrays, state_in.x, contacts_view, f.tangent, params, self._frames])
+            self.collision.warm_start(last, cur, n_contacts, self.warm_start)
             self._launch("friction", friction.apply_rod_impulses, dim=n_contacts, device=dev, inputs=[
-                contacts, self._frames, state_in.x, f.tangent, state_out.v, state_out.spin])
+                contacts_view, self._frames, state_in.x, f.tangent, state_out.v, state_out.spin])
             if self.coloring:
-                self.contacts.color(state_out, n_contacts)
+                self.collision.color(cur, n_contacts)
 
         walls = self._walls(control, state_in.time, dt)
-        self._last_solve = (contacts, params, walls)
-        wc = self._wall_contacts(state_out)
+        wc = self._wall_contacts(cur)
+        self._last_solve = (contacts_view, params, walls, wc)
         self._n_active.zero_()
         self._n_wall_frames.zero_()
         if P:
-            state_out.wall_impulse.assign(state_in.wall_impulse)
+            cur.wall_impulse.assign(last.wall_impulse)
             self._launch("friction", wall_contacts.prepare_wall_contacts, dim=N, device=dev, inputs=[
                 m.arrays, state_in.x, f.tangent, walls, params, wc, state_out.v, state_out.spin])
             needed = int(self._n_wall_frames.numpy()[0])
@@ -427,7 +490,8 @@ class RodSolver(StepBounds, SolverChecks):
                 # more wall contacts than ever before: grow the frame list and fill it
                 self._wall_key = wp.zeros(2 * needed, dtype=wp.int32, device=dev)
                 self._wall_frames = wp.empty(2 * needed, dtype=ContactFrame, device=dev)
-                wc = self._wall_contacts(state_out)
+                wc = self._wall_contacts(cur)
+                self._last_solve = (contacts_view, params, walls, wc)
                 self._launch("friction", wall_contacts.fill_wall_frames, dim=int(self._n_active.numpy()[0]), device=dev,
                              inputs=[m.arrays, state_in.x, f.tangent, walls, params, wc])
 
@@ -446,18 +510,18 @@ class RodSolver(StepBounds, SolverChecks):
         if self.fused:
             self._launch("solve", solve.gauss_seidel_sequential, dim=1, device=dev, inputs=[
                 m.arrays, rs_in,
-                contacts, self._frames, walls, wc, f, params, state_out.v, state_out.spin, self._solve_out])
+                contacts_view, self._frames, walls, wc, f, params, state_out.v, state_out.spin, self._solve_out])
             res, sres, used = (float(x) for x in self._solve_out.numpy())
             used = int(used)
         else:
-            res, sres, used = self._sweeps(rs_in, state_out, contacts, walls, wc, params, P)
+            res, sres, used = self._sweeps(rs_in, state_out, contacts_view, walls, wc, params, P)
 
         self._launch("elastics", elastics.integrate_positions, dim=V, device=dev,
                      inputs=[state_in.x, state_out.v, fdt, state_out.x])
         passes = 0
         # an IMC overlap is the penalty's compliance, not an error to project away
         if self.position_sweeps and (n_contacts or P) and not m.contact_law.imc:
-            passes = self._project_positions(rs_in, state_out, contacts, walls, wc, params, P)
+            passes = self._project_positions(rs_in, state_out, contacts_view, walls, wc, params, P)
         self._launch("elastics", frames.advance_frames, dim=V, device=dev, inputs=[
             m.arrays, state_in.x, state_out.x, state_in.director, state_in.theta, state_out.spin, fdt,
             state_out.director, state_out.theta])
@@ -468,7 +532,7 @@ class RodSolver(StepBounds, SolverChecks):
         self._launch("checks", broadphase.max_speed, dim=V, device=dev, inputs=[state_out.v, self._scalar])
         if n_contacts:
             self._launch("checks", narrowphase.contact_overlap, dim=n_contacts, device=dev, inputs=[
-                n_contacts, state_out.contact_seg, m.arrays.seg_vertex, m.arrays.vertex_rod, m.arrays.radius,
+                n_contacts, cur.seg, m.arrays.seg_vertex, m.arrays.vertex_rod, m.arrays.radius,
                 state_out.x, self._no_gaps, self._scalar[2:3]])
         sc = self._scalar.numpy()
         vmax_out = float(sc[0])
@@ -484,105 +548,28 @@ class RodSolver(StepBounds, SolverChecks):
                 raise self._blowup(state_in, dt, theta, f"rods overlap by {depth / m.min_diameter:.2f} d", control)
             if self.energy_check_every and state_out.step_index % self.energy_check_every == 0:
                 self._check_energy(state_in, state_out, dt, theta, control)
+        contacts.commit()  # the step passed its checks: its impulses warm-start the next
         info = StepInfo(state_out.step_index, state_out.time, dt, used, n_contacts,
                         float(res), float(sres), vmax_out, theta, max(depth, 0.0), passes)
         self.last_info = info
         return info
 
-    def _wall_contacts(self, state_out: State) -> WallContacts:
-        # one view per state (the output state alternates), kept on the state itself
-        return cached_view(state_out.__dict__, "_wall_contacts", WallContacts, gap=self._wall_gap,
-                           normal=self._wall_normal,
-                           impulse=state_out.wall_impulse, active=self._active, n_active=self._n_active,
-                           span=self._wall_span, key=self._wall_key, frames=self._wall_frames,
-                           n_frames=self._n_wall_frames)
-
-    def _project_positions(self, rs_in, state_out, contacts, walls, wc, params, P):
-        """Post-stabilisation: overlaps beyond the slop removed from the end-of-step positions
-        (velocities untouched), so the velocity solve carries no Baumgarte term. Returns the
-        sweeps run."""
-        m = self.model
-        dev = m.device
-        f = self.factors
-        if self.fused:
-            self._launch("friction", overlap.project_positions_sequential, dim=1, device=dev, inputs=[
-                self.position_sweeps, wp.float64(self.position_tolerance * m.min_diameter), m.arrays, rs_in.x,
-                contacts, self._frames, f.tangent, walls, wc, params, state_out.x, self._proj_out])
-            return int(self._proj_out.numpy()[1])
-        n_active = int(self._n_active.numpy()[0]) if P else 0
-        for _ in range(self.position_sweeps):
-            if contacts.count:
-                ids = self.contacts.color_ids
-                if self.coloring:
-                    for c0, c1 in self.contacts.color_ranges:
-                        self._launch("friction", overlap.project_rod_contacts, dim=c1 - c0, device=dev,
-                                     inputs=[ids[c0:c1], 1, m.arrays, contacts, self._frames, params, rs_in.x,
-                                             f.tangent, state_out.x])
-                else:
-                    self._launch("friction", overlap.project_rod_contacts, dim=contacts.count, device=dev,
-                                 inputs=[ids, 0, m.arrays, contacts, self._frames, params, rs_in.x, f.tangent,
-                                         state_out.x])
-            if n_active:
-                self._launch("friction", overlap.project_wall_contacts, dim=n_active, device=dev, inputs=[
-                    m.arrays, rs_in.x, f.tangent, walls, wc, params, state_out.x])
-        return self.position_sweeps
-
-    def _sweeps(self, rs_in, state_out, contacts, walls, wc, params, P):
-        """Gauss-Seidel sweeps as separate launches (coloured contacts; the GPU path)."""
-        m = self.model
-        dev = m.device
-        f = self.factors
-        n_active = int(self._n_active.numpy()[0]) if P else 0
-        n_contacts = contacts.count
-        ids = self.contacts.color_ids
-        used = 0
-        self._launch("friction", friction.rigid_bodies_to_sweeps, dim=m.n_rods, device=dev, inputs=[
-            m.arrays, f.tangent, state_out.v, state_out.spin, f.axial])
-        for it in range(self.iterations):
-            measure = it == self.iterations - 1 or (self.tolerance > 0 and it % 2 == 1)
-            if measure:
-                self._residual.zero_()
-                self._sresidual.zero_()
-            if n_contacts:
-                args = [m.arrays, contacts, self._frames, params, state_out.v, state_out.spin, self._residual]
-                if self.coloring:
-                    for c0, c1 in self.contacts.color_ranges:
-                        self._launch("friction", friction.solve_rod_contacts, dim=c1 - c0, device=dev,
-                                     inputs=[ids[c0:c1], 1, *args])
-                else:
-                    self._launch("friction", friction.solve_rod_contacts, dim=n_contacts, device=dev,
-                                 inputs=[ids, 0, *args])
-            if n_active:
-                self._launch("friction", wall_contacts.solve_wall_contacts, dim=n_active, device=dev, inputs=[
-                    walls, params, wc, state_out.v, state_out.spin, self._residual])
-            self._launch("elastics", elastics.rod_projection, dim=m.n_rods, device=dev, inputs=[
-                m.arrays, rs_in, state_out.v, state_out.spin, f, params.dt, self._sresidual])
-            used = it + 1
-            if measure and self.tolerance > 0 and it < self.iterations - 1:
-                if (self._residual.numpy()[0] < self.tolerance ** 2
-                        and self._sresidual.numpy()[0] < self.length_tolerance):
-                    break
-        self._launch("friction", friction.rigid_bodies_from_sweeps, dim=m.n_rods, device=dev, inputs=[
-            m.arrays, f.tangent, state_out.v, state_out.spin, f.axial])
-        self._launch("elastics", elastics.rigid_length_projection, dim=m.n_rods, device=dev, inputs=[
-            m.arrays, rs_in, state_out.v, f, params.dt, wp.float64(self.length_tolerance), self._sresidual])
-        # the contact residual is kept squared on the device
-        return math.sqrt(float(self._residual.numpy()[0])), float(self._sresidual.numpy()[0]), used
-
-
 def run(solver: RodSolver, state: State, duration: float, dt: float, *, control=None, callback=None,
-        every: int = 1) -> State:
+        every: int = 1, contacts: ContactPoints | None = None) -> State:
     """Step ``state`` forward by ``duration`` seconds with step ``dt``; returns the final state.
 
-    Two states are ping-ponged; ``callback(state, info)`` is called every ``every`` steps
-    with the state just written. The input ``state`` object is updated in place at the end.
+    Two states are ping-ponged; each step collides, then steps (``contacts``, when given, carry
+    the warm start in and out). ``callback(state, info)`` is called every ``every`` steps with
+    the state just written. The input ``state`` object is updated in place at the end.
     """
     n = int(round(duration / dt))
+    contacts = solver.contacts() if contacts is None else contacts
     a = state
-    b = State(solver.model, a.contact_capacity)
+    b = State(solver.model)
     b.copy_from(a)
     for k in range(n):
-        info = solver.step(a, b, control, dt)
+        solver.collide(a, control, dt, contacts)
+        info = solver.step(a, b, control, contacts, dt)
         a, b = b, a
         if callback is not None and (k + 1) % every == 0:
             callback(a, info)

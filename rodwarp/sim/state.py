@@ -7,7 +7,7 @@ import warp as wp
 
 
 class State:
-    """Positions, velocities, spins, material frames, time and the solver's memory.
+    """Positions, velocities, spins, material frames and time of a rod scene.
 
     Attributes
     ----------
@@ -20,19 +20,19 @@ class State:
         Material angle of each edge from its reference director (rad).
     director : wp.array of vec3d (V,)
         Reference director of each edge (unit, normal to the edge), time-parallel transported.
-    wall_impulse : wp.array of vec3d (V * P,)
-        Impulses of the vertex-wall contacts of the last step (P walls of the model).
-    contact_* :
-        Rod-rod contacts of the last step and their impulses.
+    time : float
+        Simulated time (s).
+    step_index : int
+        Steps taken to reach this state.
 
-    The impulses are kept so the next step can warm-start Gauss-Seidel; checkpoints save
-    them, so a resumed run is bit-identical.
+    The contacts of a step and the impulses that warm-start the next one live in
+    :class:`~rodwarp.sim.contacts.Contacts`, not here (as in Newton).
     """
 
-    def __init__(self, model, contact_capacity: int = 0):
+    def __init__(self, model):
         d = model.device
         V = model.n_vertices
-        self.model = model.finalize()  # its walls are fixed from here: the wall buffers are sized once
+        self.model = model
         self.time = 0.0
         self.step_index = 0
         self.x = wp.zeros(V, dtype=wp.vec3d, device=d)
@@ -40,27 +40,6 @@ class State:
         self.spin = wp.zeros(V, dtype=wp.float64, device=d)
         self.theta = wp.zeros(V, dtype=wp.float64, device=d)
         self.director = wp.zeros(V, dtype=wp.vec3d, device=d)
-        self.wall_impulse = wp.zeros(V * max(len(model.walls), 1), dtype=wp.vec3d, device=d)
-        self.contact_count = 0
-        self.allocate_contacts(max(contact_capacity, 16))
-
-    def allocate_contacts(self, capacity: int) -> None:
-        """(Re)allocate contact storage for ``capacity`` contacts (content is discarded)."""
-        d = self.model.device
-        self.contact_capacity = capacity
-        # keys need 2x room for wp.utils.radix_sort_pairs
-        self.contact_key = wp.zeros(2 * capacity, dtype=wp.int64, device=d)
-        self.contact_seg = wp.zeros(capacity, dtype=wp.vec2i, device=d)
-        self.contact_st = wp.zeros(capacity, dtype=wp.vec2d, device=d)
-        self.contact_normal = wp.zeros(capacity, dtype=wp.vec3d, device=d)
-        self.contact_gap = wp.zeros(capacity, dtype=wp.float64, device=d)
-        self.contact_impulse = wp.zeros(capacity, dtype=wp.vec3d, device=d)
-
-    def ensure_wall_storage(self) -> None:
-        """Size the wall impulses for the model's walls (after walls were added to the model)."""
-        n = self.model.n_vertices * max(len(self.model.walls), 1)
-        if self.wall_impulse.shape[0] != n:
-            self.wall_impulse = wp.zeros(n, dtype=wp.vec3d, device=self.model.device)
 
     # ------------------------------------------------------------------ device bundles
     def rod_state(self):
@@ -70,18 +49,6 @@ class State:
 
         return cached_view(self.__dict__, "_rod_state", RodState, x=self.x, v=self.v, spin=self.spin,
                            theta=self.theta, director=self.director)
-
-    def rod_contacts(self, count: int | None = None):
-        """The :class:`~rodwarp.kernels.structs.RodContacts` view of this state's contacts
-        (one per state; its count set at every call)."""
-        from rodwarp.kernels.structs import RodContacts
-
-        c = cached_view(self.__dict__, "_rod_contacts", RodContacts, seg=self.contact_seg, st=self.contact_st,
-                        normal=self.contact_normal, gap=self.contact_gap, impulse=self.contact_impulse)
-        n = self.contact_count if count is None else count
-        if c.count != n:
-            c.count = n
-        return c
 
     # ------------------------------------------------------------------ host access
     def positions(self) -> np.ndarray:
@@ -114,60 +81,26 @@ class State:
         """Make this state an exact copy of ``other`` (same model)."""
         self.time = other.time
         self.step_index = other.step_index
-        for name in ("x", "v", "spin", "theta", "director"):
+        for name in _ARRAYS:
             getattr(self, name).assign(getattr(other, name))
-        if self.wall_impulse.shape != other.wall_impulse.shape:
-            self.wall_impulse = wp.zeros_like(other.wall_impulse)
-        self.wall_impulse.assign(other.wall_impulse)
-        if self.contact_capacity != other.contact_capacity:
-            self.allocate_contacts(other.contact_capacity)
-        for name in ("contact_key", "contact_seg", "contact_st", "contact_normal", "contact_gap", "contact_impulse"):
-            getattr(self, name).assign(getattr(other, name))
-        self.contact_count = other.contact_count
 
     def to_numpy(self) -> dict:
         """Every array of the state as NumPy (for checkpoints)."""
-        c = self.contact_count
-        return {
-            "time": np.float64(self.time),
-            "step_index": np.int64(self.step_index),
-            "x": self.x.numpy(),
-            "v": self.v.numpy(),
-            "spin": self.spin.numpy(),
-            "theta": self.theta.numpy(),
-            "director": self.director.numpy(),
-            "wall_impulse": self.wall_impulse.numpy(),
-            "contact_key": self.contact_key.numpy()[:c],
-            "contact_seg": self.contact_seg.numpy()[:c],
-            "contact_st": self.contact_st.numpy()[:c],
-            "contact_normal": self.contact_normal.numpy()[:c],
-            "contact_gap": self.contact_gap.numpy()[:c],
-            "contact_impulse": self.contact_impulse.numpy()[:c],
-        }
+        return {"time": np.float64(self.time), "step_index": np.int64(self.step_index),
+                **{name: getattr(self, name).numpy() for name in _ARRAYS}}
 
     def load_numpy(self, data: dict) -> None:
-        """Restore from :meth:`to_numpy` output (exactly)."""
+        """Restore from :meth:`to_numpy` output (exactly; other keys are ignored)."""
         d = self.model.device
         self.time = float(data["time"])
         self.step_index = int(data["step_index"])
-        self.x.assign(wp.array(data["x"], dtype=wp.vec3d, device=d))
-        self.v.assign(wp.array(data["v"], dtype=wp.vec3d, device=d))
-        self.spin.assign(wp.array(data["spin"], dtype=wp.float64, device=d))
-        self.theta.assign(wp.array(data["theta"], dtype=wp.float64, device=d))
-        self.director.assign(wp.array(data["director"], dtype=wp.vec3d, device=d))
-        self.wall_impulse = wp.array(data["wall_impulse"], dtype=wp.vec3d, device=d)
-        c = int(len(data["contact_key"]))
-        self.allocate_contacts(max(16, 2 * c))
-        if c:
-            keys = np.zeros(2 * self.contact_capacity, dtype=np.int64)
-            keys[:c] = data["contact_key"]
-            self.contact_key.assign(wp.array(keys, dtype=wp.int64, device=d))
-            for name, dt in (("contact_seg", wp.vec2i), ("contact_st", wp.vec2d), ("contact_normal", wp.vec3d),
-                             ("contact_gap", wp.float64), ("contact_impulse", wp.vec3d)):
-                full = getattr(self, name).numpy()
-                full[:c] = data[name]
-                getattr(self, name).assign(wp.array(full, dtype=dt, device=d))
-        self.contact_count = c
+        for name in _ARRAYS:
+            a = getattr(self, name)
+            a.assign(wp.array(data[name], dtype=a.dtype, device=d))
+
+
+#: the evolving arrays of a :class:`State`
+_ARRAYS = ("x", "v", "spin", "theta", "director")
 
 
 def cached_view(cache: dict, slot: str, struct_type, /, **arrays):
