@@ -56,7 +56,7 @@ _WHERE = {
     "SegmentParams": "_params", "SegmentResult": "_params",
     "prepare_volume": "_prepare", "parse_voxel_size": "_prepare", "Prepared": "_prepare",
     "cross_section": "_bundles", "looks_bundled": "_bundles", "fit_discs": "_bundles",
-    "trace_filaments": "_curved",
+    "trace_filaments": "_curved", "FilamentResult": "_curved",
     "segment_volume": "_segment", "AUTO_BEND_FRACTION": "_segment",
     # scoring and the command's files
     "RodMatch": "_score", "match_rods": "_score", "ContactScore": "_score", "score_contacts": "_score",

@@ -31,12 +31,13 @@ This module must not import warp.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
 
 
-__all__ = ["trace_filaments", "bend_fraction"]
+__all__ = ["trace_filaments", "bend_fraction", "FilamentResult"]
 
 #: largest angle (degrees) between facing end tangents, and between each and the chord, of a
 #: join (skeleton ends bend towards the junction they were cut from; on the wire tangles 45
@@ -328,7 +329,46 @@ def _radii(polys, raw_norm: np.ndarray, r0: float, margin: float):
     return out
 
 
-def trace_filaments(raw: np.ndarray, st, P, quality: dict, progress=None):
+@dataclass(frozen=True)
+class FilamentResult:
+    """What :func:`trace_filaments` traced.
+
+    Attributes
+    ----------
+    polylines : list of (m, 3) ndarray
+        Centrelines ``(x, y, z)`` in working voxels, vertices about one voxel apart.
+    radii : ndarray (n,)
+        One radius per centreline (voxels), from its intensity mass per unit length.
+    skeleton_voxels : int
+        Voxels of the 3-D skeleton of the binarised volume.
+    skeleton_junctions : int
+        Skeleton voxels with 3 or more skeleton neighbours (removed before joining).
+    branches : int
+        Skeleton branches left once the junctions are removed.
+    bend_fraction : float
+        Share (0 to 1) of the long branches' length that bends (see :func:`bend_fraction`).
+    joins : int
+        Branch ends joined through junction gaps.
+    faint : int
+        Chains rejected because their axis is fainter than ``0.8 min_fill`` of the plateau.
+    """
+
+    polylines: list
+    radii: np.ndarray
+    skeleton_voxels: int
+    skeleton_junctions: int
+    branches: int
+    bend_fraction: float
+    joins: int
+    faint: int
+
+    @property
+    def filaments(self) -> int:
+        """Number of filaments traced (``len(polylines)``)."""
+        return len(self.polylines)
+
+
+def trace_filaments(raw: np.ndarray, st, P, progress=None) -> FilamentResult:
     """Trace curved filaments in a (prepared, in-memory) volume.
 
     Parameters
@@ -339,13 +379,14 @@ def trace_filaments(raw: np.ndarray, st, P, quality: dict, progress=None):
         Background and foreground levels, threshold, coarse radius ``r0`` (voxels).
     P : rodwarp.ct.SegmentParams
         Knobs (``smooth_sigma``, ``junction_radius``, ``min_length``, ``window_margin``).
-    quality : dict
-        Updated with ``branches``, ``joins``, ``filaments``, ``bend_fraction``.
+    progress : callable(stage, done, total), optional
+        Called with ``"detect"`` as the steps advance.
 
     Returns
     -------
-    (list of (m, 3) arrays, radii (n,))
-        Centrelines (x, y, z) in voxels, vertices about one voxel apart, and radii (voxels).
+    FilamentResult
+        Centrelines (x, y, z) in voxels, vertices about one voxel apart, their radii
+        (voxels), and the skeleton and joining counts.
     """
     from rodwarp.ct._voxels import _BlockSampler
 
@@ -359,14 +400,12 @@ def trace_filaments(raw: np.ndarray, st, P, quality: dict, progress=None):
     if progress is not None:
         progress("detect", 0, 3)
     branches, junc, n_sk = _branches(mask, r0, P.junction_radius)
-    quality["skeleton_voxels"] = n_sk
-    quality["skeleton_junctions"] = int(len(junc))
-    quality["branches"] = len(branches)
-    quality["bend_fraction"] = bend_fraction(branches, max(1.5, 0.5 * r0), 6.0 * r0)
+    n_branches = len(branches)
+    bend = bend_fraction(branches, max(1.5, 0.5 * r0), 6.0 * r0)
     if progress is not None:
         progress("detect", 1, 3)
     chains = _join(branches, r0, P, sampler)
-    quality["joins"] = int(sum(len(c) - 1 for c in chains))
+    joins = int(sum(len(c) - 1 for c in chains))
     polys = []
     for ch in chains:
         p = _resample(_assemble(branches, ch), 1.0)
@@ -387,9 +426,8 @@ def trace_filaments(raw: np.ndarray, st, P, quality: dict, progress=None):
         else:
             faint += 1
     polys = keep
-    quality["rods_rejected"] = {"faint": faint} if faint else {}
     radii = _radii(polys, raw_norm, r0, P.window_margin) if polys else np.zeros(0)
-    quality["filaments"] = len(polys)
     if progress is not None:
         progress("detect", 3, 3)
-    return polys, radii
+    return FilamentResult(polylines=polys, radii=radii, skeleton_voxels=n_sk, skeleton_junctions=int(len(junc)),
+                          branches=n_branches, bend_fraction=bend, joins=joins, faint=faint)

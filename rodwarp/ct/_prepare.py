@@ -91,6 +91,7 @@ class Prepared:
     notes: dict = field(default_factory=dict)
 
     def info(self) -> dict:
+        """What preparation did, as ``SegmentResult.quality`` lists it (a new dict each call)."""
         return {"spacing": self.spacing, "zoom": list(self.zoom), "dark_rods": self.dark, "fov": self.fov,
                 "background_trend": self.trend}
 
@@ -212,8 +213,7 @@ def _trend(sl, inside, centre_yx, step=0.25):
     return rho, r_c, B, S, noise
 
 
-def prepare_volume(volume, voxel_size=None, *, dark=None, fov=None, background=None,
-                   quality: dict | None = None) -> Prepared:
+def prepare_volume(volume, voxel_size=None, *, dark=None, fov=None, background=None) -> Prepared:
     """Prepare a scan for :func:`rodwarp.ct.segment_volume` (see the module docstring).
 
     Parameters
@@ -326,6 +326,4 @@ def prepare_volume(volume, voxel_size=None, *, dark=None, fov=None, background=N
                                                   order=0, mode="nearest") > 0.5
     out.spacing = float(h)
     out.notes = notes
-    if quality is not None:
-        quality.update(out.info())
     return out

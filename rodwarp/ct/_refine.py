@@ -13,6 +13,7 @@ short, too faint or of the wrong thickness are rejected (:func:`_check_rod`).  T
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -356,29 +357,32 @@ class _Refiner:
         self.C, self.r, self.sigma = C, r, sg
 
 
-def _dedupe_rods(rods, P, reasons, filled=None):
-    """Drop failed rods (counting reasons) and union duplicates / collinear pieces among the rest."""
-    good = []
+def _dedupe_rods(rods, P, filled=None):
+    """Drop failed rods and union duplicates / collinear pieces among the rest.
+
+    Returns the rods kept, the number of merges and the reasons of the dropped rods (one per
+    rod, in the rods' order).
+    """
+    good, failed = [], []
     for rod in rods:
         if rod.ok:
             good.append(rod)
         else:
-            reasons[rod.why] = reasons.get(rod.why, 0) + 1
+            failed.append(rod.why)
     if len(good) < 2:
-        return good, 0
+        return good, 0, failed
     r = float(np.median([g.r for g in good]))
     merged, nm, groups = _merge_lines([(g.p0, g.p1) for g in good], r, P.merge_angle,
                                       P.merge_distance * r, P.merge_gap * r, filled=filled)
     if nm == 0:
-        return good, 0
+        return good, 0, failed
     out = []
     for (p0, p1), mem in zip(merged, groups):
         if len(mem) == 1:
             out.append(good[mem[0]])
         else:
             out.append(_Rod(p0, p1, good[mem[0]].r))
-    reasons["duplicate"] = reasons.get("duplicate", 0) + nm
-    return out, nm
+    return out, nm, failed
 
 
 def _check_rod(rod, r_glob, C, P, sigma=None, mixed=False):
@@ -402,9 +406,52 @@ def _check_rod(rod, r_glob, C, P, sigma=None, mixed=False):
         rod.ok, rod.why = False, "radius"
 
 
-def _refine(reader, st, P, lines, progress, quality, reasons):
+@dataclass(frozen=True)
+class RefineStats:
+    """What the greyscale refinement (:func:`_refine`) measured, besides the rods.
+
+    Attributes
+    ----------
+    radius_profile_fit : float
+        Global rod radius from the blurred-disc fit of the radial profile (voxels), before
+        the radius from the intensity mass per unit length replaces it.
+    radius_cv : float
+        Robust coefficient of variation (1.4826 MAD / median, dimensionless) of the rods' own radii
+        from their mass per unit length; 0 with fewer than 3 rods.
+    rounds : int
+        Refinement rounds run (at most ``refine_iterations``).
+    rod_refinements : int
+        Rod refinements summed over the rounds (a rod counts once per round it was refined).
+    contrast_fit : float
+        Fitted rod plateau relative to the measured foreground - background (dimensionless).
+    blur_sigma : float
+        Fitted Gaussian blur of the image (voxels).
+    end_offset : float
+        Offset of a rod end from the half-level point along the axis, for the fitted radius,
+        blur and end model (voxels).
+    rejected : dict of str to int
+        Rods dropped during refinement, by reason (``"no interior"``, ``"collapsed"``,
+        ``"short"``, ..., and ``"duplicate"`` for pieces merged into another rod), in the
+        order the reasons first occurred; reasons that never occurred are absent.
+    """
+
+    radius_profile_fit: float
+    radius_cv: float
+    rounds: int
+    rod_refinements: int
+    contrast_fit: float
+    blur_sigma: float
+    end_offset: float
+    rejected: dict
+
+
+def _refine(reader, st, P, lines, progress):
     """Greyscale refinement until every rod moves less than ``refine_tol`` (at most
-    ``refine_iterations`` rounds; a rod is refined again only while it or a neighbour moves)."""
+    ``refine_iterations`` rounds; a rod is refined again only while it or a neighbour moves).
+
+    Returns the rods (dropped ones removed), the refiner (its fitted contrast ``C``, radius
+    ``r``, blur ``sigma`` and ``mixed`` flag) and the :class:`RefineStats`.
+    """
     r_given = 0.5 * P.diameter if P.diameter is not None else None
     rods = [_Rod(a, b, st.r0) for a, b in lines]
     ref = _Refiner(reader, st, P, st.r0)
@@ -416,6 +463,8 @@ def _refine(reader, st, P, lines, progress, quality, reasons):
     active = set(range(len(rods)))
     n_refined = 0
     it = 0
+    rejected: dict[str, int] = {}  # reason -> rods, in the order the reasons first occur
+    r_profile = cv = None
     for it in range(n_it):
         if progress is not None:
             progress("refine", it, n_it)
@@ -431,7 +480,7 @@ def _refine(reader, st, P, lines, progress, quality, reasons):
                 ref.refine_axis(rods, k, nbl[k], collect)
         if fit_now:
             ref.contrast_fit(collect, r_given)
-            quality["radius_profile_fit"] = ref.r
+            r_profile = ref.r
             # the radius from the mass per unit length is unbiased by touching neighbours
             # (the nearest-surface partition trades equal leaks); the profile shape is not
             masses = [rod.mass for rod in rods if rod.ok and np.isfinite(rod.mass)]
@@ -443,7 +492,6 @@ def _refine(reader, st, P, lines, progress, quality, reasons):
                             if rod.ok and np.isfinite(rod.mass) and rod.mass > 0])
             cv = 1.4826 * float(np.median(np.abs(own - np.median(own)))) / float(np.median(own)) if own.size >= 3 \
                 else 0.0
-            quality["radius_cv"] = cv
             if P.per_rod_radius is None:
                 ref.mixed = r_given is None and (st.mixed or cv > MIXED_RADIUS_CV)
             else:
@@ -471,7 +519,11 @@ def _refine(reader, st, P, lines, progress, quality, reasons):
                 moved[id(rod)] = max(float(np.linalg.norm(rod.p0 - rod.prev[0])),
                                      float(np.linalg.norm(rod.p1 - rod.prev[1])))
         old_ids = {id(rod) for rod in rods}
-        rods, nm = _dedupe_rods(rods, P, reasons, filled)
+        rods, nm, failed = _dedupe_rods(rods, P, filled)
+        for why in failed:
+            rejected[why] = rejected.get(why, 0) + 1
+        if nm:
+            rejected["duplicate"] = rejected.get("duplicate", 0) + nm
         # next round: rods that moved, new (merged) rods, and the neighbours of either
         hot = [k for k, rod in enumerate(rods)
                if id(rod) not in old_ids or moved.get(id(rod), 0.0) > P.refine_tol]
@@ -486,9 +538,6 @@ def _refine(reader, st, P, lines, progress, quality, reasons):
             active = set(range(len(rods)))
     if progress is not None:
         progress("refine", n_it, n_it)
-    quality["refine_rounds"] = it + 1
-    quality["rod_refinements"] = n_refined
-    quality["contrast_fit"] = ref.C
-    quality["blur_sigma"] = ref.sigma
-    quality["end_offset"] = ref.delta
-    return rods, ref
+    stats = RefineStats(radius_profile_fit=r_profile, radius_cv=cv, rounds=it + 1, rod_refinements=n_refined,
+                        contrast_fit=ref.C, blur_sigma=ref.sigma, end_offset=ref.delta, rejected=rejected)
+    return rods, ref, stats

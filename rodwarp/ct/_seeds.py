@@ -9,10 +9,43 @@ bends decides ``shape="auto"``.  This module must not import warp.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from rodwarp.ct._params import SegmentParams
 from rodwarp.ct._voxels import _canonical
+
+
+@dataclass(frozen=True)
+class SeedResult:
+    """What :func:`_skeleton_seeds` found in one block.
+
+    Attributes
+    ----------
+    seeds : list of (centre, direction, t0, t1, n)
+        Straight skeleton pieces, longest first: ``centre`` (3,) in block ``(x, y, z)`` voxels,
+        ``direction`` a unit (3,) vector, ``t0 <= t1`` the extent along it (voxels) and ``n``
+        the number of skeleton voxels in the piece.
+    skeleton_voxels : int
+        Voxels of the 3-D skeleton of the binarised block, before junctions are removed.
+    skeleton_junctions : int
+        Skeleton voxels with 3 or more skeleton neighbours.
+    branch_voxels : int
+        Voxels of the long branches (at least 8 coarse radii) judged for bending.
+    bent_voxels : int
+        Voxels of those long branches that bend smoothly (a curve, not two straight rods
+        meeting at a corner).
+    bent_branches : int
+        Number of such smoothly bending branches.
+    """
+
+    seeds: list
+    skeleton_voxels: int
+    skeleton_junctions: int
+    branch_voxels: int = 0
+    bent_voxels: int = 0
+    bent_branches: int = 0
 
 
 def _dp_split(q: np.ndarray, tol: float) -> list[tuple[int, int]]:
@@ -93,8 +126,8 @@ def _components(pts: np.ndarray):
     return pairs, g, ncomp, lab, order, bounds
 
 
-def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=None, quality=None):
-    """Straight skeleton pieces, junction neighbourhoods removed: [(centre, dir, t0, t1, n)] (block xyz).
+def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=None) -> SeedResult:
+    """Straight skeleton pieces, junction neighbourhoods removed, and how much of the skeleton bends.
 
     ``cut_faces``: per axis (z, y, x) a pair of flags, True where the block face is interior to
     the volume (a chunk border): the skeleton bends along such faces, so voxels near them are
@@ -104,7 +137,7 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
 
     idx, junc, keep = _skeleton(mask, r0, P.junction_radius)
     if len(idx) == 0:
-        return [], 0, 0
+        return SeedResult([], 0, 0)
     if cut_faces is not None:
         m = r0 + 1.0
         for ax in range(3):
@@ -115,7 +148,7 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
                 keep &= idx[:, ax] <= mask.shape[ax] - 1 - m
     pts = idx[keep]
     if len(pts) == 0:
-        return [], len(idx), len(junc)
+        return SeedResult([], len(idx), len(junc))
     pairs, g, ncomp, lab, order, bounds = _components(pts)
     csr = g.tocsr()
     csr = csr + csr.T
@@ -162,8 +195,4 @@ def _skeleton_seeds(mask: np.ndarray, r0: float, P: SegmentParams, cut_faces=Non
             seeds.append((c, u, float(t.min()), float(t.max()), len(idx_p)))
     # longest first; ties broken by position (deterministic)
     seeds.sort(key=lambda s: (-(s[3] - s[2]), -s[4], tuple(np.round(s[0], 6))))
-    if quality is not None:
-        quality["_branch_voxels"] = quality.get("_branch_voxels", 0) + bend_stats[0]
-        quality["_bent_voxels"] = quality.get("_bent_voxels", 0) + bend_stats[1]
-        quality["_bent_branches"] = quality.get("_bent_branches", 0) + bend_stats[2]
-    return seeds, len(idx), len(junc)
+    return SeedResult(seeds, len(idx), len(junc), *bend_stats)

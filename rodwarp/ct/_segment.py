@@ -26,6 +26,11 @@ filaments are traced as polylines instead (``_curved``), which does stages 3-5 i
 ``SegmentResult.quality["flags"]`` says in words when the output should not be trusted;
 ``_score`` scores a result against a phantom's truth, ``_report`` writes the files of
 ``rodwarp segment``.  This module must not import warp.
+
+Every stage returns its own result (``Prepared``, ``_Levels``, ``TraceResult``/``TraceStats``,
+``RefineStats``, ``FilamentResult``); none writes into a dict it is handed.
+:func:`_assemble_result` alone composes ``SegmentResult.quality`` from them, so the keys of
+``summary.json`` are written in one place.
 """
 
 from __future__ import annotations
@@ -33,20 +38,24 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict
-from typing import Callable
+from typing import TYPE_CHECKING, Callable, NamedTuple
 
 import numpy as np
 
 from rodwarp._util import one_line_error as _fail
 from rodwarp.ct._contacts import confirm_contacts
-from rodwarp.ct._levels import _measure_levels
+from rodwarp.ct._levels import _Levels, _measure_levels
 from rodwarp.ct._params import _HINT, SegmentParams, SegmentResult
 from rodwarp.ct._pasting import _gap_filler, _merge_lines
 from rodwarp.ct._reader import _Reader
-from rodwarp.ct._refine import _check_rod, _refine, _Rod
-from rodwarp.ct._tracing import _detect_block
+from rodwarp.ct._refine import RefineStats, _check_rod, _refine, _Rod
+from rodwarp.ct._tracing import TraceStats, _detect_block
 from rodwarp.ct._voxels import _canonical, _unit
 from rodwarp.rodset import RodSet, detect_contacts
+
+if TYPE_CHECKING:  # annotations only: _prepare and _curved load when a run needs them
+    from rodwarp.ct._curved import FilamentResult
+    from rodwarp.ct._prepare import Prepared
 
 __all__ = ["segment_volume", "AUTO_BEND_FRACTION"]
 
@@ -116,7 +125,6 @@ def segment_volume(volume, params: SegmentParams | None = None,
     P.validate()
     t_all = time.perf_counter()
     timings: dict[str, float] = {}
-    quality: dict = {}
 
     def note(stage, done, total):
         if progress is not None:
@@ -130,7 +138,7 @@ def segment_volume(volume, params: SegmentParams | None = None,
         raise _fail(f"volume shape {shape} is too small to hold a rod: every dimension needs at least "
                     f"{MIN_EDGE_VOXELS} voxels (a rod about 2 voxels across, its blurred edges and some "
                     f"background); give the whole CT stack")
-    prep = prepare_volume(volume, voxel_size, dark=P.dark, fov=P.fov, background=P.background, quality=quality)
+    prep = prepare_volume(volume, voxel_size, dark=P.dark, fov=P.fov, background=P.background)
     vol = prep.volume
     if isinstance(vol, _Corrected) and isinstance(volume, np.ndarray):
         vol = vol[:, :, :]  # in memory anyway: gathers from an array are much faster
@@ -142,11 +150,9 @@ def segment_volume(volume, params: SegmentParams | None = None,
     note("stats", 1, 1)
     timings["stats"] = time.perf_counter() - tic
     noise = prep.notes.get("noise") or st.noise
-    quality.update(background=st.bg, foreground=st.fg, threshold=st.threshold,
-                   cnr=(st.fg - st.bg) / noise if noise > 0 else float("inf"),
-                   coarse_radius=st.r0)
+    cnr = (st.fg - st.bg) / noise if noise > 0 else float("inf")
     if P.shape == "curved":
-        return _finish_curved(reader, st, P, quality, timings, t_all, prep, progress)
+        return _finish_curved(reader, st, P, prep, cnr, timings, t_all, progress)
 
     # detection
     tic = time.perf_counter()
@@ -154,41 +160,36 @@ def segment_volume(volume, params: SegmentParams | None = None,
         int(max(math.ceil(4 * P.smooth_sigma) + 2, math.ceil(3 * st.r0) + 2))
     chunks = list(_chunks(reader.shape, P.chunk, halo))
     lines = []
+    block_stats = []
     for ci, (clo, chi, blo, bhi) in enumerate(chunks):
         raw = reader.read(blo, bhi)
-        got = _detect_block(raw, blo, st, P, quality, reader.shape)
-        lines.extend(got)
+        got = _detect_block(raw, blo, st, P, reader.shape)
+        lines.extend(got.lines)
+        block_stats.append(got.stats)
         note("detect", ci + 1, len(chunks))
     timings["detect"] = time.perf_counter() - tic
-    fg_tot = quality.pop("_fg", 0)
-    quality["foreground_explained"] = quality.pop("_fg_explained", 0) / fg_tot if fg_tot else 0.0
-    quality["candidates"] = len(lines)
-    bv = quality.pop("_branch_voxels", 0)
-    quality["bend_fraction"] = quality.pop("_bent_voxels", 0) / bv if bv else 0.0
-    quality["bent_branches"] = quality.pop("_bent_branches", 0)
+    trace = TraceStats.total(block_stats)
+    candidates = len(lines)
     # (below a contrast-to-noise of 1.5 the skeleton of the noise itself bends: stay straight)
-    if P.shape == "auto" and quality["bend_fraction"] > AUTO_BEND_FRACTION and quality["bent_branches"] >= 3 \
-            and quality["cnr"] >= 1.5:
-        quality["shape"] = "curved"
-        return _finish_curved(reader, st, P, quality, timings, t_all, prep, progress)
-    quality["shape"] = "straight"
+    if P.shape == "auto" and trace.bend_fraction > AUTO_BEND_FRACTION and trace.bent_branches >= 3 \
+            and cnr >= 1.5:
+        return _finish_curved(reader, st, P, prep, cnr, timings, t_all, progress, trace, candidates)
     if not lines:
-        raise _fail(f"no rods found: {quality.get('seeds', 0)} skeleton seeds gave no rod-like "
+        raise _fail(f"no rods found: {trace.seeds} skeleton seeds gave no rod-like "
                     f"fit (coarse radius {st.r0:.2f} voxels); {_HINT}")
 
     # merge
     tic = time.perf_counter()
     lines, nm, _ = _merge_lines(lines, st.r0, P.merge_angle, P.merge_distance * st.r0, P.merge_gap * st.r0,
                                 filled=_gap_filler(reader, st, st.r0))
-    quality["merged"] = nm
     note("merge", 1, 1)
     timings["merge"] = time.perf_counter() - tic
 
     # refine
     tic = time.perf_counter()
-    reasons: dict[str, int] = {}
+    ref_stats = None
     if P.refine_iterations > 0:
-        rods, ref = _refine(reader, st, P, lines, progress, quality, reasons)
+        rods, ref, ref_stats = _refine(reader, st, P, lines, progress)
         r_glob = ref.r
         C = ref.C
         sigma_fit, mixed = ref.sigma, ref.mixed
@@ -201,17 +202,17 @@ def segment_volume(volume, params: SegmentParams | None = None,
                 u = _unit(rod.p1 - rod.p0)
                 if rod.length > 2 * r_glob:
                     rod.p0, rod.p1 = rod.p0 + 0.55 * r_glob * u, rod.p1 - 0.55 * r_glob * u
-    quality["per_rod_radius"] = bool(mixed)
+    # rods rejected by reason: those refinement dropped first, then the final checks'
+    reasons: dict[str, int] = dict(ref_stats.rejected) if ref_stats is not None else {}
     for rod in rods:
         _check_rod(rod, r_glob, C, P, sigma_fit, mixed)
         if not rod.ok:
             reasons[rod.why] = reasons.get(rod.why, 0) + 1
     good = [r for r in rods if r.ok]
     timings["refine"] = time.perf_counter() - tic
-    quality["rods_rejected"] = reasons
     if not good:
         why = ", ".join(f"{k} {v}" for k, v in sorted(reasons.items()))
-        raise _fail(f"no rods found: all {quality['candidates']} candidate(s) rejected ({why}); {_HINT}")
+        raise _fail(f"no rods found: all {candidates} candidate(s) rejected ({why}); {_HINT}")
 
     # output rod set (deterministic order and orientation)
     polys, radii, res, mr = [], [], [], []
@@ -227,21 +228,18 @@ def segment_volume(volume, params: SegmentParams | None = None,
         res.append(rod.resid)
         mr.append(rod.mass_r)
     out = RodSet.from_polylines(polys, np.asarray(radii), units="voxel")
-    quality["fit_residual"] = float(np.nanmean(res)) if np.any(np.isfinite(res)) else float("nan")
-    quality["radius_spread"] = float(np.nanstd(mr)) if np.any(np.isfinite(mr)) else float("nan")
+    fit_residual = float(np.nanmean(res)) if np.any(np.isfinite(res)) else float("nan")
+    radius_spread = float(np.nanstd(mr)) if np.any(np.isfinite(mr)) else float("nan")
 
     tic = time.perf_counter()
     contacts, rej = confirm_contacts(out, reader, st, C, P, sigma_fit)
     out.contacts = contacts
-    quality["contacts_rejected_by_image"] = rej
     note("contacts", 1, 1)
     timings["contacts"] = time.perf_counter() - tic
-    timings["total"] = time.perf_counter() - t_all
-    out.attrs = {"source": "rodwarp.segment", "diameter_voxels": 2 * r_glob,
-                 "params": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(P).items()}}
-    _flags(quality, "straight")
-    return SegmentResult(rods=out, contacts=contacts, diameter=2.0 * r_glob, timings=timings, quality=quality,
-                         spacing=prep.spacing)
+    straight = _Straight(merged=nm, refine=ref_stats, per_rod_radius=bool(mixed), rejected=reasons,
+                         fit_residual=fit_residual, contacts_rejected=rej)
+    return _assemble_result(out, contacts, r_glob, radius_spread, P, prep, st, cnr, timings, t_all,
+                            trace=trace, candidates=candidates, straight=straight)
 
 
 #: ``shape="auto"`` traces filaments when more than this share of the long skeleton branches
@@ -250,17 +248,20 @@ def segment_volume(volume, params: SegmentParams | None = None,
 AUTO_BEND_FRACTION = 0.3
 
 
-def _finish_curved(reader, st, P, quality, timings, t_all, prep, progress):
-    """The curved-filament path of :func:`segment_volume` (polylines, per-filament radii)."""
+def _finish_curved(reader, st, P, prep, cnr, timings, t_all, progress, trace=None, candidates=0):
+    """The curved-filament path of :func:`segment_volume` (polylines, per-filament radii).
+
+    ``trace`` and ``candidates``: the straight tracer's counts when ``shape="auto"`` ran it first.
+    """
     from rodwarp.ct._curved import _resample, trace_filaments
 
-    quality["shape"] = "curved"
     tic = time.perf_counter()
     raw = reader.read((0, 0, 0), reader.shape)
-    polys, radii = trace_filaments(raw, st, P, quality, progress)
+    fil = trace_filaments(raw, st, P, progress)
+    polys, radii = fil.polylines, fil.radii
     timings["detect"] = timings.get("detect", 0.0) + time.perf_counter() - tic
     if not polys:
-        raise _fail(f"no filaments found: {quality.get('branches', 0)} skeleton branches gave no filament longer "
+        raise _fail(f"no filaments found: {fil.branches} skeleton branches gave no filament longer "
                     f"than {P.min_length:g} radii (coarse radius {st.r0:.2f} voxels); {_HINT}")
     tic = time.perf_counter()
     # vertices every 2 voxels (or the radius): enough for the curvature a skeleton resolves
@@ -274,18 +275,78 @@ def _finish_curved(reader, st, P, quality, timings, t_all, prep, progress):
     contacts = detect_contacts(out, tolerance=P.contact_tolerance)
     out.contacts = contacts
     r_glob = float(np.median(radii))
-    quality["radius_spread"] = float(np.std(radii))
+    radius_spread = float(np.std(radii))  # of the sorted radii, as always (the sum's order counts)
     timings["contacts"] = time.perf_counter() - tic
+    return _assemble_result(out, contacts, r_glob, radius_spread, P, prep, st, cnr, timings, t_all,
+                            trace=trace, candidates=candidates, filaments=fil)
+
+
+class _Straight(NamedTuple):
+    """Figures of the straight-rod path that the driver measures itself, between and after stages."""
+
+    merged: int                 # candidate lines pasted into others (stage 3)
+    refine: RefineStats | None  # None with refine_iterations=0
+    per_rod_radius: bool        # rods keep their own radii (mixed radii)
+    rejected: dict              # reason -> rods, refinement's reasons first, then the final checks'
+    fit_residual: float         # mean RMS of slab centroids about the axes (voxels)
+    contacts_rejected: int      # contact candidates the image did not confirm
+
+
+def _assemble_result(out: RodSet, contacts, r_glob: float, radius_spread: float, P: SegmentParams,
+                     prep: Prepared, st: _Levels, cnr: float, timings: dict, t_all: float, *,
+                     trace: TraceStats | None = None, candidates: int = 0, straight: _Straight | None = None,
+                     filaments: FilamentResult | None = None) -> SegmentResult:
+    """The :class:`SegmentResult` of either path, its ``quality`` composed from the stages' results.
+
+    The one place that writes ``quality``: keys in the order ``summary.json`` has always listed
+    them (preparation, levels, the straight tracer's counts when it ran, the shape, then the
+    straight path's or the curved path's figures).  With ``shape="auto"`` turned curved, the
+    curved skeleton's ``skeleton_voxels``, ``skeleton_junctions`` and ``bend_fraction``
+    replace the straight tracer's in their places.
+    """
     timings["total"] = time.perf_counter() - t_all
-    out.attrs = {"source": "rodwarp.segment", "shape": "curved", "diameter_voxels": 2 * r_glob,
-                 "params": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(P).items()}}
-    _flags(quality, "curved")
-    return SegmentResult(rods=out, contacts=contacts, diameter=2.0 * r_glob, timings=timings, quality=quality,
+    shape = "curved" if filaments is not None else "straight"
+    attrs = {"source": "rodwarp.segment"}
+    if shape == "curved":
+        attrs["shape"] = "curved"
+    attrs["diameter_voxels"] = 2 * r_glob
+    attrs["params"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(P).items()}
+    out.attrs = attrs
+    q = prep.info()
+    q.update(background=st.bg, foreground=st.fg, threshold=st.threshold, cnr=cnr, coarse_radius=st.r0)
+    if trace is not None:
+        q.update(skeleton_voxels=trace.skeleton_voxels, skeleton_junctions=trace.skeleton_junctions,
+                 seeds=trace.seeds)
+        for name in trace.events:  # only the counters that counted, in the order they first did
+            q[name] = getattr(trace, name)
+        q.update(foreground_explained=trace.foreground_explained, candidates=candidates,
+                 bend_fraction=trace.bend_fraction, bent_branches=trace.bent_branches)
+    q["shape"] = shape
+    if filaments is not None:
+        f = filaments
+        q.update(skeleton_voxels=f.skeleton_voxels, skeleton_junctions=f.skeleton_junctions, branches=f.branches,
+                 bend_fraction=f.bend_fraction, joins=f.joins, rods_rejected={"faint": f.faint} if f.faint else {},
+                 filaments=f.filaments, radius_spread=radius_spread)
+    else:
+        s = straight
+        q["merged"] = s.merged
+        if s.refine is not None:
+            r = s.refine
+            q.update(radius_profile_fit=r.radius_profile_fit, radius_cv=r.radius_cv, refine_rounds=r.rounds,
+                     rod_refinements=r.rod_refinements, contrast_fit=r.contrast_fit, blur_sigma=r.blur_sigma,
+                     end_offset=r.end_offset)
+        q.update(per_rod_radius=s.per_rod_radius, rods_rejected=s.rejected, fit_residual=s.fit_residual,
+                 radius_spread=radius_spread, contacts_rejected_by_image=s.contacts_rejected)
+    q["flags"] = _flags(q, shape)
+    return SegmentResult(rods=out, contacts=contacts, diameter=2.0 * r_glob, timings=timings, quality=q,
                          spacing=prep.spacing)
 
 
-def _flags(quality: dict, shape: str) -> None:
-    """Quality flags: short sentences naming what makes the output untrustworthy (empty: none)."""
+def _flags(quality: dict, shape: str) -> list[str]:
+    """Quality flags: short sentences naming what makes the output untrustworthy (empty: none).
+
+    Reads the composed ``quality``; :func:`_assemble_result` stores the list as ``quality["flags"]``.
+    """
     flags = []
     fe = quality.get("foreground_explained")
     if fe is not None and fe < 0.9:
@@ -307,4 +368,4 @@ def _flags(quality: dict, shape: str) -> None:
     cnr = quality.get("cnr")
     if cnr is not None and np.isfinite(cnr) and cnr < 1.5:
         flags.append(f"contrast-to-noise {cnr:.1f} is below 1.5: expect missed rods and false contacts")
-    quality["flags"] = flags
+    return flags

@@ -11,6 +11,8 @@ This module must not import warp.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, fields
+from typing import NamedTuple
 
 import numpy as np
 from scipy import ndimage
@@ -19,6 +21,93 @@ from rodwarp.ct._levels import _Levels
 from rodwarp.ct._params import SegmentParams
 from rodwarp.ct._seeds import _skeleton_seeds
 from rodwarp.ct._voxels import _BlockSampler, _basis, _canonical, _disc_offsets, _point_segment_distance, _unit, _window_voxels
+
+
+@dataclass
+class TraceStats:
+    """Counts from tracing one block (:func:`_detect_block`), or all blocks (:meth:`total`).
+
+    Attributes
+    ----------
+    skeleton_voxels, skeleton_junctions : int
+        Voxels of the binarised foreground's 3-D skeleton, and of its junctions (see
+        :class:`rodwarp.ct._seeds.SeedResult`).
+    seeds : int
+        Skeleton seeds traced (straight skeleton pieces).
+    split : int
+        Traces whose cross-section showed two rods side by side, split in two.
+    bundles_split, bundle_rods : int
+        Traces recognised as bundles of touching rods, and the rods traced in them.
+    residual_seeds : int
+        Seeds taken from foreground that no traced rod explained (the second round).
+    foreground_voxels : int
+        Voxels of the binarised foreground.
+    explained_voxels : int
+        Of those, voxels within ``r + 1.5`` voxels of a traced rod.
+    branch_voxels, bent_voxels, bent_branches : int
+        Long skeleton branches judged for bending: their voxels, the voxels of those that bend
+        smoothly, and how many do (``shape="auto"``).
+    events : tuple of str
+        Names of the optional counters (``split``, ``bundles_split``, ``bundle_rods``,
+        ``residual_seeds``) that became non-zero, in the order they first did; a counter
+        never incremented is not listed.  ``SegmentResult.quality`` lists exactly these, in
+        this order, as it did when the tracer wrote them into the dict itself.
+    """
+
+    skeleton_voxels: int = 0
+    skeleton_junctions: int = 0
+    seeds: int = 0
+    split: int = 0
+    bundles_split: int = 0
+    bundle_rods: int = 0
+    residual_seeds: int = 0
+    foreground_voxels: int = 0
+    explained_voxels: int = 0
+    branch_voxels: int = 0
+    bent_voxels: int = 0
+    bent_branches: int = 0
+    events: tuple[str, ...] = ()
+
+    def _bump(self, name: str, n: int) -> None:
+        setattr(self, name, getattr(self, name) + n)
+        if name not in self.events:
+            self.events = self.events + (name,)
+
+    @property
+    def foreground_explained(self) -> float:
+        """Fraction (0 to 1) of the binarised foreground within ``r + 1.5`` of a traced rod (0 without foreground)."""
+        return self.explained_voxels / self.foreground_voxels if self.foreground_voxels else 0.0
+
+    @property
+    def bend_fraction(self) -> float:
+        """Fraction (0 to 1) of the long skeleton branches' voxels that bend smoothly (0 without long branches)."""
+        return self.bent_voxels / self.branch_voxels if self.branch_voxels else 0.0
+
+    @classmethod
+    def total(cls, parts) -> "TraceStats":
+        """The counts of several blocks summed; ``events`` in the order they first occurred, block by block."""
+        out = cls()
+        for part in parts:
+            for f in fields(cls):
+                if f.name != "events":
+                    setattr(out, f.name, getattr(out, f.name) + getattr(part, f.name))
+            out.events = out.events + tuple(e for e in part.events if e not in out.events)
+        return out
+
+
+class TraceResult(NamedTuple):
+    """What :func:`_detect_block` traced in one block.
+
+    Attributes
+    ----------
+    lines : list of (p0, p1)
+        Rod axes, each two (3,) end points in global ``(x, y, z)`` voxels.
+    stats : TraceStats
+        The block's counts.
+    """
+
+    lines: list
+    stats: TraceStats
 
 
 class _Tracer:
@@ -166,9 +255,9 @@ def _rasterize(lines, shape_zyx, origin_zyx, radius):
     return cov
 
 
-def _detect_block(raw: np.ndarray, origin_zyx, st: _Levels, P: SegmentParams, quality: dict,
-                  volume_shape=None):
-    """Trace rods in one block; returns a list of (p0, p1) in global xyz."""
+def _detect_block(raw: np.ndarray, origin_zyx, st: _Levels, P: SegmentParams,
+                  volume_shape=None) -> TraceResult:
+    """Trace rods in one block: their axes (p0, p1) in global xyz, and the block's counts."""
     g = ndimage.gaussian_filter(raw, P.smooth_sigma) if P.smooth_sigma > 0 else raw
     scale = 1.0 / (st.fg_smooth - st.bg)  # the smoothed rod plateau is 1
     g = (g - np.float32(st.bg)) * np.float32(scale)
@@ -182,10 +271,11 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Levels, P: SegmentParams, qu
     cut = None
     if volume_shape is not None:
         cut = [(origin_zyx[a] > 0, origin_zyx[a] + raw.shape[a] < volume_shape[a]) for a in range(3)]
-    seeds, n_sk, n_j = _skeleton_seeds(mask, r0, P, cut, quality)
-    quality["skeleton_voxels"] = quality.get("skeleton_voxels", 0) + n_sk
-    quality["skeleton_junctions"] = quality.get("skeleton_junctions", 0) + n_j
-    quality["seeds"] = quality.get("seeds", 0) + len(seeds)
+    sr = _skeleton_seeds(mask, r0, P, cut)
+    seeds = sr.seeds
+    stats = TraceStats(skeleton_voxels=sr.skeleton_voxels, skeleton_junctions=sr.skeleton_junctions,
+                       seeds=len(seeds), branch_voxels=sr.branch_voxels, bent_voxels=sr.bent_voxels,
+                       bent_branches=sr.bent_branches)
     o_xyz = np.asarray(origin_zyx, float)[::-1]
     raw_s = []
     r_kid = r0
@@ -257,8 +347,8 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Levels, P: SegmentParams, qu
                     kid_r[len(lines) - 1] = r_kid
                     got += 1
                 if got:
-                    quality["bundles_split"] = quality.get("bundles_split", 0) + 1
-                    quality["bundle_rods"] = quality.get("bundle_rods", 0) + got
+                    stats._bump("bundles_split", 1)
+                    stats._bump("bundle_rods", got)
                     continue
                 if covered:  # a bundle traced before, seen again: its middle is no rod
                     continue
@@ -297,7 +387,7 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Levels, P: SegmentParams, qu
                         lines.append(seg(kids[i_k]))
                         got += 1
                     if got:
-                        quality["split"] = quality.get("split", 0) + 1
+                        stats._bump("split", 1)
                         continue
             lines.append((c2 + a * u2, c2 + b * u2))
 
@@ -327,9 +417,9 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Levels, P: SegmentParams, qu
         if not new:
             break
         new.sort(key=lambda s: (-(s[3] - s[2]), -s[4], tuple(np.round(s[0], 6))))
-        quality["residual_seeds"] = quality.get("residual_seeds", 0) + len(new)
+        stats._bump("residual_seeds", len(new))
         run(new)
     cov = _rasterize(lines, mask.shape, origin_zyx, cover_radius())
-    quality["_fg"] = quality.get("_fg", 0) + int(mask.sum())
-    quality["_fg_explained"] = quality.get("_fg_explained", 0) + int((mask & cov).sum())
-    return lines
+    stats.foreground_voxels = int(mask.sum())
+    stats.explained_voxels = int((mask & cov).sum())
+    return TraceResult(lines, stats)
