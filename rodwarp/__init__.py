@@ -8,7 +8,8 @@ Subpackages, each with a flat public face: :mod:`rodwarp.rodset` (the rod set, i
 contacts, files, run folders), :mod:`rodwarp.sim` (the engine), :mod:`rodwarp.analysis`
 (local fields, ACN, statistics, figures), :mod:`rodwarp.ct` (CT volumes, phantoms,
 segmentation), :mod:`rodwarp.experiments` (the paper's protocol, the verdict, sweeps, the
-phase diagram); :mod:`rodwarp.testing` holds test material.  The README's "Layout" section
+phase diagram); :mod:`rodwarp.testing` holds the validation material (an independent NumPy oracle of
+the fields, scenes with analytic answers; docs/validation.md).  The README's "Layout" section
 draws the layers; docs/physics.md and docs/protocol.md describe the model and the experiment.
 """
 

@@ -75,6 +75,15 @@ def test_analyze_centerlines_prints_the_fields_rodwarp_analyze_writes(tmp_path):
     assert 0.005 < printed["phi"] < 0.05 and 0 < printed["S"] <= 1 and printed["e"] > 0
 
 
+def test_check_fields_agrees_with_the_numpy_oracle_to_round_off():
+    out = run_example("check_fields.py")
+    (n_vox, n_rods) = grab(r"(\d+) voxels of (\d+) rods on cpu", out)
+    assert (n_vox, n_rods) == (200, 60)
+    for name, tol in (("phi", 1e-15), ("S", 1e-9), ("n", 0.0), ("e", 1e-12)):
+        diff, mean = grab(rf"{name}: largest \|warp - numpy\| = {NUM} \(mean {NUM}\)", out)
+        assert diff <= tol, f"{name} differs from the oracle by {diff}"
+        assert mean > 0  # the voxels hold rods: the comparison is not of empty balls
+
 def test_ct_roundtrip_finds_the_true_rods_and_contacts():
     out = run_example("ct_roundtrip.py")
     found, true, f1 = grab(rf"rods: (\d+) found, (\d+) true, rod F1 {NUM}", out)

@@ -1,12 +1,14 @@
-"""Test and benchmark material: not part of rodwarp's API, and not used by rodwarp itself.
+"""Validation material: what the tests and benchmarks check rodwarp against, and what a user
+calls to check rodwarp on their own rods and device (docs/validation.md, "Checking rodwarp
+yourself"; examples/check_fields.py). rodwarp itself never uses it.
 
 * :mod:`rodwarp.testing.reference` - an independent NumPy implementation of the exact local
   fields (clipping, Gauss integral, phi, S, n, contacts), written from the formulas alone and
-  sharing no code with :mod:`rodwarp.analysis` or :mod:`rodwarp.kernels`: the tests' oracle
-  and the benchmarks' speed peer;
+  sharing no code with :mod:`rodwarp.analysis` or :mod:`rodwarp.kernels`: the tests' oracle,
+  the benchmarks' speed peer, and a user's check of the Warp fields on another device;
 * :mod:`rodwarp.testing.scenes` - small mechanics scenes with analytic answers (cantilevers,
   inclines, ladders, log cabins) for the engine's tests and benchmarks.
 
-It ships inside the package (rather than under ``tests/``) because ``benchmarks/`` uses it
-too; nothing under ``rodwarp/`` outside this folder may import it.
+It ships inside the package (rather than under ``tests/``) because users and ``benchmarks/``
+call it too; nothing under ``rodwarp/`` outside this folder imports it.
 """

@@ -1,7 +1,7 @@
 """Small validation scenes with analytic answers (cantilevers, inclines, stacks, crossings).
 
-Test material (:mod:`rodwarp.testing`): used by the tests and the benchmarks, not by rodwarp
-itself; each returns rods in metres.  The analytic answers they are checked against are
+Validation material (:mod:`rodwarp.testing`): used by the tests, the benchmarks and users who
+check the engine on their machine, not by rodwarp itself; each returns rods in metres.  The analytic answers they are checked against are
 listed in ``docs/physics.md``.
 """
 
@@ -56,6 +56,24 @@ def cantilever_frequency(length=TEST_LENGTH, radius=TEST_RADIUS, young=TEST_YOUN
 
 
 def straight_rod(center, direction, length, radius, n_vertices=10) -> np.ndarray:
+    """Vertices of a straight rod.
+
+    Parameters
+    ----------
+    center, direction : array_like, shape (3,)
+        Midpoint (m) and axis (any length; normalised here).
+    length : float
+        Rod length (m).
+    radius : float
+        Unused here (the caller builds the rod set with it); kept so scenes read alike.
+    n_vertices : int
+        Vertices, evenly spaced from end to end.
+
+    Returns
+    -------
+    ndarray, shape (n_vertices, 3)
+        Vertex positions (m).
+    """
     c = np.asarray(center, float)
     d = np.asarray(direction, float)
     d = d / np.linalg.norm(d)
