@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rodwarp.experiments._packing import random_packing
+from rodwarp.experiments import random_packing
 
 rods = random_packing(60, 0.1, 0.002, np.array([0.1, 0.1, 0.25]), n_vertices=10, seed=0, device="cpu")
 out = Path(__file__).with_name("centerlines.csv")

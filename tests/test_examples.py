@@ -108,3 +108,15 @@ def test_custom_stage_runs_the_lift_between_entangling_and_the_test():
     assert "stages: entangle -> lift -> stability" in out
     (t0,) = grab(rf"test started at t = {NUM} s", out)
     assert abs(t0 - 0.4) < 1e-9  # after 0.2 s of entangling and 0.2 s of the lift
+
+
+def test_make_centerlines_remakes_the_shipped_csv_byte_for_byte(tmp_path):
+    # run a copy beside an empty folder, so the shipped examples/centerlines.csv is not rewritten
+    import shutil
+
+    shutil.copy(EXAMPLES / "make_centerlines.py", tmp_path)
+    r = subprocess.run([sys.executable, str(tmp_path / "make_centerlines.py")], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "60 rods ->" in r.stdout
+    assert (tmp_path / "centerlines.csv").read_bytes() == (EXAMPLES / "centerlines.csv").read_bytes()
