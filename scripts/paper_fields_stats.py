@@ -284,7 +284,8 @@ def main(argv=None) -> int:
         "command": shlex.join(["python", *sys.argv]) if argv is None else shlex.join(["python", __file__, *argv]),
         "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "versions": _versions(),
-        "data": str(args.data),
+        # the folder's name, not its path on this machine: each file is identified by its sha256 below
+        "data": f"{Path(args.data).name} (given with --data)",
         "settings": {"outlier_method": "q3", "connectivity": 26,
                      "xi_over_L": "largest tangle bounding box / bounding box of the valid voxels",
                      "share": "tangle voxels / valid voxels"},
