@@ -94,7 +94,9 @@ def _peer() -> dict | None:
     if r.returncode != 0:
         return {"failure": (r.stderr.strip().splitlines() or ["failed"])[-1], "command": cmd}
     out = json.loads(r.stdout.strip().splitlines()[-1])
-    out.update({"command": cmd, "wall_s": time.perf_counter() - t})
+    # the peer lives in a throwaway folder outside the repository: record its program by name only
+    shown = shlex.join([os.path.basename(a) if os.path.isabs(a) else a for a in shlex.split(cmd)])
+    out.update({"command": shown, "wall_s": time.perf_counter() - t})
     return out
 
 
