@@ -125,7 +125,7 @@ def far_rod(rods) -> tuple[int, float, float, str] | None:
     Parameters
     ----------
     rods : RodSet
-        Any units.
+        Any units: the distances returned are in ``rods.units``.
 
     Returns
     -------

@@ -10,7 +10,7 @@ tests) and as a row of the device's :class:`~rodwarp.kernels.structs.Walls` bund
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -21,7 +21,23 @@ KINDS = {"plane": 0, "cylinder": 1}
 
 
 @dataclass
-class Plane:
+class _Wall:
+    """What every wall kind holds besides its geometry: friction, whether it follows the
+    control's drive, and its name (the kind's when not given). Keyword-only, so each kind's
+    geometry comes first."""
+
+    mu: float | None = field(default=0.2, kw_only=True)
+    moving: bool = field(default=False, kw_only=True)
+    name: str = field(default="", kw_only=True)
+    kind = ""
+
+    def __post_init__(self):
+        if not self.name:
+            self.name = self.kind
+
+
+@dataclass
+class Plane(_Wall):
     """Half-space wall {x : n . x >= offset} with Coulomb friction.
 
     Parameters
@@ -40,9 +56,6 @@ class Plane:
 
     normal: np.ndarray
     offset: float
-    mu: float | None = 0.2
-    moving: bool = False
-    name: str = "plane"
     kind = "plane"
 
     def distance(self, x, displacement=0.0, direction=(0.0, 0.0, 1.0)):
@@ -63,11 +76,11 @@ class Plane:
         ln = np.linalg.norm(n)
         if not ln > 0:
             raise RodwarpError("plane normal must be a non-zero vector")
-        return cls(n / ln, float(offset), mu, bool(moving), name)
+        return cls(n / ln, float(offset), mu=mu, moving=bool(moving), name=name)
 
 
 @dataclass
-class Cylinder:
+class Cylinder(_Wall):
     """The inside of a circular cylinder, {x : |(x - c) - a ((x - c) . a)| <= R}: rods are kept
     within ``radius`` of the axis through ``point`` along ``axis`` (infinitely long: close it
     with planes).
@@ -87,9 +100,6 @@ class Cylinder:
     point: np.ndarray
     axis: np.ndarray
     radius: float
-    mu: float | None = 0.2
-    moving: bool = False
-    name: str = "cylinder"
     kind = "cylinder"
 
     def device_row(self, drive_direction):
@@ -106,7 +116,8 @@ class Cylinder:
             raise RodwarpError("cylinder axis must be a non-zero vector")
         if not (np.isfinite(radius) and radius > 0):
             raise RodwarpError(f"cylinder radius must be a positive length (m), got {radius}")
-        return cls(np.asarray(point, dtype=np.float64).reshape(3), a / la, float(radius), mu, bool(moving), name)
+        return cls(np.asarray(point, dtype=np.float64).reshape(3), a / la, float(radius), mu=mu, moving=bool(moving),
+                   name=name)
 
     def distance(self, x, displacement=0.0, direction=(0.0, 0.0, 1.0)):
         """As :meth:`Plane.distance`: R minus the distance from the axis (m)."""
