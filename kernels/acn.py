@@ -20,11 +20,10 @@ degenerate segments, whose Gauss integrand vanishes everywhere it is defined: G 
 
 import warp as wp
 
+from rodwarp.kernels.constants import F0, F1, TWO
+
 wp.set_module_options({"enable_backward": False})
 
-F0 = wp.float64(0.0)
-F1 = wp.float64(1.0)
-TWO = wp.float64(2.0)
 INV_2PI = wp.float64(0.15915494309189535)  # 1 / (2 pi)
 # |h| below this fraction of |e1| |e2| |a| counts as coplanar (touching, in-plane, parallel)
 COPLANAR_TOL = wp.float64(1.0e-14)

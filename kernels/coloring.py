@@ -7,10 +7,17 @@ rod-rod contacts are coloured (``color_claim`` / ``color_commit``) and each colo
 
 import warp as wp
 
+from rodwarp.kernels.constants import F0
+
 wp.set_module_options({"enable_backward": False})
 
-F0 = wp.float64(0.0)
 
+@wp.func
+def contact_vertices(seg: wp.array(dtype=wp.vec2i), seg_vertex: wp.array(dtype=wp.int32), k: int):
+    """The four vertices contact k moves: both ends of each of its two segments."""
+    ia = seg_vertex[seg[k][0]]
+    ib = seg_vertex[seg[k][1]]
+    return wp.vec4i(ia, ia + 1, ib, ib + 1)
 
 
 @wp.kernel
@@ -25,12 +32,9 @@ def color_claim(
     k = wp.tid()
     if k >= count or color[k] >= 0:
         return
-    ia = seg_vertex[seg[k][0]]
-    ib = seg_vertex[seg[k][1]]
-    wp.atomic_min(owner, ia, k)
-    wp.atomic_min(owner, ia + 1, k)
-    wp.atomic_min(owner, ib, k)
-    wp.atomic_min(owner, ib + 1, k)
+    ends = contact_vertices(seg, seg_vertex, k)
+    for c in range(4):
+        wp.atomic_min(owner, ends[c], k)
 
 
 @wp.kernel
@@ -47,9 +51,8 @@ def color_commit(
     k = wp.tid()
     if k >= count or color[k] >= 0:
         return
-    ia = seg_vertex[seg[k][0]]
-    ib = seg_vertex[seg[k][1]]
-    if owner[ia] == k and owner[ia + 1] == k and owner[ib] == k and owner[ib + 1] == k:
+    ends = contact_vertices(seg, seg_vertex, k)
+    if owner[ends[0]] == k and owner[ends[1]] == k and owner[ends[2]] == k and owner[ends[3]] == k:
         color[k] = round_id
     else:
         wp.atomic_add(remaining, 0, 1)

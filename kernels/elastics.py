@@ -37,13 +37,10 @@ and one mass metric inside the sweep and the converged step is implicit Euler.
 
 import warp as wp
 
+from rodwarp.kernels.constants import F0, F1, HALF
 from rodwarp.kernels.structs import RodFactors, RodModel, RodState
 
 wp.set_module_options({"enable_backward": False})
-
-F0 = wp.float64(0.0)
-F1 = wp.float64(1.0)
-HALF = wp.float64(0.5)
 
 
 @wp.func

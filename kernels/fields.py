@@ -19,14 +19,10 @@ of float32 contact points with a widened radius and re-tests every candidate in 
 
 import warp as wp
 
+from rodwarp.kernels.constants import F0, F1, HALF, THREE
 from rodwarp.kernels.acn import gauss_linking_lengths
 
 wp.set_module_options({"enable_backward": False})
-
-F0 = wp.float64(0.0)
-F1 = wp.float64(1.0)
-HALF = wp.float64(0.5)
-THREE = wp.float64(3.0)
 
 
 @wp.func

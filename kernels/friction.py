@@ -35,16 +35,12 @@ contacts run one thread per rod.
 
 import warp as wp
 
-from rodwarp.kernels.imc import solve_imc
+from rodwarp.kernels.constants import F0, F1, HALF, FAR
+from rodwarp.kernels.imc import solve_imc, split_settled
 from rodwarp.kernels.narrowphase import any_perpendicular
 from rodwarp.kernels.structs import ContactFrame, ContactSide, RodContacts, RodModel, StepParams
 
 wp.set_module_options({"enable_backward": False})
-
-F0 = wp.float64(0.0)
-F1 = wp.float64(1.0)
-HALF = wp.float64(0.5)
-FAR = wp.float64(1.0e299)
 
 
 @wp.func
@@ -167,10 +163,10 @@ def solve_local(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.f
         q = coulomb_2d(wp.dot(c, e1), wp.dot(c, e2), f.k[1], f.k[2], f.k[3], mu * pn_new, gamma)
         gamma = q[2]
         pt_new = e1 * q[0] + e2 * q[1]
-        change = wp.abs(pn_new - pn) + wp.length(pt_new - pt)
+        done = split_settled(f.coupled, pn_new, pt_new, pn, pt, wp.float64(1.0e-9))
         pn = pn_new
         pt = pt_new
-        if f.coupled == 0 or change <= wp.float64(1.0e-9) * (pn + wp.length(pt)):
+        if done:
             break
     return n * pn + pt, gamma
 

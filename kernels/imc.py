@@ -24,13 +24,10 @@ is implicit Euler with this law, so its fixed point is the law's static equilibr
 
 import warp as wp
 
+from rodwarp.kernels.constants import F0, F1, HALF
 from rodwarp.kernels.structs import ContactFrame, StepParams
 
 wp.set_module_options({"enable_backward": False})
-
-F0 = wp.float64(0.0)
-F1 = wp.float64(1.0)
-HALF = wp.float64(0.5)
 
 
 @wp.func
@@ -145,6 +142,15 @@ def smoothed_friction_impulse(c1: wp.float64, c2: wp.float64, w11: wp.float64, w
 
 
 @wp.func
+def split_settled(coupled: int, pn_new: wp.float64, pt_new: wp.vec3d, pn: wp.float64, pt: wp.vec3d,
+                  tol: wp.float64):
+    """Whether the alternation of a contact's normal and friction parts is done: at once where
+    the mobility does not couple them, else when the impulse moved by at most ``tol`` of its
+    size (the exact law's and IMC's local solves, kernels/friction.py and this file)."""
+    return coupled == 0 or wp.abs(pn_new - pn) + wp.length(pt_new - pt) <= tol * (pn_new + wp.length(pt_new))
+
+
+@wp.func
 def solve_imc(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.float64, params: StepParams):
     """The IMC impulse of one contact over the step: ``u`` its velocity with the current impulse
     ``P`` applied, ``f`` its frame (mobility, tangent basis, start-of-step gap); returns the new
@@ -166,9 +172,9 @@ def solve_imc(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.flo
         q = smoothed_friction_impulse(wp.dot(c, e1), wp.dot(c, e2), f.k[1], f.k[2], f.k[3], mu * pn_new, s, params)
         s = q[2]
         pt_new = e1 * q[0] + e2 * q[1]
-        change = wp.abs(pn_new - pn) + wp.length(pt_new - pt)
+        done = split_settled(f.coupled, pn_new, pt_new, pn, pt, wp.float64(1.0e-10))
         pn = pn_new
         pt = pt_new
-        if f.coupled == 0 or change <= wp.float64(1.0e-10) * (pn + wp.length(pt)):
+        if done:
             break
     return n * pn + pt, s

@@ -37,13 +37,11 @@ Normal
 import numpy as np
 import warp as wp
 
+from rodwarp.kernels.constants import F0, F1, HALF
 from rodwarp.kernels.structs import RawContacts, RodModel
 
 wp.set_module_options({"enable_backward": False})
 
-F0 = wp.float64(0.0)
-F1 = wp.float64(1.0)
-HALF = wp.float64(0.5)
 PARALLEL_TOL = wp.float64(1.0e-12)  # on sin^2 of the angle between the segments
 DEGENERATE_TOL = wp.float64(1.0e-28)  # on squared length relative to the pair's size
 CONTACT_TOL = wp.float64(1.0e-14)  # distance treated as zero, relative to the scale

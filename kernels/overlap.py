@@ -13,15 +13,13 @@ thread per rod.
 
 import warp as wp
 
+from rodwarp.kernels.constants import F0, F1
 from rodwarp.kernels.friction import contact_side, side_response
 from rodwarp.kernels.wall_contacts import vertex_edge
 from rodwarp.kernels.structs import ContactFrame, ContactSide, RodContacts, RodModel, StepParams, WallContacts, Walls
 from rodwarp.kernels.walls import wall_surface
 
 wp.set_module_options({"enable_backward": False})
-
-F0 = wp.float64(0.0)
-F1 = wp.float64(1.0)
 
 
 @wp.func

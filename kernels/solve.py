@@ -8,6 +8,7 @@ Python launch overhead of three launches per sweep, which dominates for small sc
 
 import warp as wp
 
+from rodwarp.kernels.constants import F0
 from rodwarp.kernels.elastics import project_rigid_length, project_rod
 from rodwarp.kernels.friction import rigid_from_body, rigid_to_body, solve_rod_contact
 from rodwarp.kernels.wall_contacts import solve_rod_walls
@@ -15,8 +16,6 @@ from rodwarp.kernels.structs import (ContactFrame, RodContacts, RodFactors, RodM
                                      WallContacts, Walls)
 
 wp.set_module_options({"enable_backward": False})
-
-F0 = wp.float64(0.0)
 
 
 @wp.kernel

@@ -8,14 +8,13 @@ drive. One thread per rod that touches a wall, so a rod's wall contacts never ra
 
 import warp as wp
 
-from rodwarp.kernels.friction import (FAR, F0, approach_target, contact_side, local_frame, relaxed, side_apply,
+from rodwarp.kernels.constants import F0, F1, FAR
+from rodwarp.kernels.friction import (approach_target, contact_side, local_frame, relaxed, side_apply,
                                       side_apply_atomic, side_velocity, solve_contact)
 from rodwarp.kernels.structs import ContactFrame, RodModel, StepParams, WallContacts, Walls
 from rodwarp.kernels.walls import wall_surface, wall_velocity
 
 wp.set_module_options({"enable_backward": False})
-
-F1 = wp.float64(1.0)
 
 
 @wp.func
@@ -23,8 +22,6 @@ def wall_contact_exact(f: ContactFrame, P: wp.vec3d, n: wp.vec3d, walls: Walls, 
                        v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
     """``rod_contact_exact`` for a contact with wall p of normal ``n`` (frame side ``a`` the rod's)."""
     return solve_contact(side_velocity(f.a, v, spin) - wall_velocity(walls, p), f, n, P, walls.mu[p], params)
-
-
 
 
 @wp.func
@@ -49,6 +46,18 @@ def wall_frame(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(d
     f.gap = contacts.gap[k]
     f.a = c
     return f
+
+
+@wp.func
+def write_wall_frames(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d), walls: Walls,
+                      params: StepParams, contacts: WallContacts, r: int, base: int):
+    """The frames and keys of rod r's wall contacts in reach, written from slot ``base`` on."""
+    j = base
+    for k in range(model.rod_start[r] * walls.n, model.rod_start[r + 1] * walls.n):
+        if contacts.gap[k] < FAR:
+            contacts.key[j] = k
+            contacts.frames[j] = wall_frame(model, x, tangent, walls, params, contacts, k)
+            j += 1
 
 
 @wp.kernel
@@ -102,12 +111,7 @@ def prepare_wall_contacts(
     contacts.span[q] = wp.vec2i(base, count)
     if base + count > contacts.frames.shape[0]:
         return
-    j = base
-    for k in range(a * walls.n, b * walls.n):
-        if contacts.gap[k] < FAR:
-            contacts.key[j] = k
-            contacts.frames[j] = wall_frame(model, x, tangent, walls, params, contacts, k)
-            j += 1
+    write_wall_frames(model, x, tangent, walls, params, contacts, r, base)
 
 
 @wp.kernel
@@ -121,13 +125,7 @@ def fill_wall_frames(
 ):
     """One thread per active rod: its span of frames (after the host grew the list)."""
     q = wp.tid()
-    r = contacts.active[q]
-    j = contacts.span[q][0]
-    for k in range(model.rod_start[r] * walls.n, model.rod_start[r + 1] * walls.n):
-        if contacts.gap[k] < FAR:
-            contacts.key[j] = k
-            contacts.frames[j] = wall_frame(model, x, tangent, walls, params, contacts, k)
-            j += 1
+    write_wall_frames(model, x, tangent, walls, params, contacts, contacts.active[q], contacts.span[q][0])
 
 
 @wp.func
@@ -172,7 +170,6 @@ def solve_wall_contacts(
 ):
     """One thread per rod that touches a wall (``active`` lists them); the residual squared."""
     wp.atomic_max(residual, 0, solve_rod_walls(wp.tid(), walls, params, contacts, v, spin))
-
 
 
 @wp.kernel

@@ -16,12 +16,12 @@ spheres are the contacts.
 
 import warp as wp
 
+from rodwarp.kernels.constants import F0
 from rodwarp.kernels.narrowphase import any_perpendicular
 from rodwarp.kernels.structs import Walls
 
 wp.set_module_options({"enable_backward": False})
 
-F0 = wp.float64(0.0)
 
 PLANE = wp.constant(0)
 CYLINDER = wp.constant(1)
