@@ -222,16 +222,16 @@ def simulate(
     from rodwarp.experiments import default_run_name, run_protocol
 
     # the options that are ProtocolParams fields, the two taken in another form converted
-    params = ProtocolParams(**fields, box=_parse_box(box), initial=str(initial) if initial else None,
-                            initial_diameter=initial_diameter)
-    params._explicit = _given(ctx, "alpha", "length", "n_rods", "vertices", "box", "seed")
-    params.validate()
+    checked = ProtocolParams(**fields, box=_parse_box(box), initial=str(initial) if initial else None,
+                             initial_diameter=initial_diameter).validate(
+        explicit=_given(ctx, "alpha", "length", "n_rods", "vertices", "box", "seed"))
+    params = checked.params  # with --initial: the input's alpha and length
     if params.law == "imc" and params.rolling:
         typer.echo("note: --rolling with --contact-law imc: DisMech's IMC friction acts on the centreline (no "
                    "rolling); this run lets the rods spin, which the paper's model did not", err=True)
     outdir = out or Path("runs") / default_run_name(params)
     with _failure_recorded(outdir):
-        summary = run_protocol(params, outdir, progress=not quiet, resume=resume, overwrite=overwrite,
+        summary = run_protocol(checked, outdir, progress=not quiet, resume=resume, overwrite=overwrite,
                                entangled_from=entangled_from)
     typer.echo(
         f"alpha={summary['alpha']:g} n_rods={summary['n_rods']} a/g={summary['a_over_g']:.3g} "

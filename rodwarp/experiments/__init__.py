@@ -22,7 +22,7 @@ One private module per concern, their public names re-exported here:
 ``_sweep``         :class:`SweepSpec`, :func:`run_sweep`, :func:`run_point` - the grid on Dask
 ``_phase``         :func:`phase_diagram`, :func:`alpha_star` - the alpha* estimate and the
                    figures (drawn in ``_phase_figures``)
-``_checks``        :func:`check_protocol`, :func:`check_scheduler` - the options of ``simulate``
+``_checks``        :func:`check_protocol` (:class:`CheckedProtocol`), :func:`check_scheduler` - the options of ``simulate``
                    and ``sweep``, checked before any work
 =================  ==========================================================================
 
@@ -53,7 +53,7 @@ _WHERE = {
     "read_results": "_sweep", "write_results": "_sweep", "run_sweep": "_sweep",
     "phase_diagram": "_phase", "alpha_star": "_phase",
     # checks of the options
-    "check_protocol": "_checks", "check_input_rods": "_checks", "check_step_count": "_checks",
+    "check_protocol": "_checks", "CheckedProtocol": "_checks", "check_input_rods": "_checks", "check_step_count": "_checks",
     "output_bytes": "_checks", "check_scheduler": "_checks",
 }
 

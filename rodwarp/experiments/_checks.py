@@ -9,6 +9,7 @@ and checked. The generic checks come from :mod:`rodwarp.validation`.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from rodwarp.experiments._plan import STEPS_PER_PERIOD, frames, plan
@@ -46,18 +47,66 @@ def stage_steps(duration: float, dt: float) -> int:
     return int(round(duration / dt))
 
 
-def check_protocol(p) -> None:
+@dataclass(frozen=True)
+class CheckedProtocol:
+    """Parameters that passed :func:`check_protocol`, with what the check found.
+
+    Attributes
+    ----------
+    params : rodwarp.experiments.ProtocolParams
+        The parameters the run uses: with an ``initial`` rod set, ``alpha`` and ``length``
+        are the input's (l / d and the mean rod length, m).
+    input_rods : RodSet or None
+        The ``initial`` rod set, loaded, checked and in metres; None for a random packing.
+    n_vertices : int
+        Vertices the run simulates (sizes its memory and disk estimates).
+    frames : int
+        Frames the run records (one every ``save_every``).
+    explicit : frozenset of str
+        The options the user gave (see :func:`check_protocol`).
+    """
+
+    params: object
+    input_rods: object
+    n_vertices: int
+    frames: int
+    explicit: frozenset = frozenset()
+
+
+def check_protocol(p, explicit=()) -> CheckedProtocol:
     """Every check of :class:`rodwarp.experiments.ProtocolParams`, in the order the options are
     listed by ``rodwarp simulate --help``; the input rod set (``initial``) is loaded and
-    checked too (see :func:`check_input_rods`).
+    checked too (see :func:`check_input_rods`), and the options are checked again with its
+    aspect ratio and length.
 
     Parameters
     ----------
     p : rodwarp.experiments.ProtocolParams
-        The parameters; ``p._explicit`` (a set of field names, optional) lists the options the
-        user typed, so that options --initial decides can be refused when given.
+        The parameters (not changed: they are frozen).
+    explicit : iterable of str
+        Field names of the options the user typed, so that options --initial decides can be
+        refused when given, and an --alpha or --length that contradicts the input too.
+
+    Returns
+    -------
+    CheckedProtocol
+        The parameters the run uses and what the check loaded and counted.
     """
-    explicit = set(getattr(p, "_explicit", ()) or ())
+    explicit = frozenset(explicit)
+    stages = _check_options(p, explicit)
+    rods = None
+    if p.initial:
+        rods, alpha, length = check_input_rods(p, explicit)
+        p = replace(p, alpha=alpha, length=length)
+        stages = _check_options(p, explicit)  # durations, steps and the box against the input's l
+        n_vertices = rods.n_vertices
+    else:
+        n_vertices = _check_packing(p)
+    return CheckedProtocol(p, rods, n_vertices, frames(stages, p.save_every), explicit)
+
+
+def _check_options(p, explicit: frozenset):
+    """The checks of every option and of their consistency; returns the plan's stages."""
     number("--alpha", p.alpha, gt=1, hint="alpha is rod length over diameter")
     for name in ("freq", "entangle_freq"):
         number(f"--{name.replace('_', '-')}", getattr(p, name), ge=0, unit="Hz")
@@ -150,28 +199,28 @@ def check_protocol(p) -> None:
     height = box[2] * p.length
     if 2 * p.entangle_amplitude >= 0.5 * height or 2 * p.amplitude >= 0.5 * height:
         fail(f"vibration amplitude does not fit the box (height {height:g} m); lower --amplitude")
+    return stages
 
-    if p.initial:
-        rods = check_input_rods(p, explicit)
-        n_vertices = rods.n_vertices
-    else:
-        n = p.rods
-        d = p.length / p.alpha
-        diag = math.sqrt(sum(v * v for v in box))
-        if diag < 1.0 + 1.0 / p.alpha:
-            fail(f"--box {','.join(f'{v:g}' for v in box)} (rod lengths) is too small to hold one rod "
-                 f"(diagonal {diag:.3g} < 1 + d/l); enlarge --box")
-        n_vertices = n * int(p.vertices)
-        memory_fits(f"{n} rods x {p.vertices} vertices", BASE_BYTES + BYTES_PER_VERTEX * n_vertices,
-                    "lower --n-rods (default round(5.4 alpha)), --alpha or --vertices")
-        vol = float(box[0] * box[1] * box[2]) * p.length**3
-        phi = n * math.pi * d * d * p.length / 4.0 / vol
-        if phi * p.alpha > MAX_PHI_ALPHA:
-            fail(f"{n} rods of aspect ratio {p.alpha:g} would fill {phi:.3g} of the box (phi * alpha = "
-                 f"{phi * p.alpha:.3g}); random packing places at most phi * alpha ~ {MAX_PHI_ALPHA:g}: "
-                 f"lower --n-rods or enlarge --box")
-    p._n_vertices = n_vertices
-    p._frames = frames(stages, p.save_every)
+
+def _check_packing(p) -> int:
+    """The random packing's checks (the box holds a rod, memory, density); its vertex count."""
+    box = tuple(p.box)
+    n = p.rods
+    d = p.length / p.alpha
+    diag = math.sqrt(sum(v * v for v in box))
+    if diag < 1.0 + 1.0 / p.alpha:
+        fail(f"--box {','.join(f'{v:g}' for v in box)} (rod lengths) is too small to hold one rod "
+             f"(diagonal {diag:.3g} < 1 + d/l); enlarge --box")
+    n_vertices = n * int(p.vertices)
+    memory_fits(f"{n} rods x {p.vertices} vertices", BASE_BYTES + BYTES_PER_VERTEX * n_vertices,
+                "lower --n-rods (default round(5.4 alpha)), --alpha or --vertices")
+    vol = float(box[0] * box[1] * box[2]) * p.length**3
+    phi = n * math.pi * d * d * p.length / 4.0 / vol
+    if phi * p.alpha > MAX_PHI_ALPHA:
+        fail(f"{n} rods of aspect ratio {p.alpha:g} would fill {phi:.3g} of the box (phi * alpha = "
+             f"{phi * p.alpha:.3g}); random packing places at most phi * alpha ~ {MAX_PHI_ALPHA:g}: "
+             f"lower --n-rods or enlarge --box")
+    return n_vertices
 
 
 def check_step_count(p, dt: float, source: str) -> None:
@@ -189,16 +238,16 @@ DISK_BYTES_PER_VERTEX_FIXED = 2 * 400 + 2 * 100
 DISK_BYTES_FIXED = 1.0e6
 
 
-def output_bytes(p) -> float:
+def output_bytes(checked: CheckedProtocol) -> float:
     """Disk space a run needs (bytes): its frames (trajectory plus VTK, every --save-every),
     checkpoints, rod sets and figures."""
-    V = float(getattr(p, "_n_vertices", 0))
-    return float(getattr(p, "_frames", 0)) * V * DISK_BYTES_PER_VERTEX_FRAME + V * DISK_BYTES_PER_VERTEX_FIXED \
+    V = float(checked.n_vertices)
+    return float(checked.frames) * V * DISK_BYTES_PER_VERTEX_FRAME + V * DISK_BYTES_PER_VERTEX_FIXED \
         + DISK_BYTES_FIXED
 
 
 def check_input_rods(p, explicit=()):
-    """Load and check the --initial rod set; set ``p.alpha`` and ``p.length`` from it.
+    """Load and check the --initial rod set, and measure its aspect ratio and rod length.
 
     A CSV is read in ``p.units`` (default m) with ``p.initial_diameter`` for a missing radius
     column (none is guessed); npz/zarr files record their own unit. Refuses an empty set,
@@ -207,13 +256,17 @@ def check_input_rods(p, explicit=()):
     :data:`rodwarp.rodset._scale.PLAUSIBLE_LENGTH_M` (1e-5 to 100 m: most likely the wrong
     unit, the message names the measured length and the likely ``--units``), rods
     overlapping deeper than :data:`MAX_INPUT_OVERLAP` diameters (naming the deepest pair), an
-    --alpha or --length that contradicts the input, and a set too large for memory. The rods
-    (converted to metres) are kept on ``p`` for the run.
+    --alpha or --length among ``explicit`` that contradicts the input, and a set too large for
+    memory.
 
     Returns
     -------
-    RodSet
+    rods : RodSet
         The input rods in metres.
+    alpha : float
+        Their aspect ratio, mean rod length over mean diameter.
+    length : float
+        Their mean rod length (m).
     """
     import numpy as np
 
@@ -222,10 +275,6 @@ def check_input_rods(p, explicit=()):
     path = Path(p.initial)
     if not path.exists():
         fail(f"initial rod set not found: {path}; check the --initial path")
-    cached = getattr(p, "_input_rods", None)
-    key = (str(path), p.alpha, p.length, p.units, p.initial_diameter)
-    if cached is not None and getattr(p, "_input_key", None) == key:
-        return cached
     from rodwarp.rodset._scale import PLAUSIBLE_LENGTH_M, check_diameter_agrees, unit_hint
 
     if p.units is not None and p.units not in ("m", "mm", "um"):
@@ -278,11 +327,7 @@ def check_input_rods(p, explicit=()):
         more = f" ({len(c)} pairs overlap by more than {MAX_INPUT_OVERLAP:g} d)" if len(c) > 1 else ""
         fail(f"--initial {path}: rods {i} and {j} overlap by {depth:.2g} d{more}; separate them "
              f"(the contact solver pushes apart at most {MAX_INPUT_OVERLAP:g} d without blowing up)")
-    p.alpha = alpha
-    p.length = length
-    p._input_rods = rods
-    p._input_key = (str(path), p.alpha, p.length, p.units, p.initial_diameter)
-    return rods
+    return rods, alpha, length
 
 
 def check_scheduler(address: str, timeout: float = 3.0) -> str:

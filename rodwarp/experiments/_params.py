@@ -24,12 +24,14 @@ def _param(default, help: str, short: str | None = None):
     return field(default=default, metadata={"help": help, "short": short})
 
 
-@dataclass
+@dataclass(frozen=True)
 class ProtocolParams:
-    """Parameters of :func:`run_protocol` (SI units; box in rod lengths).
+    """Parameters of :func:`run_protocol` (SI units; box in rod lengths), frozen.
 
     Every field's default and help text are stated here once; ``rodwarp simulate`` takes its
-    options from them (:func:`option_table`).
+    options from them (:func:`option_table`). :meth:`validate` checks them and returns the
+    parameters a run uses (:class:`~rodwarp.experiments.CheckedProtocol`); a variant is
+    ``dataclasses.replace(params, ...)``.
     """
 
     alpha: float = _param(100.0, "Rod aspect ratio l / d (> 1).")
@@ -84,14 +86,25 @@ class ProtocolParams:
                                                   "radius column.", "d")
     entangle: bool = _param(False, "With --initial: run the entangling stage too.")
 
-    def validate(self) -> None:
+    def validate(self, explicit=()):
         """Raise :class:`RodwarpError` (one line) for any impossible, inconsistent or oversized
-        parameter, before any work (:func:`rodwarp.experiments.check_protocol`); with
-        ``initial`` the input rods are loaded and checked, and ``alpha`` and ``length`` are
-        set from them."""
+        parameter, before any work (:func:`rodwarp.experiments.check_protocol`).
+
+        Parameters
+        ----------
+        explicit : iterable of str
+            Field names of the options the user gave (an --alpha that contradicts an
+            ``initial`` rod set is refused only when given).
+
+        Returns
+        -------
+        CheckedProtocol
+            The parameters a run uses (with ``initial``: alpha and length from the input
+            rods, which it holds loaded and in metres), unchanged otherwise.
+        """
         from rodwarp.experiments._checks import check_protocol
 
-        check_protocol(self)
+        return check_protocol(self, explicit)
 
     @property
     def law(self) -> str:

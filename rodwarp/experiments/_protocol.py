@@ -246,9 +246,13 @@ def _take_entangling(donor: Path, outdir: Path, meta: dict, n_frames: int, rods)
         traj.write(k, float(src["time"][k]), np.asarray(src["positions"][k]))
 
 
-def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resume: bool = False,
+def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
                  overwrite: bool = False, thresholds=None, entangled_from=None, stages=None) -> dict:
     """Run the whole experiment and write its outputs to ``outdir``.
+
+    ``params`` is a :class:`ProtocolParams` (checked here) or the
+    :class:`~rodwarp.experiments.CheckedProtocol` that its ``validate()`` returned (the check
+    is not repeated).
 
     Writes ``summary.json`` (every parameter, seed, versions, device, dt, steps, wall time and
     the results), ``metrics.csv`` (time series), ``trajectory.zarr`` (frames every
@@ -284,7 +288,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     """
     from rodwarp import _warp
     from rodwarp.experiments import _verdict as vd
-    from rodwarp.experiments._checks import check_step_count, output_bytes
+    from rodwarp.experiments._checks import CheckedProtocol, check_step_count, output_bytes
     from rodwarp.experiments._packing import orientation_statistics, random_packing
     from rodwarp.experiments._recorder import Recorder, plot_metrics
     from rodwarp.rodset import load, rundir
@@ -292,7 +296,8 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     from rodwarp.rodset.trajectory import plot_snapshots
     from rodwarp.sim import State, centroid_height, rod_contacts
 
-    params.validate()
+    checked = params if isinstance(params, CheckedProtocol) else params.validate()
+    params = checked.params  # with --initial: the input's alpha and length
     thresholds = thresholds or vd.DEFAULT_THRESHOLDS
     outdir = Path(outdir)
     donor = Path(entangled_from) if entangled_from is not None and not resume else None
@@ -300,7 +305,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
     branch = _entangled_point(params, donor, outdir) if donor is not None else None
     run = rundir.claim(outdir, "simulate", asdict(params), SIMULATE_OUTPUTS, resume=resume,
                        overwrite=overwrite, resumable=any((outdir / "checkpoints").glob("ckpt_*.npz")),
-                       need_bytes=output_bytes(params))
+                       need_bytes=output_bytes(checked))
     device = _warp.resolve_device(params.device)
     # compiled now, with a word on stderr when the cache is cold, rather than at the first
     # launch under a progress bar that would sit at t = 0 for a minute
@@ -322,7 +327,7 @@ def run_protocol(params: ProtocolParams, outdir, *, progress: bool = True, resum
         write_json(outdir / ENTANGLED_FROM, donor_rec)
         rods = load(outdir / "initial.npz")
     elif params.initial:
-        rods = params._input_rods  # loaded, in metres, and checked by validate()
+        rods = checked.input_rods  # loaded, in metres, and checked by validate()
     else:
         rods = random_packing(params.rods, params.length, params.diameter, np.asarray(params.box) * params.length,
                               n_vertices=params.vertices, seed=params.seed, device=device)

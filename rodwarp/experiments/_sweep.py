@@ -28,7 +28,7 @@ import socket
 import sys
 import time
 import traceback
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 from rodwarp.errors import RodwarpError
@@ -58,7 +58,7 @@ def _as_protocol(name: str, help: str):
     return field(default=ProtocolParams.__dataclass_fields__[name].default, metadata={"help": help})
 
 
-@dataclass
+@dataclass(frozen=True)
 class SweepSpec:
     """A grid of experiments: every combination of alphas x freqs x gravities x static loads x seeds.
 
@@ -85,17 +85,19 @@ class SweepSpec:
                 "whole protocol, the others start their test from its entangled.npz (the same results, bit for "
                 "bit on the CPU, without entangling again)."})
 
-    def validate(self) -> None:
-        """Refuse (one line) an empty grid, unknown or sweep-owned overrides, unknown analyze options."""
+    def validate(self) -> "SweepSpec":
+        """Refuse (one line) an empty grid, unknown or sweep-owned overrides, unknown analyze
+        options; return the spec with every grid a list (a single number given for one) and
+        the seeds integers (the spec itself is frozen)."""
         from rodwarp.analysis import AnalyzeOptions
 
+        grid = {}
         for name in ("alphas", "freqs", "gravities", "static_loads", "seeds"):
             v = getattr(self, name)
-            if isinstance(v, (int, float)):
-                setattr(self, name, [v])
-            if not getattr(self, name):
+            grid[name] = [v] if isinstance(v, (int, float)) else list(v)
+            if not grid[name]:
                 raise RodwarpError(f"sweep: '{name}' is empty; give at least one value")
-        self.seeds = [int(s) for s in self.seeds]
+        grid["seeds"] = [int(s) for s in grid["seeds"]]
         known = {f.name for f in fields(ProtocolParams)}
         bad = sorted(set(self.overrides) - known)
         if bad:
@@ -107,6 +109,7 @@ class SweepSpec:
         bad = sorted(set(self.analyze) - aknown)
         if bad:
             raise RodwarpError(f"sweep: unknown analyze option(s) {', '.join(bad)}")
+        return replace(self, **grid)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -128,7 +131,7 @@ def points(spec: SweepSpec) -> list[dict]:
     Each point is a flat dict of its parameters (grid values, amplitude, durations, the
     overrides, ``device``) plus ``id`` and the analyze options under ``_analyze``.
     """
-    spec.validate()
+    spec = spec.validate()
     out = []
     for a in sorted({float(x) for x in spec.alphas}, reverse=True):
         for f in sorted({float(x) for x in spec.freqs}):
@@ -476,7 +479,7 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
     from rodwarp.rodset import rundir
     from rodwarp.validation import output_location
 
-    spec.validate()
+    spec = spec.validate()
     pts = points(spec)
     check_points(pts, local=not scheduler)
     out = Path(out)
