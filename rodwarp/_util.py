@@ -5,6 +5,8 @@
 * :func:`json_safe` - any result (NumPy scalars and arrays, paths, NaN) as plain JSON values;
 * :func:`versions` and :func:`version_line` - the versions recorded in every summary;
 * :func:`progress_bar` - one progress bar per stage of a long computation (``rich``);
+* :func:`option` and :func:`option_table` - a command's parameter dataclass field with its
+  default and ``--help`` line, and the table the CLI's option generator reads;
 * :func:`lazy_exports` - the flat public face of a subpackage whose heavy parts (Warp,
   matplotlib) load only when used, so ``rodwarp --help`` stays fast.
 
@@ -23,7 +25,8 @@ from typing import Any, Callable, Iterator
 
 from rodwarp.errors import RodwarpError
 
-__all__ = ["one_line_error", "json_safe", "versions", "version_line", "progress_bar", "lazy_exports"]
+__all__ = ["one_line_error", "json_safe", "versions", "version_line", "progress_bar", "lazy_exports", "option",
+           "option_table"]
 
 
 def one_line_error(msg: str) -> RodwarpError:
@@ -210,3 +213,26 @@ def lazy_exports(package: str, where: dict[str, str]):
         return sorted(set(where) | set(importlib.import_module(package).__dict__))
 
     return __getattr__, __dir__
+
+
+def option(default, help: str, **metadata):
+    """A field of a command's parameter dataclass: its default and its ``--help`` line, stated
+    once; the command line takes both from here (:func:`option_table`, the CLI's option
+    generator). ``metadata`` adds more keys (e.g. ``short``, a folder-name abbreviation)."""
+    from dataclasses import field
+
+    return field(default=default, metadata={"help": help, **metadata})
+
+
+def option_table(cls) -> dict:
+    """``{field: (default, help)}`` of a parameter dataclass whose fields carry ``help`` metadata
+    (:func:`option`): where the CLI's options take their defaults and help text from. A
+    default factory is called (lists)."""
+    from dataclasses import MISSING, fields
+
+    out = {}
+    for f in fields(cls):
+        if "help" in f.metadata:
+            default = f.default_factory() if f.default_factory is not MISSING else f.default
+            out[f.name] = (default, f.metadata["help"])
+    return out

@@ -20,21 +20,34 @@ import typer
 
 from rodwarp._util import version_line
 from rodwarp.analysis import AnalyzeOptions, fields_help
-from rodwarp.ct import PhantomOptions, SegmentParams, make_phantom
+from rodwarp.ct import PhantomOptions, SegmentOptions, make_phantom
 from rodwarp.errors import RodwarpError, SimulationBlowUp
 from rodwarp.experiments import ProtocolParams, SweepSpec, option_table
 
 # option defaults come from where they are defined (the options' dataclasses, the phantom
 # builder's signature), so each is stated once; simulate and sweep take their help texts from
 # the parameter dataclasses' field metadata too
-_A = AnalyzeOptions()
-_S = SegmentParams()
+_AN = option_table(AnalyzeOptions)
+#: `rodwarp analyze`'s options in --help order: AnalyzeOptions fields, and the command's own
+_ANALYZE_OPTIONS = ("out", "radius", "spacing", "diameter", "length", "units", "keep_outside", "contact_tolerance",
+                    "outlier", "connectivity", "bins", "device", "figures", "overwrite", "quiet")
+_SG = option_table(SegmentOptions)
+#: `rodwarp segment`'s options in --help order: SegmentOptions fields, and the command's own
+_SEGMENT_OPTIONS = ("voxel_size", "units", "diameter", "out", "shape", "dark_rods", "min_fill", "chunk",
+                    "contact_tolerance", "figures", "overwrite", "quiet")
 _PH = option_table(PhantomOptions)
 #: `rodwarp phantom`'s options in --help order: PhantomOptions fields, and the command's own
 _PHANTOM_OPTIONS = ("shape", "voxel_size", "units", "out", "blur", "cnr", "ring", "cupping", "streaks", "fov", "dark",
                     "z_thickness", "n_rods", "radius", "aspect", "touching", "seed", "overwrite")
 _P = option_table(ProtocolParams)
 _W = option_table(SweepSpec)
+#: `rodwarp sweep`'s options in --help order: SweepSpec fields, the grids under their option
+#: names (comma-separated text, the seeds as a count), and the command's own
+_SWEEP_RENAMED = {"alphas": "alpha", "freqs": "freq", "gravities": "gravity", "static_loads": "static_load",
+                  "seeds": "seeds"}
+_SWEEP_OPTIONS = ("alpha", "freq", "gravity", "static_load", "seeds", "entangle_duration", "duration", "amplitude",
+                  "save_every", "out", "scheduler", "workers", "device", "share_entangling", "figures", "overwrite",
+                  "quiet", "set_")
 _FROM_TABLE = object()
 
 
@@ -61,18 +74,20 @@ def _csv(values) -> str:
     return ",".join(f"{v:g}" for v in values)
 
 
-def _field_options(cls, table: dict, order: tuple[str, ...]):
+def _field_options(cls, table: dict, order: tuple[str, ...], renamed: dict | None = None):
     """Give a command that takes ``**fields`` one option per field of ``cls`` named in ``order``.
 
     ``order`` is the ``--help`` order of every option of the command. A name that is a
     parameter of the command keeps that parameter (an option of the command's own, or a field
     taken in another form, such as a tuple given as 'X,Y,Z'); any other name is a field of
     ``cls`` whose option takes its type from the dataclass and its default and help from
-    ``table``, so none of them is restated here. typer reads the resulting signature.
+    ``table``, so none of them is restated here. ``renamed`` maps a field to the command's
+    parameter that takes it under another name (``alphas`` as ``--alpha``). typer reads the
+    resulting signature.
     """
     hints = typing.get_type_hints(cls)
     keyword = inspect.Parameter.KEYWORD_ONLY
-    missing = sorted(set(table) - set(order))
+    missing = sorted(set(table) - set(order) - set(renamed or {}))
     if missing:  # a new field must be placed in the command's --help order
         raise TypeError(f"{cls.__name__} fields {', '.join(missing)} have no place in the command's options")
 
@@ -246,31 +261,19 @@ def simulate(
                   f"Fields (one array each in fields.zarr; means in summary.json; panels in the figures): "
                   f"{fields_help()}.")
 @_friendly
+@_field_options(AnalyzeOptions, _AN, _ANALYZE_OPTIONS)
 def analyze(
     input: Path = typer.Argument(..., help="simulate/segment output directory, rod-set file (.npz, .zarr, .csv) "
                                            "or precomputed fields (.zarr, .npz with e and n)."),
     out: Optional[Path] = typer.Option(None, help="Output directory (default analysis/ beside the input)."),
-    radius: Optional[float] = typer.Option(None, help="Ball radius R (input units; default sqrt(d l))."),
-    spacing: Optional[float] = typer.Option(None, help="Grid spacing (input units; default R / 2)."),
-    diameter: Optional[float] = typer.Option(None, help="Rod diameter d for the default R (required for a CSV without radius)."),
-    length: Optional[float] = typer.Option(None, help="Rod length l for the default R (default the mean rod length)."),
-    units: Optional[str] = typer.Option(None, help="Length unit of a CSV (m, mm, um, voxel); converts npz/zarr rod sets."),
-    keep_outside: bool = typer.Option(_A.keep_outside, help="Keep voxels whose ball leaves the domain (masked as NaN by default)."),
-    contact_tolerance: Optional[float] = typer.Option(None, help="Surface gap counted as contact when contacts are detected (default d / 10)."),
-    outlier: str = typer.Option(_A.outlier, help="Outlier bound: q3 = Q3 + 1.5 IQR (the paper's) or q1 = Q1 + 1.5 IQR."),
-    connectivity: int = typer.Option(_A.connectivity, help="Tangle connectivity: 26 (default) or 6."),
-    bins: int = typer.Option(_A.bins, help="Histogram bins."),
-    device: str = typer.Option(_A.device, help="cpu, cuda or auto."),
-    figures: bool = typer.Option(_A.figures, help="Write the PNG figures."),
     overwrite: bool = typer.Option(False, help="Write into --out even when it holds another kind of run."),
     quiet: bool = typer.Option(False, help="No progress bar."),
+    **fields,
 ):
     from rodwarp.analysis import analyze as run_analyze
     from rodwarp.analysis import default_out
 
-    opts = AnalyzeOptions(radius=radius, spacing=spacing, diameter=diameter, length=length, units=units,
-                          keep_outside=keep_outside, contact_tolerance=contact_tolerance, outlier=outlier,
-                          connectivity=connectivity, bins=bins, device=device, figures=figures)
+    opts = AnalyzeOptions(**fields)
     opts.validate()
     outdir = out or default_out(input)
     with _failure_recorded(outdir):
@@ -319,42 +322,25 @@ def phantom(
 
 @app.command(epilog="Example: rodwarp segment ct/stack.tif --voxel-size 0.078 --units mm --out ct/segment")
 @_friendly
+@_field_options(SegmentOptions, _SG, _SEGMENT_OPTIONS)
 def segment(
     stack: Path = typer.Argument(..., help="Multi-page TIFF, a folder of slice TIFFs, or a zarr array."),
-    voxel_size: Optional[str] = typer.Option(None, help="Voxel edge in --units: one value, or three for z,y,x "
-                                                        "(e.g. 0.1,0.05,0.05). Default: the file's metadata "
-                                                        "(ImageJ/OME-TIFF, OME-Zarr)."),
-    units: Optional[str] = typer.Option(None, help="Unit of --voxel-size, --diameter and the outputs (m, mm, um, "
-                                                   "voxel); default mm, or the metadata's."),
-    diameter: Optional[float] = typer.Option(None, help="Rod diameter in --units (estimated when absent)."),
     out: Optional[Path] = typer.Option(None, help="Output directory (default segment/ beside the stack)."),
-    shape: str = typer.Option(_S.shape, help="straight (rods), curved (filaments as polylines) or auto."),
-    dark_rods: Optional[bool] = typer.Option(None, "--dark-rods/--bright-rods",
-                                             help="Rods darker / brighter than the background (default: detected)."),
-    min_fill: float = typer.Option(_S.min_fill, help="Reject rods whose axis plateau is below this share of what a rod of "
-                                             "their radius shows under the measured blur."),
-    chunk: Optional[int] = typer.Option(None, help="Process in overlapping chunks of this edge (voxels), for big volumes."),
-    contact_tolerance: float = typer.Option(_S.contact_tolerance, help="Largest surface gap counted as contact (voxels)."),
-    figures: bool = typer.Option(True, help="Write the QA PNGs."),
+    dark_rods: Optional[bool] = typer.Option(None, "--dark-rods/--bright-rods", help=_SG["dark_rods"][1]),
     overwrite: bool = typer.Option(False, help="Write into --out even when it holds another command's run (an "
                                                "earlier segmentation there is always replaced)."),
     quiet: bool = typer.Option(False, help="No progress bar."),
+    **fields,
 ):
     """CT stack to rod centrelines and contacts (CPU)."""
-    from rodwarp.ct import check_segment, run_segment
+    from rodwarp.ct import run_segment
     from rodwarp.ct import default_out as seg_default_out
 
-    if shape not in ("straight", "curved", "auto"):
-        raise RodwarpError(f"--shape must be straight, curved or auto, got '{shape}'")
-    check_segment(stack=stack, voxel_size=voxel_size, units=units, diameter=diameter,
-                    out=out if out is not None else seg_default_out(stack), chunk=chunk,
-                    contact_tolerance=contact_tolerance, min_fill=min_fill)
-    params = SegmentParams(shape=shape, dark=dark_rods, min_fill=min_fill)
+    opts = SegmentOptions(**fields, dark_rods=dark_rods)
     outdir = out if out is not None else seg_default_out(stack)
+    opts.validate(stack, outdir)
     with _failure_recorded(outdir):
-        s = run_segment(stack, voxel_size=voxel_size, units=units, diameter=diameter, out=outdir, chunk=chunk,
-                        contact_tolerance=contact_tolerance, figures=figures, progress=not quiet, params=params,
-                        overwrite=overwrite)
+        s = run_segment(stack, out=outdir, progress=not quiet, overwrite=overwrite, **opts.run_kwargs())
     u = s["units"]
     typer.echo(f"{s['n_rods']} {'filaments' if s.get('shape') == 'curved' else 'rods'}, {s['n_contacts']} contacts, "
                f"diameter {s['diameter']:.4g} {u} ({s['diameter_voxels']:.2f} voxels), {s['wall_time_s']:.1f} s "
@@ -419,21 +405,17 @@ def _overrides(items: list[str]) -> dict:
 @app.command(epilog="Example: rodwarp sweep --alpha 25,50,100 --freq 1,10 --seeds 2 --out runs/sweep   "
                      "(exit 4 when any point failed)")
 @_friendly
+@_field_options(SweepSpec, _W, _SWEEP_OPTIONS, renamed=_SWEEP_RENAMED)
 def sweep(
     alpha: str = _swp("alphas", default=_csv(_W["alphas"][0])),
     freq: str = _swp("freqs", default=_csv(_W["freqs"][0])),
     gravity: str = _swp("gravities", default=_csv(_W["gravities"][0])),
     static_load: str = _swp("static_loads", default=_csv(_W["static_loads"][0])),
     seeds: int = _swp("seeds", default=len(_W["seeds"][0])),
-    entangle_duration: float = _swp("entangle_duration"),
-    duration: float = _swp("duration"),
-    amplitude: float = _swp("amplitude"),
     save_every: float = _sim("save_every", help="Sampling interval of each point's metrics (s of simulated time)."),
     out: Path = typer.Option(..., help="Sweep directory (results.csv, points/, figures)."),
     scheduler: Optional[str] = typer.Option(None, help="Existing Dask scheduler tcp://HOST:8786 (default: a local cluster on 127.0.0.1)."),
     workers: Optional[int] = typer.Option(None, help="Local worker processes (default: the number of cores)."),
-    device: str = _swp("device"),
-    share_entangling: bool = _swp("share_entangling"),
     figures: bool = typer.Option(True, help="Draw the phase diagram at the end."),
     overwrite: bool = typer.Option(False, help="Replace the run --out holds. Without it a sweep adds its points to "
                                                "the folder's sweep of the same protocol (durations, amplitude, "
@@ -442,6 +424,7 @@ def sweep(
     set_: Optional[list[str]] = typer.Option(None, "--set", help="Any other simulate parameter for every point, "
                                              "KEY=VALUE (repeatable; the names of `rodwarp simulate`'s options "
                                              "with underscores), e.g. --set rod_model=rigid --set rolling=false."),
+    **fields,
 ):
     """Parameter sweep: simulate + analyze per point on Dask; results.csv, then the phase diagram."""
     from rodwarp import validation as v
@@ -452,8 +435,7 @@ def sweep(
         v.integer("--workers", workers, ge=1, le=1024)
     spec = SweepSpec(alphas=_floats(alpha, "--alpha"), freqs=_floats(freq, "--freq"),
                      gravities=_floats(gravity, "--gravity"), static_loads=_floats(static_load, "--static-load"),
-                     seeds=list(range(seeds)), entangle_duration=entangle_duration, duration=duration,
-                     amplitude=amplitude, device=device, share_entangling=share_entangling,
+                     seeds=list(range(seeds)), **fields,
                      # only when changed: rows of sweeps run before this option still match their points
                      overrides={**({} if save_every == _P["save_every"][0] else {"save_every": save_every}),
                                 **_overrides(set_ or [])})

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rodwarp._util import progress_bar, versions
+from rodwarp._util import option, progress_bar, versions
 from rodwarp.analysis._fieldset import Fields
 from rodwarp.analysis._outputs import ANALYZE_OUTPUTS
 from rodwarp.errors import RodwarpError
@@ -33,22 +33,24 @@ from rodwarp.rodset.files import write_json
 ROD_FILES = ("final.npz", "rods.npz", "rods.zarr", "final.zarr")
 
 
-@dataclass
+@dataclass(frozen=True)
 class AnalyzeOptions:
-    """Options of :func:`analyze` (lengths in the input's units)."""
+    """Options of :func:`analyze` (lengths in the input's units), frozen; each field's default
+    and help are those of ``rodwarp analyze``."""
 
-    radius: float | None = None
-    spacing: float | None = None
-    diameter: float | None = None
-    length: float | None = None
-    units: str | None = None
-    keep_outside: bool = False
-    contact_tolerance: float | None = None
-    outlier: str = "q3"
-    connectivity: int = 26
-    bins: int = 40
-    device: str = "cpu"
-    figures: bool = True
+    radius: float | None = option(None, "Ball radius R (input units; default sqrt(d l)).")
+    spacing: float | None = option(None, "Grid spacing (input units; default R / 2).")
+    diameter: float | None = option(None, "Rod diameter d for the default R (required for a CSV without radius).")
+    length: float | None = option(None, "Rod length l for the default R (default the mean rod length).")
+    units: str | None = option(None, "Length unit of a CSV (m, mm, um, voxel); converts npz/zarr rod sets.")
+    keep_outside: bool = option(False, "Keep voxels whose ball leaves the domain (masked as NaN by default).")
+    contact_tolerance: float | None = option(None, "Surface gap counted as contact when contacts are detected "
+                                                   "(default d / 10).")
+    outlier: str = option("q3", "Outlier bound: q3 = Q3 + 1.5 IQR (the paper's) or q1 = Q1 + 1.5 IQR.")
+    connectivity: int = option(26, "Tangle connectivity: 26 (default) or 6.")
+    bins: int = option(40, "Histogram bins.")
+    device: str = option("cpu", "cpu, cuda or auto.")
+    figures: bool = option(True, "Write the PNG figures.")
 
     def validate(self) -> None:
         """Raise :class:`RodwarpError` (one line) for any option that is not finite, out of

@@ -17,7 +17,7 @@ re-exported here (scikit-image's layout); segmentation is split by stage, in the
 ``_phantom_render``  :func:`render_phantom`: partial volume, blur, noise, artefacts
 ``_scenes``          phantom scenes in voxel units (random packings, bundles, arcs, wires)
 ``_cases``           realistic-scan cases with their truth (:func:`make_case`)
-``_params``          :class:`SegmentParams`, :class:`SegmentResult`
+``_params``          :class:`SegmentParams`, :class:`SegmentOptions`, :class:`SegmentResult`
 ``_prepare``         0 - field-of-view mask, background trend, dark rods, anisotropic voxels
 ``_levels``          1 - levels and binarisation (background, plateau, threshold, coarse radius)
 ``_seeds``           2 - seeds: straight pieces of the skeleton, junctions removed
@@ -53,7 +53,7 @@ _WHERE = {
     "ScanCase": "_cases", "CASES": "_cases", "make_case": "_cases", "crop_straight": "_cases",
     "scored_subset": "_cases",
     # segmentation
-    "SegmentParams": "_params", "SegmentResult": "_params",
+    "SegmentParams": "_params", "SegmentOptions": "_params", "SegmentResult": "_params",
     "prepare_volume": "_prepare", "parse_voxel_size": "_prepare", "Prepared": "_prepare",
     "cross_section": "_bundles", "looks_bundled": "_bundles", "fit_discs": "_bundles",
     "trace_filaments": "_curved", "FilamentResult": "_curved",

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rodwarp._util import one_line_error as _fail
+from rodwarp._util import option
 from rodwarp.rodset import Contacts, RodSet
 
 __all__ = ["SegmentParams", "SegmentResult"]
@@ -193,6 +194,45 @@ class SegmentParams:
         lo, hi = self.radius_range
         if not (0 <= lo < hi):
             raise _fail(f"radius_range must be (low, high) with 0 <= low < high, got {self.radius_range!r}")
+
+
+@dataclass(frozen=True)
+class SegmentOptions:
+    """Options of ``rodwarp segment`` (:func:`~rodwarp.ct.run_segment`), frozen: each field's
+    default and help are the command's. Lengths in ``units`` unless marked voxels."""
+
+    voxel_size: str | None = option(None, "Voxel edge in --units: one value, or three for z,y,x (e.g. 0.1,0.05,0.05). "
+                                          "Default: the file's metadata (ImageJ/OME-TIFF, OME-Zarr).")
+    units: str | None = option(None, "Unit of --voxel-size, --diameter and the outputs (m, mm, um, voxel); default mm, "
+                                     "or the metadata's.")
+    diameter: float | None = option(None, "Rod diameter in --units (estimated when absent).")
+    shape: str = option(SegmentParams.shape, "straight (rods), curved (filaments as polylines) or auto.")
+    dark_rods: bool | None = option(None, "Rods darker / brighter than the background (default: detected).")
+    min_fill: float = option(SegmentParams.min_fill, "Reject rods whose axis plateau is below this share of what a "
+                                                     "rod of their radius shows under the measured blur.")
+    chunk: int | None = option(None, "Process in overlapping chunks of this edge (voxels), for big volumes.")
+    contact_tolerance: float = option(SegmentParams.contact_tolerance, "Largest surface gap counted as contact "
+                                                                       "(voxels).")
+    figures: bool = option(True, "Write the QA PNGs.")
+
+    def validate(self, stack, out) -> None:
+        """Refuse (one line) a bad option, a missing stack or an unusable ``out`` before the
+        volume is read (:func:`rodwarp.ct.check_segment`)."""
+        from rodwarp.ct._checks import check_segment
+
+        if self.shape not in ("straight", "curved", "auto"):
+            raise _fail(f"--shape must be straight, curved or auto, got '{self.shape}'")
+        check_segment(stack=stack, voxel_size=self.voxel_size, units=self.units, diameter=self.diameter, out=out,
+                      chunk=self.chunk, contact_tolerance=self.contact_tolerance, min_fill=self.min_fill)
+
+    def params(self) -> SegmentParams:
+        """The segmentation knobs these options set (the rest at their defaults)."""
+        return SegmentParams(shape=self.shape, dark=self.dark_rods, min_fill=self.min_fill)
+
+    def run_kwargs(self) -> dict:
+        """The keywords of :func:`~rodwarp.ct.run_segment` these options give."""
+        return {"voxel_size": self.voxel_size, "units": self.units, "diameter": self.diameter, "chunk": self.chunk,
+                "contact_tolerance": self.contact_tolerance, "figures": self.figures, "params": self.params()}
 
 
 @dataclass

@@ -6,7 +6,9 @@ here (:func:`option_table`); :mod:`rodwarp.experiments._protocol` runs them.
 from __future__ import annotations
 
 import math
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import dataclass
+
+from rodwarp._util import option, option_table  # noqa: F401 (option_table re-exported)
 
 import numpy as np
 
@@ -21,7 +23,7 @@ RIGID_SAG = 0.01
 def _param(default, help: str, short: str | None = None):
     """A :class:`ProtocolParams` field: its default, its ``rodwarp simulate --help`` line, and
     its abbreviation in default folder names (:func:`default_run_name`; the name when None)."""
-    return field(default=default, metadata={"help": help, "short": short})
+    return option(default, help, short=short)
 
 
 @dataclass(frozen=True)
@@ -147,18 +149,6 @@ class ProtocolParams:
         """Gravity with the static load as an extra body load, g (1 + 4 F~ / pi) (m/s^2;
         docs/protocol.md, "The experiment")."""
         return self.gravity * (1.0 + 4.0 * self.static_load / math.pi)
-
-
-def option_table(cls) -> dict:
-    """``{field: (default, help)}`` of a parameter dataclass whose fields carry ``help`` metadata
-    (:class:`ProtocolParams`, :class:`~rodwarp.experiments.SweepSpec`): where the CLI's options
-    take their defaults and help text from. A default factory is called (lists)."""
-    out = {}
-    for f in fields(cls):
-        if "help" in f.metadata:
-            default = f.default_factory() if f.default_factory is not MISSING else f.default
-            out[f.name] = (default, f.metadata["help"])
-    return out
 
 
 def _straight(rods, tol: float = 1e-3) -> bool:

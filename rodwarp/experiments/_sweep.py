@@ -235,7 +235,7 @@ def run_point(point: dict, outdir: str, entangled_from: str | None = None, donor
         opts = _point_analysis(point)
         dev = summary.get("device", "cpu")
         if opts.device == "cpu" and "device" not in point.get("_analyze", {}) and str(dev).startswith("cuda"):
-            opts.device = dev
+            opts = replace(opts, device=dev)
         a = analyze(out, out / "analysis", opts)
         row.update({
             "n_rods": summary["n_rods"], "a_over_g": summary["a_over_g"],
