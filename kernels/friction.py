@@ -449,10 +449,8 @@ def apply_rod_impulses(
 
 @wp.kernel
 def rod_contact_residual(
-    count: int,
+    contacts: RodContacts,
     frames: wp.array(dtype=ContactFrame),
-    impulse: wp.array(dtype=wp.vec3d),
-    normal: wp.array(dtype=wp.vec3d),
     params: StepParams,
     v: wp.array(dtype=wp.vec3d),
     spin: wp.array(dtype=wp.float64),
@@ -461,9 +459,9 @@ def rod_contact_residual(
     """Per rod-rod contact, read only: the velocity change (m/s) its exact local solve would
     make against the current velocities (the Gauss-Seidel residual of every contact)."""
     k = wp.tid()
-    if k >= count:
+    if k >= contacts.count:
         return
     f = frames[k]
-    P = impulse[k]
-    P_exact, gamma = rod_contact_exact(f, P, normal[k], params, v, spin)
+    P = contacts.impulse[k]
+    P_exact, gamma = rod_contact_exact(f, P, contacts.normal[k], params, v, spin)
     wp.atomic_max(residual, 0, wp.length(f.W * (P_exact - P)))

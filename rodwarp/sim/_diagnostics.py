@@ -81,7 +81,7 @@ class SolverChecks:
             m.arrays, self.factors.tangent, v, spin, wp.zeros_like(self.factors.axial)])
         if contacts.count:
             wp.launch(friction.rod_contact_residual, dim=contacts.count, device=m.device, inputs=[
-                contacts.count, self._frames, contacts.impulse, contacts.normal, params, v, spin, out])
+                contacts, self._frames, params, v, spin, out])
         n = int(self._n_wall_frames.numpy()[0])
         if n:
             wp.launch(wall_contacts.wall_contact_residual, dim=n, device=m.device, inputs=[
