@@ -37,18 +37,8 @@ def max_speed(v: wp.array(dtype=wp.vec3d), out: wp.array(dtype=wp.float64)):
 
 
 @wp.func
-def within_reach(
-    sa: int,
-    sb: int,
-    mid: wp.array(dtype=wp.vec3),
-    seg_vertex: wp.array(dtype=wp.int32),
-    vertex_rod: wp.array(dtype=wp.int32),
-    rod_radius: wp.array(dtype=wp.float64),
-    arc: wp.array(dtype=wp.float64),
-    x: wp.array(dtype=wp.vec3d),
-    r2: float,
-    margin: wp.float64,
-):
+def within_reach(model: RodModel, sa: int, sb: int, mid: wp.array(dtype=wp.vec3), x: wp.array(dtype=wp.vec3d),
+                 r2: float, margin: wp.float64):
     """Whether segments sa and sb belong in the Verlet list: capsule gap below ``margin``.
 
     Two segments of one rod less than a diameter of arc length apart never form a contact:
@@ -59,15 +49,15 @@ def within_reach(
     dm = mid[sb] - mid[sa]
     if wp.dot(dm, dm) > r2:
         return False
-    ia = seg_vertex[sa]
-    ib = seg_vertex[sb]
-    ra = vertex_rod[ia]
-    rb = vertex_rod[ib]
+    ia = model.seg_vertex[sa]
+    ib = model.seg_vertex[sb]
+    ra = model.vertex_rod[ia]
+    rb = model.vertex_rod[ib]
     if rb == ra:
         lo = wp.min(ia, ib)
         hi = wp.max(ia, ib)
         # the arc length strictly between the two segments
-        if arc[hi] - arc[lo + 1] < rod_radius[ra] + rod_radius[rb]:
+        if model.arc[hi] - model.arc[lo + 1] < model.radius[ra] + model.radius[rb]:
             return False
     # the distance between the two infinite lines bounds the segments' from below: a cheap
     # reject of most pairs of long (rigid) rods, which the midpoint test alone keeps
@@ -76,11 +66,11 @@ def within_reach(
     c = wp.cross(da, db)
     cc = wp.dot(c, c)
     if cc > wp.float64(1.0e-12) * wp.dot(da, da) * wp.dot(db, db):
-        if wp.abs(wp.dot(x[ib] - x[ia], c)) / wp.sqrt(cc) - rod_radius[ra] - rod_radius[rb] > margin:
+        if wp.abs(wp.dot(x[ib] - x[ia], c)) / wp.sqrt(cc) - model.radius[ra] - model.radius[rb] > margin:
             return False
     # exact capsule gap: only pairs that can come within reach are kept
     pair = closest_points_segments(x[ia], x[ia + 1], x[ib], x[ib + 1])
-    return pair.dist - rod_radius[ra] - rod_radius[rb] <= margin
+    return pair.dist - model.radius[ra] - model.radius[rb] <= margin
 
 
 @wp.kernel
@@ -143,7 +133,7 @@ def find_pairs_of_flagged(
     while wp.hash_grid_query_next(query, sb):
         if sb == sa or (flag[sb] != 0 and sb < sa):
             continue
-        if within_reach(sa, sb, mid, model.seg_vertex, model.vertex_rod, model.radius, model.arc, x, r2, margin):
+        if within_reach(model, sa, sb, mid, x, r2, margin):
             k = wp.atomic_add(count, 0, 1)
             if k < capacity:
                 pairs[k] = wp.vec2i(wp.min(sa, sb), wp.max(sa, sb))
