@@ -24,9 +24,8 @@ from rodwarp.ct import PhantomOptions, SegmentOptions, make_phantom
 from rodwarp.errors import RodwarpError, SimulationBlowUp
 from rodwarp.experiments import ProtocolParams, SweepSpec, option_table
 
-# option defaults come from where they are defined (the options' dataclasses, the phantom
-# builder's signature), so each is stated once; simulate and sweep take their help texts from
-# the parameter dataclasses' field metadata too
+# every command's option defaults and help texts come from its parameter dataclass's fields
+# (rodwarp._util.option), so each is stated once; docs/commands.md, "Where an option is declared"
 _AN = option_table(AnalyzeOptions)
 #: `rodwarp analyze`'s options in --help order: AnalyzeOptions fields, and the command's own
 _ANALYZE_OPTIONS = ("out", "radius", "spacing", "diameter", "length", "units", "keep_outside", "contact_tolerance",
@@ -42,9 +41,8 @@ _PHANTOM_OPTIONS = ("shape", "voxel_size", "units", "out", "blur", "cnr", "ring"
 _P = option_table(ProtocolParams)
 _W = option_table(SweepSpec)
 #: `rodwarp sweep`'s options in --help order: SweepSpec fields, the grids under their option
-#: names (comma-separated text, the seeds as a count), and the command's own
-_SWEEP_RENAMED = {"alphas": "alpha", "freqs": "freq", "gravities": "gravity", "static_loads": "static_load",
-                  "seeds": "seeds"}
+#: names (comma-separated text; --seeds, a count, keeps its name), and the command's own
+_SWEEP_RENAMED = {"alphas": "alpha", "freqs": "freq", "gravities": "gravity", "static_loads": "static_load"}
 _SWEEP_OPTIONS = ("alpha", "freq", "gravity", "static_load", "seeds", "entangle_duration", "duration", "amplitude",
                   "save_every", "out", "scheduler", "workers", "device", "share_entangling", "figures", "overwrite",
                   "quiet", "set_")

@@ -62,15 +62,12 @@ class CheckedProtocol:
         Vertices the run simulates (sizes its memory and disk estimates).
     frames : int
         Frames the run records (one every ``save_every``).
-    explicit : frozenset of str
-        The options the user gave (see :func:`check_protocol`).
     """
 
     params: object
     input_rods: object
     n_vertices: int
     frames: int
-    explicit: frozenset = frozenset()
 
 
 def check_protocol(p, explicit=()) -> CheckedProtocol:
@@ -102,7 +99,7 @@ def check_protocol(p, explicit=()) -> CheckedProtocol:
         n_vertices = rods.n_vertices
     else:
         n_vertices = _check_packing(p)
-    return CheckedProtocol(p, rods, n_vertices, frames(stages, p.save_every), explicit)
+    return CheckedProtocol(p, rods, n_vertices, frames(stages, p.save_every))
 
 
 def _check_options(p, explicit: frozenset):
