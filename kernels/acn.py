@@ -100,27 +100,16 @@ def gauss_linking_segments(p1: wp.vec3d, p2: wp.vec3d, p3: wp.vec3d, p4: wp.vec3
 
 
 @wp.kernel
-def gauss_linking_pairs(
-    p1: wp.array(dtype=wp.vec3d),
-    p2: wp.array(dtype=wp.vec3d),
-    p3: wp.array(dtype=wp.vec3d),
-    p4: wp.array(dtype=wp.vec3d),
-    out: wp.array(dtype=wp.float64),
-):
+def gauss_linking_pairs(p1: wp.array(dtype=wp.vec3d), p2: wp.array(dtype=wp.vec3d), p3: wp.array(dtype=wp.vec3d),
+                        p4: wp.array(dtype=wp.vec3d), out: wp.array(dtype=wp.float64)):
     """Signed G of segment pairs (p1[i]->p2[i], p3[i]->p4[i]), one pair per thread."""
     i = wp.tid()
     out[i] = gauss_linking_segments(p1[i], p2[i], p3[i], p4[i])
 
 
 @wp.kernel
-def polyline_linking_rows(
-    a: wp.array(dtype=wp.vec3d),
-    na_edges: int,
-    b: wp.array(dtype=wp.vec3d),
-    nb_edges: int,
-    signed_out: wp.array(dtype=wp.float64),
-    abs_out: wp.array(dtype=wp.float64),
-):
+def polyline_linking_rows(a: wp.array(dtype=wp.vec3d), na_edges: int, b: wp.array(dtype=wp.vec3d), nb_edges: int,
+                          signed_out: wp.array(dtype=wp.float64), abs_out: wp.array(dtype=wp.float64)):
     """Row i: sum over edges j of polyline b of G and |G| with edge i of polyline a.
 
     Edge k of a polyline joins vertex k and vertex (k + 1) mod (vertex count), so a closed

@@ -14,11 +14,7 @@ wp.set_module_options({"enable_backward": False})
 
 
 @wp.kernel
-def segment_midpoints(
-    seg_vertex: wp.array(dtype=wp.int32),
-    x: wp.array(dtype=wp.vec3d),
-    mid: wp.array(dtype=wp.vec3),
-):
+def segment_midpoints(seg_vertex: wp.array(dtype=wp.int32), x: wp.array(dtype=wp.vec3d), mid: wp.array(dtype=wp.vec3)):
     s = wp.tid()
     i = seg_vertex[s]
     m = (x[i] + x[i + 1]) * wp.float64(0.5)
@@ -74,15 +70,9 @@ def within_reach(model: RodModel, sa: int, sb: int, mid: wp.array(dtype=wp.vec3)
 
 
 @wp.kernel
-def stale_segments(
-    seg_vertex: wp.array(dtype=wp.int32),
-    x: wp.array(dtype=wp.vec3d),
-    ref: wp.array(dtype=wp.vec3d),
-    tau: wp.float64,
-    flag: wp.array(dtype=wp.int32),
-    count: wp.array(dtype=wp.int32),
-    stale: wp.array(dtype=wp.int32),
-):
+def stale_segments(seg_vertex: wp.array(dtype=wp.int32), x: wp.array(dtype=wp.vec3d), ref: wp.array(dtype=wp.vec3d),
+                   tau: wp.float64, flag: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32),
+                   stale: wp.array(dtype=wp.int32)):
     """flag[s] = 1 for every segment that has moved by more than ``tau`` since its last
     refresh (either end point: no point of the segment has moved further), listed in
     ``stale`` (in any order: the contacts are sorted by key later)."""
@@ -107,20 +97,10 @@ def drop_pairs_of_flagged(pairs: wp.array(dtype=wp.vec2i), flag: wp.array(dtype=
 
 
 @wp.kernel
-def find_pairs_of_flagged(
-    grid: wp.uint64,
-    stale: wp.array(dtype=wp.int32),
-    flag: wp.array(dtype=wp.int32),
-    mid: wp.array(dtype=wp.vec3),
-    model: RodModel,
-    x: wp.array(dtype=wp.vec3d),
-    query_radius: float,
-    margin: wp.float64,
-    capacity: int,
-    count: wp.array(dtype=wp.int32),
-    pairs: wp.array(dtype=wp.vec2i),
-    ref: wp.array(dtype=wp.vec3d),
-):
+def find_pairs_of_flagged(grid: wp.uint64, stale: wp.array(dtype=wp.int32), flag: wp.array(dtype=wp.int32),
+                          mid: wp.array(dtype=wp.vec3), model: RodModel, x: wp.array(dtype=wp.vec3d),
+                          query_radius: float, margin: wp.float64, capacity: int, count: wp.array(dtype=wp.int32),
+                          pairs: wp.array(dtype=wp.vec2i), ref: wp.array(dtype=wp.vec3d)):
     """Broadphase (Verlet list): every pair of a flagged segment whose capsule gap is below
     ``margin`` (contact margin + skin) now, found through the hash grid (midpoints within
     ``query_radius`` = h_max + 2 r_max + margin); a pair of two flagged segments once, from

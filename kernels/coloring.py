@@ -21,13 +21,8 @@ def contact_vertices(seg: wp.array(dtype=wp.vec2i), seg_vertex: wp.array(dtype=w
 
 
 @wp.kernel
-def color_claim(
-    count: int,
-    seg: wp.array(dtype=wp.vec2i),
-    seg_vertex: wp.array(dtype=wp.int32),
-    color: wp.array(dtype=wp.int32),
-    owner: wp.array(dtype=wp.int32),
-):
+def color_claim(count: int, seg: wp.array(dtype=wp.vec2i), seg_vertex: wp.array(dtype=wp.int32),
+                color: wp.array(dtype=wp.int32), owner: wp.array(dtype=wp.int32)):
     """Each uncoloured contact bids for its four vertices; the lowest index wins each."""
     k = wp.tid()
     if k >= count or color[k] >= 0:
@@ -38,15 +33,8 @@ def color_claim(
 
 
 @wp.kernel
-def color_commit(
-    count: int,
-    seg: wp.array(dtype=wp.vec2i),
-    seg_vertex: wp.array(dtype=wp.int32),
-    round_id: int,
-    owner: wp.array(dtype=wp.int32),
-    color: wp.array(dtype=wp.int32),
-    remaining: wp.array(dtype=wp.int32),
-):
+def color_commit(count: int, seg: wp.array(dtype=wp.vec2i), seg_vertex: wp.array(dtype=wp.int32), round_id: int,
+                 owner: wp.array(dtype=wp.int32), color: wp.array(dtype=wp.int32), remaining: wp.array(dtype=wp.int32)):
     """A contact that won all its vertices takes this round's colour (an independent set)."""
     k = wp.tid()
     if k >= count or color[k] >= 0:
@@ -59,16 +47,9 @@ def color_commit(
 
 
 @wp.kernel
-def warm_start_rod_contacts(
-    count: int,
-    key: wp.array(dtype=wp.int64),
-    normal: wp.array(dtype=wp.vec3d),
-    prev_count: int,
-    prev_key: wp.array(dtype=wp.int64),
-    prev_impulse: wp.array(dtype=wp.vec3d),
-    warm: wp.float64,
-    impulse: wp.array(dtype=wp.vec3d),
-):
+def warm_start_rod_contacts(count: int, key: wp.array(dtype=wp.int64), normal: wp.array(dtype=wp.vec3d), prev_count: int,
+                            prev_key: wp.array(dtype=wp.int64), prev_impulse: wp.array(dtype=wp.vec3d), warm: wp.float64,
+                            impulse: wp.array(dtype=wp.vec3d)):
     """Reuse last step's impulse of the same contact (keys are sorted: binary search).
 
     The old impulse is split along the new normal; its tangential part is kept, as friction

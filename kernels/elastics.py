@@ -57,18 +57,9 @@ def bend_coeffs(rest_length: wp.array(dtype=wp.float64), i: int):
 
 
 @wp.kernel
-def velocity_predictor(
-    model: RodModel,
-    state: RodState,
-    btarget: wp.array(dtype=wp.vec3d),
-    torque: wp.array(dtype=wp.float64),
-    body_accel: wp.vec3d,
-    damping: wp.float64,
-    dt: wp.float64,
-    explicit_bending: int,
-    v_out: wp.array(dtype=wp.vec3d),
-    spin_out: wp.array(dtype=wp.float64),
-):
+def velocity_predictor(model: RodModel, state: RodState, btarget: wp.array(dtype=wp.vec3d),
+                       torque: wp.array(dtype=wp.float64), body_accel: wp.vec3d, damping: wp.float64, dt: wp.float64,
+                       explicit_bending: int, v_out: wp.array(dtype=wp.vec3d), spin_out: wp.array(dtype=wp.float64)):
     """One thread per rod: velocity after damping, body force, (explicit) bending; spin after
     damping and the applied axial torques (N m per edge).
 
@@ -105,13 +96,8 @@ def velocity_predictor(
 
 
 @wp.func
-def pentadiagonal_factor(
-    a: int,
-    b: int,
-    diag: wp.array(dtype=wp.float64),
-    off1: wp.array(dtype=wp.float64),
-    off2: wp.array(dtype=wp.float64),
-):
+def pentadiagonal_factor(a: int, b: int, diag: wp.array(dtype=wp.float64), off1: wp.array(dtype=wp.float64),
+                         off2: wp.array(dtype=wp.float64)):
     """In-place LDL^T of the SPD pentadiagonal matrix on rows [a, b).
 
     diag -> 1 / D (the solves multiply by it: a division in every sweep's chain of
@@ -140,15 +126,9 @@ def pentadiagonal_factor(
 
 
 @wp.func
-def pentadiagonal_substitute(
-    a: int,
-    b: int,
-    dinv: wp.array(dtype=wp.float64),
-    off1: wp.array(dtype=wp.float64),
-    off2: wp.array(dtype=wp.float64),
-    rhs: wp.array(dtype=wp.vec3d),
-    out: wp.array(dtype=wp.vec3d),
-):
+def pentadiagonal_substitute(a: int, b: int, dinv: wp.array(dtype=wp.float64), off1: wp.array(dtype=wp.float64),
+                             off2: wp.array(dtype=wp.float64), rhs: wp.array(dtype=wp.vec3d),
+                             out: wp.array(dtype=wp.vec3d)):
     """Solve with the factors of ``pentadiagonal_factor`` (``dinv`` = 1 / D) for three
     right-hand sides (rhs is overwritten by the forward substitution)."""
     for i in range(a, b):
@@ -532,14 +512,8 @@ def rigid_length_projection(model: RodModel, state: RodState, v: wp.array(dtype=
 
 
 @wp.kernel
-def elastic_energy(
-    model: RodModel,
-    state: RodState,
-    btarget: wp.array(dtype=wp.vec3d),
-    ref_twist: wp.array(dtype=wp.float64),
-    body_accel: wp.vec3d,
-    out: wp.array(dtype=wp.float64),
-):
+def elastic_energy(model: RodModel, state: RodState, btarget: wp.array(dtype=wp.vec3d),
+                   ref_twist: wp.array(dtype=wp.float64), body_accel: wp.vec3d, out: wp.array(dtype=wp.float64)):
     """Per rod: kinetic (translation and spin), potential (body force), bending, stretching
     and twist energy (J); ``btarget`` and ``ref_twist`` as computed by ``step_frames``."""
     r = wp.tid()
@@ -577,11 +551,7 @@ def elastic_energy(
 
 
 @wp.kernel
-def integrate_positions(
-    x_in: wp.array(dtype=wp.vec3d),
-    v: wp.array(dtype=wp.vec3d),
-    dt: wp.float64,
-    x_out: wp.array(dtype=wp.vec3d),
-):
+def integrate_positions(x_in: wp.array(dtype=wp.vec3d), v: wp.array(dtype=wp.vec3d), dt: wp.float64,
+                        x_out: wp.array(dtype=wp.vec3d)):
     i = wp.tid()
     x_out[i] = x_in[i] + v[i] * dt

@@ -93,17 +93,9 @@ class ClippedParts:
 
 
 @wp.kernel
-def scatter_clipped_segments(
-    p0: wp.array(dtype=wp.vec3d),
-    p1: wp.array(dtype=wp.vec3d),
-    seg_rod: wp.array(dtype=wp.int32),
-    grid: BallGrid,
-    voxel_slot: wp.array(dtype=wp.int32),
-    slot_lo: int,
-    slot_hi: int,
-    write: int,
-    parts: ClippedParts,
-):
+def scatter_clipped_segments(p0: wp.array(dtype=wp.vec3d), p1: wp.array(dtype=wp.vec3d),
+                             seg_rod: wp.array(dtype=wp.int32), grid: BallGrid, voxel_slot: wp.array(dtype=wp.int32),
+                             slot_lo: int, slot_hi: int, write: int, parts: ClippedParts):
     """Segment s against every grid ball its bounding box (grown by R) reaches.
 
     For each ball (voxel whose slot lies in [slot_lo, slot_hi)) that the segment enters with
@@ -149,15 +141,10 @@ def scatter_clipped_segments(
 
 
 @wp.kernel
-def sort_parts_by_segment(
-    start: wp.array(dtype=wp.int32),
-    count: wp.array(dtype=wp.int32),
-    clip_a: wp.array(dtype=wp.vec3d),
-    clip_b: wp.array(dtype=wp.vec3d),
-    clip_seg: wp.array(dtype=wp.int32),
-    clip_rod: wp.array(dtype=wp.int32),
-    clip_len: wp.array(dtype=wp.float64),
-):
+def sort_parts_by_segment(start: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32),
+                          clip_a: wp.array(dtype=wp.vec3d), clip_b: wp.array(dtype=wp.vec3d),
+                          clip_seg: wp.array(dtype=wp.int32), clip_rod: wp.array(dtype=wp.int32),
+                          clip_len: wp.array(dtype=wp.float64)):
     """Insertion sort of each ball's parts by segment id: a fixed summation order on every device
     (parallel atomics write them in any order; on one CPU thread they arrive sorted, O(k))."""
     t = wp.tid()
@@ -188,15 +175,9 @@ def sort_parts_by_segment(
 
 
 @wp.kernel
-def ball_fields(
-    parts: ClippedParts,
-    seg_diameter: wp.array(dtype=wp.float64),
-    rods_out: wp.array(dtype=wp.int32),
-    length_out: wp.array(dtype=wp.float64),
-    volume_out: wp.array(dtype=wp.float64),
-    order_out: wp.array(dtype=wp.float64),
-    entanglement_out: wp.array(dtype=wp.float64),
-):
+def ball_fields(parts: ClippedParts, seg_diameter: wp.array(dtype=wp.float64), rods_out: wp.array(dtype=wp.int32),
+                length_out: wp.array(dtype=wp.float64), volume_out: wp.array(dtype=wp.float64),
+                order_out: wp.array(dtype=wp.float64), entanglement_out: wp.array(dtype=wp.float64)):
     """Per voxel t, from its clipped parts: rods, length, rod volume, S and e.
 
     rods: distinct rod ids among the parts.  volume: sum of (pi d^2 / 4) L.  S: largest
@@ -249,18 +230,9 @@ def ball_fields(
 
 
 @wp.kernel
-def count_contacts_in_ball(
-    grid: wp.uint64,
-    voxels: wp.array(dtype=wp.int32),
-    nx: int,
-    ny: int,
-    origin: wp.vec3d,
-    spacing: wp.float64,
-    radius: wp.float64,
-    query_radius: float,
-    points: wp.array(dtype=wp.vec3d),
-    count: wp.array(dtype=wp.int32),
-):
+def count_contacts_in_ball(grid: wp.uint64, voxels: wp.array(dtype=wp.int32), nx: int, ny: int, origin: wp.vec3d,
+                           spacing: wp.float64, radius: wp.float64, query_radius: float,
+                           points: wp.array(dtype=wp.vec3d), count: wp.array(dtype=wp.int32)):
     """count[t]: contact points within distance R of voxel voxels[t]'s centre."""
     t = wp.tid()
     c = voxel_centre(int(voxels[t]), nx, ny, origin, spacing)

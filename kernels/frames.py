@@ -101,17 +101,10 @@ def step_frames(model: RodModel, state: RodState, factors: RodFactors):
 
 
 @wp.kernel
-def advance_frames(
-    model: RodModel,
-    x_old: wp.array(dtype=wp.vec3d),
-    x_new: wp.array(dtype=wp.vec3d),
-    director_in: wp.array(dtype=wp.vec3d),
-    theta_in: wp.array(dtype=wp.float64),
-    spin: wp.array(dtype=wp.float64),
-    dt: wp.float64,
-    director_out: wp.array(dtype=wp.vec3d),
-    theta_out: wp.array(dtype=wp.float64),
-):
+def advance_frames(model: RodModel, x_old: wp.array(dtype=wp.vec3d), x_new: wp.array(dtype=wp.vec3d),
+                   director_in: wp.array(dtype=wp.vec3d), theta_in: wp.array(dtype=wp.float64),
+                   spin: wp.array(dtype=wp.float64), dt: wp.float64, director_out: wp.array(dtype=wp.vec3d),
+                   theta_out: wp.array(dtype=wp.float64)):
     """Per vertex slot (edges only): transport the director with its edge, theta += dt spin."""
     j = wp.tid()
     r = model.vertex_rod[j]

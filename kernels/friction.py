@@ -36,7 +36,7 @@ contacts run one thread per rod.
 import warp as wp
 
 from rodwarp.kernels.constants import F0, F1, HALF, FAR
-from rodwarp.kernels.imc import solve_imc, split_settled
+from rodwarp.kernels.imc import imc_normal_impulse, smoothed_friction_impulse
 from rodwarp.kernels.narrowphase import any_perpendicular
 from rodwarp.kernels.structs import ContactFrame, ContactSide, RodContacts, RodModel, StepParams
 
@@ -128,56 +128,71 @@ def local_frame(W: wp.mat33d, n: wp.vec3d, target: wp.float64):
 
 
 @wp.func
-def solve_local(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.float64):
-    """The exact impulse of one contact: u the contact velocity with the current impulse P
-    applied, ``f`` its :func:`local_frame`; returns the new impulse and the sliding
-    multiplier gamma (0 unless it slides; kept in the frame as the next sweep's guess).
+def solve_contact(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.float64, params: StepParams):
+    """The impulse of one contact under the step's contact law (``params.law``: 0 exact, 1 IMC):
+    u the contact velocity with the current impulse P applied, ``f`` its :func:`local_frame`;
+    returns the new impulse and the friction solve's guess for the next sweep, kept in the
+    frame: the sliding multiplier gamma of the exact law (0 unless it slides), the slip speed
+    of IMC (:mod:`rodwarp.kernels.imc`).
 
-    Two cases are settled in closed form before any iteration: a contact that does not
-    approach faster than its target without an impulse gets none, and one whose sticking
-    impulse W^-1 (target n - u_f) lies inside the friction cone sticks with exactly that
-    impulse (with W coupling the normal and tangential parts, the alternation below would
-    only approach it). The rest slide on the cone's edge.
+    Both laws alternate the normal and the tangential part, each solved exactly with the
+    other held, where the mobility couples them (rigid rods, contacts at segment ends); the
+    exact law's normal part is Signorini's, its tangential part the Coulomb cone
+    (:func:`coulomb_2d`), IMC's the implicit penalty and the smoothed friction. The exact
+    law first settles two cases in closed form: a contact that does not approach faster than
+    its target without an impulse gets none, and one whose sticking impulse
+    W^-1 (target n - u_f) lies inside the friction cone sticks with exactly that impulse
+    (with W coupling the parts, the alternation would only approach it). The rest slide on
+    the cone's edge.
     """
     wnn = f.k[0]
     if wnn <= F0:
         return P, f.gamma
     W = f.W
     uf = u - W * P  # the velocity this contact's impulse acts on
-    if wp.dot(uf, n) >= f.target:
-        return wp.vec3d(F0, F0, F0), F0  # separating or resting without load: no impulse
-    Ps = f.Winv * (n * f.target - uf)
-    psn = wp.dot(Ps, n)
-    if psn > F0:
-        pst = Ps - n * psn
-        if wp.dot(pst, pst) <= mu * mu * psn * psn:
-            return Ps, F0  # sticks: the exact impulse
+    imc = params.law == 1
+    rounds = 2
+    tol = wp.float64(1.0e-9)
+    if imc:
+        rounds = 3
+        tol = wp.float64(1.0e-10)
+    else:
+        if wp.dot(uf, n) >= f.target:
+            return wp.vec3d(F0, F0, F0), F0  # separating or resting without load: no impulse
+        Ps = f.Winv * (n * f.target - uf)
+        psn = wp.dot(Ps, n)
+        if psn > F0:
+            pst = Ps - n * psn
+            if wp.dot(pst, pst) <= mu * mu * psn * psn:
+                return Ps, F0  # sticks: the exact impulse
     e1 = f.e1
     e2 = wp.cross(n, e1)
     pn = wp.dot(P, n)
     pt = P - n * pn
-    gamma = f.gamma
-    for it in range(2):
-        pn_new = wp.max(F0, (f.target - wp.dot(uf + W * pt, n)) / wnn)
+    guess = f.gamma
+    for it in range(rounds):
+        cn = wp.dot(uf + W * pt, n)  # normal velocity with the tangential part held
+        pn_new = F0
+        if imc:
+            pn_new = imc_normal_impulse(f.gap, cn, wnn, pn, params)
+        else:
+            pn_new = wp.max(F0, (f.target - cn) / wnn)
         c = uf + (W * n) * pn_new
-        q = coulomb_2d(wp.dot(c, e1), wp.dot(c, e2), f.k[1], f.k[2], f.k[3], mu * pn_new, gamma)
-        gamma = q[2]
+        c1 = wp.dot(c, e1)
+        c2 = wp.dot(c, e2)
+        q = wp.vec3d(F0, F0, F0)
+        if imc:
+            q = smoothed_friction_impulse(c1, c2, f.k[1], f.k[2], f.k[3], mu * pn_new, guess, params)
+        else:
+            q = coulomb_2d(c1, c2, f.k[1], f.k[2], f.k[3], mu * pn_new, guess)
+        guess = q[2]
         pt_new = e1 * q[0] + e2 * q[1]
-        done = split_settled(f.coupled, pn_new, pt_new, pn, pt, wp.float64(1.0e-9))
+        change = wp.abs(pn_new - pn) + wp.length(pt_new - pt)
         pn = pn_new
         pt = pt_new
-        if done:
+        if f.coupled == 0 or change <= tol * (pn + wp.length(pt)):
             break
-    return n * pn + pt, gamma
-
-
-@wp.func
-def solve_contact(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.float64, params: StepParams):
-    """The local solve of the step's contact law: exact (:func:`solve_local`) or IMC
-    (:func:`rodwarp.kernels.imc.solve_imc`)."""
-    if params.law == 1:
-        return solve_imc(u, f, n, P, mu, params)
-    return solve_local(u, f, n, P, mu)
+    return n * pn + pt, guess
 
 
 @wp.func
@@ -350,14 +365,8 @@ def relaxed(P_new: wp.vec3d, P: wp.vec3d, n: wp.vec3d, mu: wp.float64, relax: wp
 
 
 @wp.kernel
-def prepare_rod_contacts(
-    model: RodModel,
-    x: wp.array(dtype=wp.vec3d),
-    contacts: RodContacts,
-    tangent: wp.array(dtype=wp.vec3d),
-    params: StepParams,
-    frames: wp.array(dtype=ContactFrame),
-):
+def prepare_rod_contacts(model: RodModel, x: wp.array(dtype=wp.vec3d), contacts: RodContacts,
+                         tangent: wp.array(dtype=wp.vec3d), params: StepParams, frames: wp.array(dtype=ContactFrame)):
     """Per contact, once per step: its two sides, mobility, tangent basis and normal target."""
     k = wp.tid()
     if k >= contacts.count:
@@ -379,15 +388,9 @@ def rod_contact_exact(f: ContactFrame, P: wp.vec3d, n: wp.vec3d, params: StepPar
 
 
 @wp.func
-def solve_rod_contact(
-    k: int,
-    frames: wp.array(dtype=ContactFrame),
-    impulse: wp.array(dtype=wp.vec3d),
-    normal: wp.array(dtype=wp.vec3d),
-    params: StepParams,
-    v: wp.array(dtype=wp.vec3d),
-    spin: wp.array(dtype=wp.float64),
-):
+def solve_rod_contact(k: int, frames: wp.array(dtype=ContactFrame), impulse: wp.array(dtype=wp.vec3d),
+                      normal: wp.array(dtype=wp.vec3d), params: StepParams, v: wp.array(dtype=wp.vec3d),
+                      spin: wp.array(dtype=wp.float64)):
     """Exact local solve of rod-rod contact k (its frame, accumulated impulse and normal);
     returns the square of the velocity change it caused (m^2/s^2: the sweep's largest is
     rooted once, not every contact's). Takes the arrays it reads rather than the model and
@@ -407,17 +410,9 @@ def solve_rod_contact(
 
 
 @wp.kernel
-def solve_rod_contacts(
-    ids: wp.array(dtype=wp.int32),
-    use_ids: int,
-    model: RodModel,
-    contacts: RodContacts,
-    frames: wp.array(dtype=ContactFrame),
-    params: StepParams,
-    v: wp.array(dtype=wp.vec3d),
-    spin: wp.array(dtype=wp.float64),
-    residual: wp.array(dtype=wp.float64),
-):
+def solve_rod_contacts(ids: wp.array(dtype=wp.int32), use_ids: int, model: RodModel, contacts: RodContacts,
+                       frames: wp.array(dtype=ContactFrame), params: StepParams, v: wp.array(dtype=wp.vec3d),
+                       spin: wp.array(dtype=wp.float64), residual: wp.array(dtype=wp.float64)):
     """One thread per contact of one colour (GPU) or of all contacts in order (CPU); the
     residual as the square of the largest velocity change (m^2/s^2)."""
     k = wp.tid()
@@ -427,14 +422,8 @@ def solve_rod_contacts(
 
 
 @wp.kernel
-def apply_rod_impulses(
-    contacts: RodContacts,
-    frames: wp.array(dtype=ContactFrame),
-    x: wp.array(dtype=wp.vec3d),
-    tangent: wp.array(dtype=wp.vec3d),
-    v: wp.array(dtype=wp.vec3d),
-    spin: wp.array(dtype=wp.float64),
-):
+def apply_rod_impulses(contacts: RodContacts, frames: wp.array(dtype=ContactFrame), x: wp.array(dtype=wp.vec3d),
+                       tangent: wp.array(dtype=wp.vec3d), v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64)):
     """Warm start: apply the reused impulses once before iterating (atomics: any order)."""
     k = wp.tid()
     if k >= contacts.count:
@@ -448,14 +437,9 @@ def apply_rod_impulses(
 
 
 @wp.kernel
-def rod_contact_residual(
-    contacts: RodContacts,
-    frames: wp.array(dtype=ContactFrame),
-    params: StepParams,
-    v: wp.array(dtype=wp.vec3d),
-    spin: wp.array(dtype=wp.float64),
-    residual: wp.array(dtype=wp.float64),
-):
+def rod_contact_residual(contacts: RodContacts, frames: wp.array(dtype=ContactFrame), params: StepParams,
+                         v: wp.array(dtype=wp.vec3d), spin: wp.array(dtype=wp.float64),
+                         residual: wp.array(dtype=wp.float64)):
     """Per rod-rod contact, read only: the velocity change (m/s) its exact local solve would
     make against the current velocities (the Gauss-Seidel residual of every contact)."""
     k = wp.tid()

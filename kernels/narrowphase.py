@@ -208,17 +208,9 @@ def point_to_segment(p: wp.vec3d, q0: wp.vec3d, q1: wp.vec3d):
 
 
 @wp.kernel
-def narrowphase_pairs(
-    pairs: wp.array(dtype=wp.vec2i),
-    n_pairs: int,
-    nseg: int,
-    model: RodModel,
-    x: wp.array(dtype=wp.vec3d),
-    v: wp.array(dtype=wp.vec3d),
-    base_margin: wp.float64,
-    dt: wp.float64,
-    out: RawContacts,
-):
+def narrowphase_pairs(pairs: wp.array(dtype=wp.vec2i), n_pairs: int, nseg: int, model: RodModel,
+                      x: wp.array(dtype=wp.vec3d), v: wp.array(dtype=wp.vec3d), base_margin: wp.float64, dt: wp.float64,
+                      out: RawContacts):
     """Narrowphase: exact capsule gap of each candidate pair; a contact when it is below the
     contact distance plus what both segments can close in one step (speculative).
 
@@ -299,18 +291,11 @@ def iota(out: wp.array(dtype=wp.int32)):
 
 
 @wp.kernel
-def gather_contacts(
-    order: wp.array(dtype=wp.int32),
-    count: int,
-    seg_in: wp.array(dtype=wp.vec2i),
-    st_in: wp.array(dtype=wp.vec2d),
-    normal_in: wp.array(dtype=wp.vec3d),
-    gap_in: wp.array(dtype=wp.float64),
-    seg_out: wp.array(dtype=wp.vec2i),
-    st_out: wp.array(dtype=wp.vec2d),
-    normal_out: wp.array(dtype=wp.vec3d),
-    gap_out: wp.array(dtype=wp.float64),
-):
+def gather_contacts(order: wp.array(dtype=wp.int32), count: int, seg_in: wp.array(dtype=wp.vec2i),
+                    st_in: wp.array(dtype=wp.vec2d), normal_in: wp.array(dtype=wp.vec3d),
+                    gap_in: wp.array(dtype=wp.float64), seg_out: wp.array(dtype=wp.vec2i),
+                    st_out: wp.array(dtype=wp.vec2d), normal_out: wp.array(dtype=wp.vec3d),
+                    gap_out: wp.array(dtype=wp.float64)):
     k = wp.tid()
     if k >= count:
         return
@@ -322,16 +307,9 @@ def gather_contacts(
 
 
 @wp.kernel
-def contact_overlap(
-    count: int,
-    seg: wp.array(dtype=wp.vec2i),
-    seg_vertex: wp.array(dtype=wp.int32),
-    vertex_rod: wp.array(dtype=wp.int32),
-    rod_radius: wp.array(dtype=wp.float64),
-    x: wp.array(dtype=wp.vec3d),
-    gap_out: wp.array(dtype=wp.float64),
-    out: wp.array(dtype=wp.float64),
-):
+def contact_overlap(count: int, seg: wp.array(dtype=wp.vec2i), seg_vertex: wp.array(dtype=wp.int32),
+                    vertex_rod: wp.array(dtype=wp.int32), rod_radius: wp.array(dtype=wp.float64),
+                    x: wp.array(dtype=wp.vec3d), gap_out: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):
     """Capsule gap of every detected segment pair at positions ``x`` into ``gap_out`` (per
     contact point); out[0] = deepest overlap (m). With an empty ``gap_out`` (the step's
     check) a line contact's extra points, which follow their pair's first (contacts are
@@ -354,16 +332,10 @@ def contact_overlap(
 
 
 @wp.kernel
-def closest_points_kernel(
-    p0: wp.array(dtype=wp.vec3d),
-    p1: wp.array(dtype=wp.vec3d),
-    q0: wp.array(dtype=wp.vec3d),
-    q1: wp.array(dtype=wp.vec3d),
-    out_s: wp.array(dtype=wp.float64),
-    out_t: wp.array(dtype=wp.float64),
-    out_dist: wp.array(dtype=wp.float64),
-    out_normal: wp.array(dtype=wp.vec3d),
-):
+def closest_points_kernel(p0: wp.array(dtype=wp.vec3d), p1: wp.array(dtype=wp.vec3d), q0: wp.array(dtype=wp.vec3d),
+                          q1: wp.array(dtype=wp.vec3d), out_s: wp.array(dtype=wp.float64),
+                          out_t: wp.array(dtype=wp.float64), out_dist: wp.array(dtype=wp.float64),
+                          out_normal: wp.array(dtype=wp.vec3d)):
     i = wp.tid()
     pair = closest_points_segments(p0[i], p1[i], q0[i], q1[i])
     out_s[i] = pair.s

@@ -8,16 +8,9 @@ wp.set_module_options({"enable_backward": False})
 
 
 @wp.kernel
-def candidate_clearance(
-    grid: wp.uint64,
-    pa: wp.array(dtype=wp.vec3d),
-    pb: wp.array(dtype=wp.vec3d),
-    ca: wp.array(dtype=wp.vec3d),
-    cb: wp.array(dtype=wp.vec3d),
-    reach: float,
-    diameter: wp.float64,
-    out: wp.array(dtype=wp.float64),
-):
+def candidate_clearance(grid: wp.uint64, pa: wp.array(dtype=wp.vec3d), pb: wp.array(dtype=wp.vec3d),
+                        ca: wp.array(dtype=wp.vec3d), cb: wp.array(dtype=wp.vec3d), reach: float, diameter: wp.float64,
+                        out: wp.array(dtype=wp.float64)):
     """Per candidate segment: smallest surface gap (m) to any placed segment within reach."""
     k = wp.tid()
     m = (ca[k] + cb[k]) * wp.float64(0.5)

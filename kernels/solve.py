@@ -19,19 +19,10 @@ wp.set_module_options({"enable_backward": False})
 
 
 @wp.kernel
-def gauss_seidel_sequential(
-    model: RodModel,
-    state: RodState,
-    contacts: RodContacts,
-    frames: wp.array(dtype=ContactFrame),
-    walls: Walls,
-    wall_contacts: WallContacts,
-    factors: RodFactors,
-    params: StepParams,
-    v: wp.array(dtype=wp.vec3d),
-    spin: wp.array(dtype=wp.float64),
-    out: wp.array(dtype=wp.float64),
-):
+def gauss_seidel_sequential(model: RodModel, state: RodState, contacts: RodContacts,
+                            frames: wp.array(dtype=ContactFrame), walls: Walls, wall_contacts: WallContacts,
+                            factors: RodFactors, params: StepParams, v: wp.array(dtype=wp.vec3d),
+                            spin: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):
     """Launch with dim = 1. out = [contact residual (m/s), stretch residual (m), sweeps]; the
     sweeps and tolerances come in ``params``.
 

@@ -183,13 +183,13 @@ class RawContacts:
     """The narrowphase's output, unsorted: up to ``capacity`` contact points, ``count[0]`` found
     (may exceed the capacity: the host grows the arrays and runs it again)."""
 
+    seg: wp.array(dtype=wp.vec2i)  # segment pair (sa < sb)
+    key: wp.array(dtype=wp.int64)  # sort key: 3 (sa nseg + sb), + 1 + end for a contact at a segment end
+    st: wp.array(dtype=wp.vec2d)  # parameters of the contact points on sa and sb
+    normal: wp.array(dtype=wp.vec3d)  # unit, from sb toward sa
+    gap: wp.array(dtype=wp.float64)  # surface gap (m)
     capacity: int
     count: wp.array(dtype=wp.int32)
-    seg: wp.array(dtype=wp.vec2i)
-    key: wp.array(dtype=wp.int64)
-    st: wp.array(dtype=wp.vec2d)
-    normal: wp.array(dtype=wp.vec3d)
-    gap: wp.array(dtype=wp.float64)
 
 
 @wp.struct

@@ -61,16 +61,9 @@ def write_wall_frames(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.
 
 
 @wp.kernel
-def prepare_wall_contacts(
-    model: RodModel,
-    x: wp.array(dtype=wp.vec3d),
-    tangent: wp.array(dtype=wp.vec3d),
-    walls: Walls,
-    params: StepParams,
-    contacts: WallContacts,
-    v: wp.array(dtype=wp.vec3d),
-    spin: wp.array(dtype=wp.float64),
-):
+def prepare_wall_contacts(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d), walls: Walls,
+                          params: StepParams, contacts: WallContacts, v: wp.array(dtype=wp.vec3d),
+                          spin: wp.array(dtype=wp.float64)):
     """One thread per rod: gaps of its vertex spheres to every wall at the start of the step,
     warm-started impulses (applied); a rod with any contact within reach joins ``active``
     with a span of frames (written when they fit; the host grows the list otherwise).
@@ -115,28 +108,16 @@ def prepare_wall_contacts(
 
 
 @wp.kernel
-def fill_wall_frames(
-    model: RodModel,
-    x: wp.array(dtype=wp.vec3d),
-    tangent: wp.array(dtype=wp.vec3d),
-    walls: Walls,
-    params: StepParams,
-    contacts: WallContacts,
-):
+def fill_wall_frames(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d), walls: Walls,
+                     params: StepParams, contacts: WallContacts):
     """One thread per active rod: its span of frames (after the host grew the list)."""
     q = wp.tid()
     write_wall_frames(model, x, tangent, walls, params, contacts, contacts.active[q], contacts.span[q][0])
 
 
 @wp.func
-def solve_rod_walls(
-    q: int,
-    walls: Walls,
-    params: StepParams,
-    contacts: WallContacts,
-    v: wp.array(dtype=wp.vec3d),
-    spin: wp.array(dtype=wp.float64),
-):
+def solve_rod_walls(q: int, walls: Walls, params: StepParams, contacts: WallContacts, v: wp.array(dtype=wp.vec3d),
+                    spin: wp.array(dtype=wp.float64)):
     """Every wall contact of active rod q in turn (same exact local solve as rod-rod
     contacts, frames prepared once per step); returns the square of the largest velocity
     change caused (m^2/s^2)."""
@@ -160,27 +141,15 @@ def solve_rod_walls(
 
 
 @wp.kernel
-def solve_wall_contacts(
-    walls: Walls,
-    params: StepParams,
-    contacts: WallContacts,
-    v: wp.array(dtype=wp.vec3d),
-    spin: wp.array(dtype=wp.float64),
-    residual: wp.array(dtype=wp.float64),
-):
+def solve_wall_contacts(walls: Walls, params: StepParams, contacts: WallContacts, v: wp.array(dtype=wp.vec3d),
+                        spin: wp.array(dtype=wp.float64), residual: wp.array(dtype=wp.float64)):
     """One thread per rod that touches a wall (``active`` lists them); the residual squared."""
     wp.atomic_max(residual, 0, solve_rod_walls(wp.tid(), walls, params, contacts, v, spin))
 
 
 @wp.kernel
-def wall_contact_residual(
-    walls: Walls,
-    params: StepParams,
-    contacts: WallContacts,
-    v: wp.array(dtype=wp.vec3d),
-    spin: wp.array(dtype=wp.float64),
-    residual: wp.array(dtype=wp.float64),
-):
+def wall_contact_residual(walls: Walls, params: StepParams, contacts: WallContacts, v: wp.array(dtype=wp.vec3d),
+                          spin: wp.array(dtype=wp.float64), residual: wp.array(dtype=wp.float64)):
     """``rod_contact_residual`` for the wall contacts (one thread per frame)."""
     j = wp.tid()
     if j >= contacts.n_frames[0]:

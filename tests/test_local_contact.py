@@ -12,7 +12,8 @@ import pytest
 import warp as wp
 
 from rodwarp import _warp
-from rodwarp.kernels.friction import local_frame, solve_local
+from rodwarp.kernels.friction import local_frame, solve_contact
+from rodwarp.kernels.structs import StepParams
 
 _warp.init()
 
@@ -24,8 +25,10 @@ def _solve(W: wp.array(dtype=wp.mat33d), u: wp.array(dtype=wp.vec3d), n: wp.arra
     k = wp.tid()
     f = local_frame(W[k], n[k], target[k])
     f.gamma = guess[k]  # the sliding multiplier a sweep before left (a warm start only)
-    # solve_local takes the velocity with the current impulse applied: u + W P0
-    P, gamma = solve_local(u[k] + W[k] * P0[k], f, n[k], P0[k], mu)
+    params = StepParams()
+    params.law = 0  # the exact law: Signorini and the Coulomb cone
+    # solve_contact takes the velocity with the current impulse applied: u + W P0
+    P, gamma = solve_contact(u[k] + W[k] * P0[k], f, n[k], P0[k], mu, params)
     out[k] = P
 
 
