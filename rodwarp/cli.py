@@ -112,8 +112,10 @@ def _field_options(cls, table: dict, order: tuple[str, ...], renamed: dict | Non
 
 
 #: `rodwarp simulate`'s options in --help order: ProtocolParams fields, and the command's own
-_SIMULATE_OPTIONS = ("alpha", "freq", "amplitude", "gravity", "duration", "entangle_duration", "entangle_freq",
-                     "entangle_amplitude", "static_load", "n_rods", "length", "vertices", "box", "mu", "young",
+_SIMULATE_OPTIONS = ("protocol", "alpha", "freq", "amplitude", "gravity", "duration", "entangle_duration",
+                     "entangle_freq", "entangle_amplitude", "static_load", "n_rods", "length", "vertices", "box",
+                     "container_radius", "fill_height", "pour_duration", "strains", "press_duration",
+                     "lift_duration", "mu", "young",
                      "density", "dt", "iterations", "step_safety", "rod_model", "rolling", "contact_law",
                      "imc_delta", "imc_nu", "imc_stiffness", "save_every",
                      "checkpoint_every", "fields_every", "resume", "overwrite", "entangle", "seed", "device", "out", "initial",
@@ -217,6 +219,7 @@ def version():
 def simulate(
     ctx: typer.Context,
     box: str = _sim("box", default=_csv(_P["box"][0])),
+    strains: str = _sim("strains", default=_csv(_P["strains"][0])),
     resume: bool = typer.Option(False, help="Continue a killed run from its newest checkpoint in --out (only the "
                                             "folder's own run, same parameters)."),
     overwrite: bool = typer.Option(False, help="Replace the run that --out holds (its outputs are removed first)."),
@@ -235,7 +238,8 @@ def simulate(
     from rodwarp.experiments import default_run_name, run_protocol
 
     # the options that are ProtocolParams fields, the two taken in another form converted
-    checked = ProtocolParams(**fields, box=_parse_box(box), initial=str(initial) if initial else None,
+    checked = ProtocolParams(**fields, box=_parse_box(box), strains=_parse_strains(strains),
+                             initial=str(initial) if initial else None,
                              initial_diameter=initial_diameter).validate(
         explicit=_given(ctx, "alpha", "length", "n_rods", "vertices", "box", "seed"))
     params = checked.params  # with --initial: the input's alpha and length
@@ -389,12 +393,13 @@ def _overrides(items: list[str]) -> dict:
                 value = int(text)
             elif "float" in kind:
                 value = None if text.lower() == "none" and "None" in kind else float(text)
-            elif "tuple" in kind:  # box: 'X,Y,Z', as simulate's own option takes it
-                value = _parse_box(text)
+            elif "tuple" in kind:  # 'X,Y,Z' (box) or 'E1,E2,...' (strains), as simulate's own options take them
+                value = _parse_strains(text) if key == "strains" else _parse_box(text)
             else:
                 value = text
         except ValueError:  # RodwarpError too: the box's own message names --box, not --set
-            what = "three positive numbers 'X,Y,Z'" if "tuple" in kind else f"a valid {kind.replace(' | None', '')}"
+            what = ("comma-separated numbers" if key == "strains" else "three positive numbers 'X,Y,Z'") \
+                if "tuple" in kind else f"a valid {kind.replace(' | None', '')}"
             raise RodwarpError(f"--set {key}={text}: not {what}") from None
         out[key] = value
     return out
@@ -481,6 +486,14 @@ def phase_diagram_cmd(
         written = phase_diagram(sweep_dir, note=lambda msg: typer.echo(f"note: {msg}"))
     for f in written:
         typer.echo(f"wrote {f}")
+
+
+def _parse_strains(text: str):
+    """--strains 'E1,E2,...' (empty: none); their range is checked with the other options."""
+    try:
+        return tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise RodwarpError(f"--strains must be comma-separated numbers 'E1,E2,...' (e.g. 0,0.05,0.1), got '{text}'")
 
 
 def _parse_box(text: str):

@@ -57,10 +57,16 @@ from rodwarp.experiments._sweep import _connect
 address, creds = sys.argv[1], json.load(open(sys.argv[2]))
 
 def attempt(addr, security=None):
+    # a Client that failed to start is finalised here, not by a garbage collection that runs
+    # while the next Client starts its loop (Dask then deadlocks in LoopRunner.stop)
+    import gc
+    gc.collect()
     try:
         c = Client(addr, timeout="5s", **({"security": security} if security is not None else {}))
     except Exception as e:
         return "refused: " + type(e).__name__
+    finally:
+        gc.collect()
     try:
         return "ran: " + str(c.submit(sum, [1, 2]).result(timeout=20))
     finally:

@@ -38,7 +38,7 @@ _WHERE = {
     "ProtocolParams": "_params", "RODS_PER_ALPHA": "_params", "RIGID_SAG": "_params",
     "SIDE_WALLS": "_plan", "Stage": "_plan", "plan": "_plan", "LoopPosition": "_protocol",
     "option_table": "_params", "rod_model_rule": "_params", "run_protocol": "_protocol",
-    "default_run_name": "_protocol",
+    "default_run_name": "_params",
     "Recorder": "_recorder", "plot_metrics": "_recorder",
     "random_packing": "_packing", "orientation_statistics": "_packing", "isotropic_directions": "_packing",
     # the verdict

@@ -110,7 +110,13 @@ def _check_options(p, explicit: frozenset):
     for name in ("amplitude", "entangle_amplitude"):
         number(f"--{name.replace('_', '-')}", getattr(p, name), ge=0, unit="m")
     number("--gravity", p.gravity, gt=0, unit="m/s^2")
-    number("--duration", p.duration, gt=0, unit="s", hint="the stability test needs at least one step")
+    if p.protocol not in ("paper", "lab"):
+        fail(f"--protocol must be paper or lab, got '{p.protocol}'")
+    lab = p.protocol == "lab"
+    if lab:
+        number("--duration", p.duration, ge=0, unit="s", hint="the shaking; 0 leaves it out")
+    else:
+        number("--duration", p.duration, gt=0, unit="s", hint="the stability test needs at least one step")
     number("--entangle-duration", p.entangle_duration, ge=0, unit="s", hint="0 skips entangling")
     number("--static-load", p.static_load, ge=0, hint="in units of a rod's weight")
     if p.n_rods is not None:
@@ -176,10 +182,13 @@ def _check_options(p, explicit: frozenset):
             fail(f"{opts} do{'es' if len(given) == 1 else ''} not apply with --initial (the input rod set "
                  f"decides {'it' if len(given) == 1 else 'them'}); drop {opts}")
 
+    _check_lab_options(p) if lab else _check_not_lab(p)
+
     # consistency of durations, intervals and the step
     stages = plan(p)
-    if p.save_every > p.duration:
-        fail(f"--save-every {p.save_every:g} s is longer than the stability test (--duration {p.duration:g} s): "
+    test = next(s for s in stages if s.test)
+    if p.save_every > test.duration:
+        fail(f"--save-every {p.save_every:g} s is longer than the {test.title} ({test.option} {test.duration:g} s): "
              f"the verdict needs samples inside the test; lower --save-every")
     if p.dt is not None:
         for s in stages:
@@ -194,15 +203,63 @@ def _check_options(p, explicit: frozenset):
             fail(f"{fq} {s.freq:g} Hz over {s.option} {s.duration:g} s needs at least {s.min_steps():.3g} steps "
                  f"({STEPS_PER_PERIOD:g} per period), more than {MAX_STEPS:.0e}; lower the frequency or the duration")
     height = box[2] * p.length
-    if 2 * p.entangle_amplitude >= 0.5 * height or 2 * p.amplitude >= 0.5 * height:
+    if not lab and (2 * p.entangle_amplitude >= 0.5 * height or 2 * p.amplitude >= 0.5 * height):
         fail(f"vibration amplitude does not fit the box (height {height:g} m); lower --amplitude")
     return stages
+
+
+#: the laboratory protocol's own options, and the paper protocol's that it does not use
+LAB_FIELDS = ("container_radius", "fill_height", "pour_duration", "strains", "press_duration", "lift_duration")
+PAPER_ONLY_FIELDS = ("box", "entangle_duration", "entangle_freq", "entangle_amplitude", "initial", "entangle")
+
+
+def _changed(p, names) -> list[str]:
+    from dataclasses import fields
+
+    defaults = {f.name: f.default for f in fields(p)}
+    return [n for n in names if getattr(p, n) != defaults[n] and not (n == "box" and list(p.box) == list(defaults[n]))]
+
+
+def _check_not_lab(p) -> None:
+    given = _changed(p, LAB_FIELDS)
+    if given:
+        opts = ", ".join(f"--{k.replace('_', '-')}" for k in given)
+        fail(f"{opts} only appl{'ies' if len(given) == 1 else 'y'} with --protocol lab; add it or drop {opts}")
+
+
+def _check_lab_options(p) -> None:
+    given = _changed(p, PAPER_ONLY_FIELDS)
+    if given:
+        opts = ", ".join(f"--{k.replace('_', '-')}" for k in given)
+        fail(f"{opts} do{'es' if len(given) == 1 else ''} not apply with --protocol lab (it pours its own rods "
+             f"into a cylinder of --container-radius); drop {opts}")
+    number("--container-radius", p.container_radius, ge=0.6, le=100, hint="in rod lengths: a rod must fit across "
+           "the cylinder in any direction")
+    number("--fill-height", p.fill_height, gt=0, le=100, hint="in rod lengths")
+    number("--pour-duration", p.pour_duration, gt=0, unit="s", hint="the rods need time to fall and settle")
+    number("--lift-duration", p.lift_duration, ge=0, unit="s", hint="0 shakes right after the lift")
+    if p.duration == 0 and p.lift_duration == 0:
+        fail("--duration 0 and --lift-duration 0 leave the lab protocol without a test; give the shaking a "
+             "--duration or the lifted packing a --lift-duration")
+    strains = tuple(p.strains)
+    for e in strains:
+        number("--strains", e, ge=0, lt=0.5, hint="compressive strains are fractions of the packing's height "
+               "(the paper's 0 to 0.15)")
+    if any(b < a for a, b in zip(strains, strains[1:])):
+        fail(f"--strains must not decrease (the piston presses further at each), got {','.join(f'{e:g}' for e in strains)}")
+    if strains:
+        number("--press-duration", p.press_duration, gt=0, unit="s")
 
 
 def _check_packing(p) -> int:
     """The random packing's checks (the box holds a rod, memory, density); its vertex count."""
     box = tuple(p.box)
     n = p.rods
+    if p.protocol == "lab":  # the pour column is dilute by construction (ProtocolParams.pour_height)
+        n_vertices = n * int(p.vertices)
+        memory_fits(f"{n} rods x {p.vertices} vertices", BASE_BYTES + BYTES_PER_VERTEX * n_vertices,
+                    "lower --n-rods, --fill-height, --container-radius or --vertices")
+        return n_vertices
     d = p.length / p.alpha
     diag = math.sqrt(sum(v * v for v in box))
     if diag < 1.0 + 1.0 / p.alpha:

@@ -34,6 +34,7 @@ def random_packing(
     n_vertices: int = 10,
     seed: int = 0,
     clearance: float = 0.0,
+    cylinder: float | None = None,
     max_attempts: int | None = None,
     device: str = "cpu",
     batch: int = 4096,
@@ -54,6 +55,9 @@ def random_packing(
         Seed of the random generator; the same seed gives the same packing.
     clearance : float
         Extra surface gap required between rods (m); 0 means touching is allowed.
+    cylinder : float, optional
+        Also keep every rod inside the vertical cylinder of this radius (m) about the box's
+        axis (through the centre of its x-y face): a pour into a round container.
     max_attempts : int, optional
         Give up after this many candidates, inside the box or not (default 20000 N + 1e5).
     device : str
@@ -100,6 +104,11 @@ def random_packing(
         # uniform position and isotropic direction, rejected unless fully inside: in a box
         # narrower than ~l this favours steep rods, as in the paper's procedure (docs/protocol.md)
         ok = np.all((c - half >= 0.0) & (c + half <= box), axis=1)
+        if cylinder is not None:
+            # a segment lies in the (convex) cylinder when both its ends do
+            axis = 0.5 * box[:2]
+            for sign in (-0.5, 0.5):
+                ok &= np.hypot(*(c[:, :2] + sign * length * d[:, :2] - axis).T) <= cylinder - r
         d, c = d[ok], c[ok]
         if len(c) == 0:
             continue

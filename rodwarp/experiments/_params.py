@@ -6,7 +6,8 @@ here (:func:`option_table`); :mod:`rodwarp.experiments._protocol` runs them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
 
 from rodwarp._util import option, option_table  # noqa: F401 (option_table re-exported)
 
@@ -15,6 +16,11 @@ import numpy as np
 #: rods per unit aspect ratio: the paper's packings hold N = round(5.4 alpha) rods (its
 #: "Materials and Methods"; docs/protocol.md). A number of rods, not a contact number.
 RODS_PER_ALPHA = 5.4
+#: volume fraction of a random packing of long rods, phi alpha = 5.4 (Philipse 1996; docs/experiments.md):
+#: the laboratory protocol fills its cylinder with the rods that take its fill height at this fraction
+PHI_ALPHA = 5.4
+#: the pour: rods released in a column above the floor at this phi alpha (dilute: they fall freely)
+POUR_PHI_ALPHA = 2.0
 #: rigid rods when the self-weight sag of a simply supported rod, 5 q l^4 / (384 E I), is below
 #: this fraction of a diameter (the knee of benchmarks/bench_rigid.py; docs/physics.md)
 RIGID_SAG = 0.01
@@ -36,6 +42,10 @@ class ProtocolParams:
     ``dataclasses.replace(params, ...)``.
     """
 
+    protocol: str = _param("paper", "paper (random packing in a box, entangling, the vibration test; "
+                                    "docs/protocol.md) or lab (rods poured into a cylinder, pressed by a piston to "
+                                    "--strains, the cylinder lifted away, the plate shaken at --freq, --amplitude "
+                                    "for --duration; docs/experiments.md).", "proto")
     alpha: float = _param(100.0, "Rod aspect ratio l / d (> 1).")
     freq: float = _param(10.0, "Floor vibration frequency of the stability test (Hz).")
     amplitude: float = _param(0.001, "Floor vibration amplitude of the stability test (m).", "amp")
@@ -46,10 +56,22 @@ class ProtocolParams:
     entangle_freq: float = _param(10.0, "Entangling vibration frequency (Hz).", "efreq")
     entangle_amplitude: float = _param(0.05, "Entangling vibration amplitude (m).", "eamp")
     static_load: float = _param(0.0, "Extra downward body load F~ in units of a rod's weight rho g d^2 l.", "F")
-    n_rods: int | None = _param(None, f"Number of rods (default round({RODS_PER_ALPHA:g} alpha)).", "n")
+    n_rods: int | None = _param(None, f"Number of rods (default round({RODS_PER_ALPHA:g} alpha); lab: the rods "
+                                      "that fill the cylinder to --fill-height).", "n")
     length: float = _param(1.0, "Rod length l (m).", "l")
     vertices: int = _param(10, "Vertices per rod.", "v")
     box: tuple = _param((1.0, 1.0, 2.5), "Container size in rod lengths, 'X,Y,Z'.")
+    container_radius: float = _param(1.0, "lab: radius of the cylinder the rods are poured into, in rod lengths.",
+                                     "Rc")
+    fill_height: float = _param(1.0, f"lab: without --n-rods, as many rods as fill the cylinder to this height (rod "
+                                     f"lengths) at a random packing's phi = {PHI_ALPHA:g} / alpha.", "H")
+    pour_duration: float = _param(1.0, "lab: time the poured rods fall and settle in the cylinder (s).", "pdur")
+    strains: tuple = _param((), "lab: compressive strains the piston presses the poured packing to in turn, "
+                                "'E1,E2,...' (e.g. 0,0.05,0.1,0.15); the fields at each in summary.json.", "eps")
+    press_duration: float = _param(0.5, "lab: time of each strain (s): pressed over its first half, held over "
+                                        "the second.", "prdur")
+    lift_duration: float = _param(1.0, "lab: time the packing stands (or spreads) after the cylinder is lifted "
+                                       "away, before the shaking (s); the test when --duration is 0.", "ldur")
     mu: float = _param(0.2, "Friction coefficient (rod-rod and walls).")
     young: float = _param(200e9, "Young's modulus (Pa).", "E")
     density: float = _param(7850.0, "Density (kg/m^3).", "rho")
@@ -136,8 +158,24 @@ class ProtocolParams:
 
     @property
     def rods(self) -> int:
-        """Number of rods: ``n_rods``, else round(5.4 alpha)."""
-        return self.n_rods if self.n_rods is not None else int(round(RODS_PER_ALPHA * self.alpha))
+        """Number of rods: ``n_rods``, else round(5.4 alpha) (lab: :meth:`lab_fill_rods`)."""
+        if self.n_rods is not None:
+            return self.n_rods
+        if self.protocol == "lab":
+            return self.lab_fill_rods()
+        return int(round(RODS_PER_ALPHA * self.alpha))
+
+    def lab_fill_rods(self) -> int:
+        """Rods that fill the lab's cylinder (radius ``container_radius`` l) to ``fill_height`` l
+        at phi = 5.4 / alpha: pi Rc^2 H phi / (pi d^2 l / 4) = 4 (Rc/l)^2 (H/l) 5.4 alpha."""
+        return max(1, int(round(4.0 * self.container_radius**2 * self.fill_height * PHI_ALPHA * self.alpha)))
+
+    def pour_height(self) -> float:
+        """Height (m) of the column the lab's rods are released in: they take it at phi alpha =
+        2 (dilute, so they fall freely), and at least 1.2 rod lengths."""
+        rc = self.container_radius * self.length
+        v_rod = math.pi / 4 * self.diameter**2 * self.length
+        return max(1.2 * self.length, self.rods * v_rod / (POUR_PHI_ALPHA / self.alpha * math.pi * rc**2))
 
     @property
     def a_over_g(self) -> float:
@@ -190,3 +228,41 @@ def rod_model_rule(params: ProtocolParams) -> dict:
         choice = "rigid" if sag < RIGID_SAG else "elastic"
     return {"rod_model": choice, "requested": params.rod_model, "sag_over_d": sag, "threshold": RIGID_SAG,
             "rule": f"rigid when the self-weight sag 5 q l^4 / (384 E I) < {RIGID_SAG:g} d, else elastic"}
+
+
+def default_run_name(params: ProtocolParams) -> str:
+    """Default simulate folder name: alpha, freq, gravity and seed always, then every other
+    parameter that differs from its default (``key<value>``, the key abbreviated as the
+    field's ``short`` metadata says), so that runs differing in any parameter never share a
+    folder; a short hash stands in for a list that would be too long."""
+    import hashlib
+
+    d = asdict(params)
+    defaults = {f.name: f.default for f in fields(ProtocolParams)}
+    short = {f.name: f.metadata.get("short") or f.name for f in fields(ProtocolParams)}
+
+    def fmt(v):
+        if isinstance(v, float):
+            return f"{v:g}"
+        if isinstance(v, (tuple, list)):
+            return "x".join(fmt(x) for x in v)
+        return str(v)
+
+    if params.initial:
+        head = f"{Path(params.initial).stem}_freq{fmt(params.freq)}_g{fmt(params.gravity)}"
+        skip = {"freq", "gravity", "initial", "device", "alpha", "length", "seed", "fields_every"}
+    else:
+        head = f"alpha{fmt(params.alpha)}_freq{fmt(params.freq)}_g{fmt(params.gravity)}_seed{params.seed}"
+        skip = {"alpha", "freq", "gravity", "seed", "device", "initial", "fields_every"}
+
+    def differs(k, v):
+        dv = defaults.get(k)
+        if isinstance(v, (tuple, list)) and isinstance(dv, (tuple, list)):
+            return list(v) != list(dv)
+        return v != dv
+
+    extra = [f"{short[k]}{fmt(v)}" for k, v in d.items() if k not in skip and differs(k, v)]
+    name = "_".join([head, *extra])
+    if len(name) > 120:
+        name = head + "_" + hashlib.sha1("_".join(extra).encode()).hexdigest()[:10]
+    return name.replace("/", "-")

@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +49,12 @@ def _build(params: ProtocolParams, rods, device, rod_model: str):
     builder = ModelBuilder(rods, Material(params.young, params.density), gravity=(0.0, 0.0, -g_eff), mu=params.mu,
                            rod_model=rod_model, rolling=params.spin, contact_law=params.contact_law_object(),
                            device=device)
+    if params.protocol == "lab":
+        from rodwarp.experiments._lab import lab_walls
+
+        box = lab_walls(builder, params, rods)
+        model = builder.finalize()
+        return model, RodSolver(model, iterations=params.iterations), box
     bb = rods.bounding_box()
     if rods.box is not None:
         # the input's container, widened to its rods: rods lying on (or sunk into) the box's
@@ -113,6 +119,9 @@ class LoopPosition:
         Per stage: step count, min, max, mean and sum of the steps (s), for summary.json.
     next_ck : float
         Simulated time of the next checkpoint (s).
+    marks : dict
+        What stages measured for later ones and for summary.json (the lab's packing height
+        when pressing began, ``height0``; its results at each strain, ``strains``).
     """
 
     y0: float
@@ -125,6 +134,7 @@ class LoopPosition:
     start_stage: int = 0
     start_j: int = 0
     mid_stage: bool = False
+    marks: dict = field(default_factory=dict)
 
     @classmethod
     def from_checkpoint(cls, meta: dict) -> "LoopPosition":
@@ -133,7 +143,8 @@ class LoopPosition:
         return cls(y0=meta["y0"], stepper=dict(meta["stepper"]), next_ck=float(meta["next_ck"]), steps=meta["steps"],
                    pile_ref=PileReference.from_dict(meta["pile_ref"]) if meta.get("pile_ref") else None,
                    stage_t0={k: float(v) for k, v in meta["stage_t0"].items()}, dts=meta["dts"],
-                   start_stage=meta["stage"], start_j=meta["j"], mid_stage=meta["mid_stage"])
+                   start_stage=meta["stage"], start_j=meta["j"], mid_stage=meta["mid_stage"],
+                   marks=dict(meta.get("marks", {})))
 
 
 def _resume_point(params: ProtocolParams, ckdir: Path):
@@ -328,6 +339,10 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
         rods = load(outdir / "initial.npz")
     elif params.initial:
         rods = checked.input_rods  # loaded, in metres, and checked by validate()
+    elif params.protocol == "lab":
+        from rodwarp.experiments._lab import lab_packing
+
+        rods = lab_packing(params, device)
     else:
         rods = random_packing(params.rods, params.length, params.diameter, np.asarray(params.box) * params.length,
                               n_vertices=params.vertices, seed=params.seed, device=device)
@@ -361,7 +376,7 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
         loop = LoopPosition.from_checkpoint(meta)
         if loop.mid_stage:
             stage = stages[loop.start_stage]
-            control = stage.control(model, loop.stage_t0[stage.name])
+            control = stage.control(model, loop.stage_t0[stage.name], loop.marks)
         saved = {k[6:]: v for k, v in arrays.items() if k.startswith("state_")}
         state.load_numpy(saved)
         points.load_numpy(saved)
@@ -369,7 +384,8 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
     if branch is not None:
         _take_entangling(donor, outdir, ck[1], n_frames, sim_rods)
     rec = Recorder(outdir, model, solver, sim_rods, n_frames, checkpoint=ck,
-                   done=[s.name for s in stages[:loop.start_stage]], fields_every=params.fields_every)
+                   done=[s.name for s in stages[:loop.start_stage]], fields_every=params.fields_every,
+                   lab=params.protocol == "lab")
 
     # the verdict's pile reference measures the input rods (a rigid rod's two-vertex chord may
     # differ from its polyline's length in the last bits)
@@ -386,11 +402,17 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
     rec.snapshot("end", state.positions())
     plot_snapshots(outdir / "snapshots.png", rec.snapshots, sim_rods.offsets, box=(box_lo, box_hi))
     floor = control.floor_height(state.time)
-    summary = _summary(params, model, rec.rows, loop, vd.judge_rows(rec.rows, loop.pile_ref.time, thresholds),
+    test = next(s for s in stages if s.test)
+    summary = _summary(params, model, rec.rows, loop, vd.judge_rows(rec.rows, loop.pile_ref.time, thresholds,
+                                                                    stage=test.name),
                        c, centroid_height(model, state, 0.0 if floor is None else floor), rule,
                        {"device": device, "wall_time_s": wall, "resumed": bool(resume), "initial_orientation": orient,
                         "fields_wall_s": rec.fields_wall_s,
                         "entangled_from": donor_rec})
+    if params.protocol == "lab":
+        from rodwarp.experiments._lab import lab_summary
+
+        summary["lab"] = lab_summary(params, model, rec.rows, loop, stages, thresholds)
     rec.write_metrics()
     write_json(outdir / "summary.json", summary)
     plot_metrics(outdir / "metrics.png", rec.rows, summary)
@@ -448,7 +470,11 @@ def _step_stages(params, model, solver, stages, engine, control, loop, rec, long
             j0 = loop.start_j if si == loop.start_stage else 0  # samples of this stage already taken
             if not resuming:
                 loop.stage_t0[name] = state.time
-                control = stage.control(model, state.time)
+                if stage.strain is not None and "height0" not in loop.marks:
+                    from rodwarp.experiments._lab import packing_top
+
+                    loop.marks["height0"] = packing_top(model, state.positions())
+                control = stage.control(model, state.time, loop.marks)
                 loop.dts[name] = {"steps": 0, "min": None, "max": None, "mean": None, "sum": 0.0, "refused": 0}
                 loop.next_ck = state.time + params.checkpoint_every
                 if stage.test:
@@ -462,7 +488,7 @@ def _step_stages(params, model, solver, stages, engine, control, loop, rec, long
             n_samples = max(1, int(math.ceil(dur / params.save_every - 1e-9)))
             update(name, state.time - t_s0, dur)
             if si == 0 and j0 == 0 and not loop.mid_stage:
-                rec.sample(name, state, points, None, control, loop)
+                rec.sample(name, state, points, None, control, loop, test=stage.test)
             t0 = t_mark = time.perf_counter()
             steps0 = loop.steps
             j = j0 + 1
@@ -498,7 +524,7 @@ def _step_stages(params, model, solver, stages, engine, control, loop, rec, long
                 loop.stepper["dt"] = dt
                 loop.stepper["overlap"] = info.max_overlap
                 if landing:
-                    rec.sample(name, state, points, info, control, loop)
+                    rec.sample(name, state, points, info, control, loop, test=stage.test)
                     j += 1
                     rate = (loop.steps - steps0) / max(time.perf_counter() - t0, 1e-9)
                     update(name, state.time - t_s0, dur, note=f"{rate:.0f} steps/s")
@@ -507,6 +533,9 @@ def _step_stages(params, model, solver, stages, engine, control, loop, rec, long
                     t_mark = _add_wall(st, t_mark)
                     rec.checkpoint(state, points, loop, si, j - 1, True, parameters)
             loop.dts[name]["mean"] = loop.dts[name]["sum"] / max(loop.dts[name]["steps"], 1)
+            if stage.strain is not None:
+                loop.marks.setdefault("strains", []).append(rec.strain_result(stage, state, points, control, params,
+                                                                              loop.marks["height0"]))
             if stage.snapshot:
                 rec.snapshot(AFTER_ENTANGLING if name == ENTANGLE else f"after {name}", state.positions())
             if si + 1 < len(stages):
@@ -561,41 +590,3 @@ def _summary(params, model, rows, loop, verdict, contacts, centroid_height, rule
         "fields_wall_s": run["fields_wall_s"], "cv_e_final": _last(rows, "cv_e"),
         "parameters": asdict(params), "versions": versions(),
     }
-
-
-def default_run_name(params: ProtocolParams) -> str:
-    """Default simulate folder name: alpha, freq, gravity and seed always, then every other
-    parameter that differs from its default (``key<value>``, the key abbreviated as the
-    field's ``short`` metadata says), so that runs differing in any parameter never share a
-    folder; a short hash stands in for a list that would be too long."""
-    import hashlib
-
-    d = asdict(params)
-    defaults = {f.name: f.default for f in fields(ProtocolParams)}
-    short = {f.name: f.metadata.get("short") or f.name for f in fields(ProtocolParams)}
-
-    def fmt(v):
-        if isinstance(v, float):
-            return f"{v:g}"
-        if isinstance(v, (tuple, list)):
-            return "x".join(fmt(x) for x in v)
-        return str(v)
-
-    if params.initial:
-        head = f"{Path(params.initial).stem}_freq{fmt(params.freq)}_g{fmt(params.gravity)}"
-        skip = {"freq", "gravity", "initial", "device", "alpha", "length", "seed", "fields_every"}
-    else:
-        head = f"alpha{fmt(params.alpha)}_freq{fmt(params.freq)}_g{fmt(params.gravity)}_seed{params.seed}"
-        skip = {"alpha", "freq", "gravity", "seed", "device", "initial", "fields_every"}
-
-    def differs(k, v):
-        dv = defaults.get(k)
-        if isinstance(v, (tuple, list)) and isinstance(dv, (tuple, list)):
-            return list(v) != list(dv)
-        return v != dv
-
-    extra = [f"{short[k]}{fmt(v)}" for k, v in d.items() if k not in skip and differs(k, v)]
-    name = "_".join([head, *extra])
-    if len(name) > 120:
-        name = head + "_" + hashlib.sha1("_".join(extra).encode()).hexdigest()[:10]
-    return name.replace("/", "-")

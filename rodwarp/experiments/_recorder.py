@@ -49,10 +49,13 @@ class Recorder:
         Warp field kernels of :func:`rodwarp.analysis.compute_fields` run on the sample's rods
         (default grid, the sample's contacts) and its row gets ``cv_e``, ``mean_e`` and
         ``mean_phi``, the same numbers ``rodwarp analyze`` gives for that frame; 0: never.
+    lab : bool
+        The laboratory protocol's columns too: the piston's face height and the packing's
+        spread radius (docs/experiments.md).
     """
 
     def __init__(self, outdir: Path, model, solver, rods, n_frames: int, checkpoint=None, done=(),
-                 fields_every: float = 0.0):
+                 fields_every: float = 0.0, lab: bool = False):
         from rodwarp.rodset.trajectory import Trajectory
 
         self.outdir = Path(outdir)
@@ -63,6 +66,7 @@ class Recorder:
         self.frame = 0
         self.fields_every = float(fields_every)
         self.fields_wall_s = 0.0
+        self.lab = bool(lab)
         if checkpoint is not None:
             arrays, meta = checkpoint
             self.rows = meta["rows"]
@@ -74,7 +78,7 @@ class Recorder:
                                      resume=checkpoint is not None)
         (self.outdir / "vtk").mkdir(exist_ok=True)
 
-    def sample(self, stage: str, state, points, info, control, loop) -> None:
+    def sample(self, stage: str, state, points, info, control, loop, test: bool | None = None) -> None:
         """Take the sample of ``state`` (the state just reached, at a sample time).
 
         Parameters
@@ -89,6 +93,8 @@ class Recorder:
             The stage's control (its floor is the reference of heights).
         loop : LoopPosition
             The run's position: the step count, y_c(0) and the pile at the test start.
+        test : bool, optional
+            Whether the stage is the test (default: it is named ``experiments.TEST``).
         """
         from rodwarp.rodset.trajectory import write_pvd, write_vtp
         from rodwarp.sim import rod_contacts
@@ -101,7 +107,7 @@ class Recorder:
         floor = 0.0 if floor is None else floor
         in_big = largest_cluster(model.n_rods, c)
         h = vd.centroid_height_above(x, model.mass_np, floor)
-        test = stage == TEST and pile_ref is not None
+        test = (stage == TEST if test is None else test) and pile_ref is not None
         self.rows.append({
             "time": state.time, "stage": stage,
             "contacts_per_rod": contacts_per_rod(model.n_rods, c),
@@ -120,6 +126,7 @@ class Recorder:
             # contact points the step solved (speculative ones included), not touching rod pairs
             "n_contact_pairs": info.n_contacts if info else 0,
             **self._fields(state.time, x, c),
+            **(self._lab_columns(x, control, state.time) if self.lab else {}),
         })
         self.trajectory.write(self.frame, state.time, x)
         fname = f"vtk/frame_{self.frame:05d}.vtp"
@@ -155,6 +162,37 @@ class Recorder:
         num = lambda v: "" if v is None else float(v)  # noqa: E731
         return {"cv_e": num(st.get("cv_e")), "mean_e": num(st.get("mean_e")), "mean_phi": num(st.get("mean_phi"))}
 
+    def _lab_columns(self, x: np.ndarray, control, t: float) -> dict:
+        """The lab protocol's columns: piston face height (m; empty when it is out) and spread
+        radius (m)."""
+        from rodwarp.experiments._lab import piston_height, spread_radius
+
+        top = piston_height(self.model, control, t)
+        return {"piston_height": "" if top is None else top, "spread_radius": spread_radius(self.model, x)}
+
+    def strain_result(self, stage, state, points, control, params, height0: float) -> dict:
+        """At the end of a piston stage: the strain reached, the rest it came to, and the fields
+        of the pressed packing (written to ``fields_<stage>.npz``; statistics returned)."""
+        from rodwarp.experiments._lab import piston_height, strain_fields
+        from rodwarp.sim import rod_contacts
+
+        x = state.positions()
+        c = rod_contacts(self.model, state, points)
+        top = piston_height(self.model, control, state.time)
+        f, stats = strain_fields(self.model, self.rods, x, c, params, top, self.model.device)
+        name = f"fields_{stage.name}.npz"
+        if f is not None:
+            f.save(self.outdir / name)
+        speed = np.linalg.norm(state.velocities(), axis=1)
+        num = lambda v: None if v is None else float(v)  # noqa: E731
+        return {"stage": stage.name, "strain": float(stage.strain[1]), "height0": float(height0),
+                "piston_height": float(top), "strain_reached": 1.0 - float(top) / float(height0),
+                "packing_top": float(np.max(x[:, 2] + self.model.radius_np[self.model.vertex_rod_np])),
+                "max_speed": float(speed.max()), "kinetic_energy": float(self.solver.energy(state)["kinetic"]),
+                "contacts_per_rod": contacts_per_rod(self.model.n_rods, c),
+                "fields": name if f is not None else None, **{k: num(v) if not isinstance(v, str) else v
+                                                              for k, v in stats.items()}}
+
     def snapshot(self, title: str, x: np.ndarray) -> None:
         """Keep the positions ``x`` (V, 3) m for ``snapshots.png`` under ``title``."""
         self.snapshots.append((title, x))
@@ -186,7 +224,7 @@ class Recorder:
                 "pile_ref": loop.pile_ref.to_dict() if loop.pile_ref is not None else None,
                 "stage_t0": loop.stage_t0, "frame": self.frame, "vtk": self.vtk,
                 "parameters": json.loads(json.dumps(parameters)), "stepper": loop.stepper, "dts": loop.dts,
-                "next_ck": loop.next_ck}
+                "next_ck": loop.next_ck, "marks": loop.marks}
         save_checkpoint(self.outdir / "checkpoints", loop.steps, arrays, meta)
         if keep_as is not None:
             write_checkpoint_file(keep_as, arrays, meta)

@@ -167,10 +167,10 @@ def judge(times, t0: float, height_kept, cluster_fraction, rods_left=None,
     return Verdict(stable, float(h[-1]), tau, float(f[-1]), left, thresholds)
 
 
-def judge_rows(rows, t0: float, thresholds: Thresholds = DEFAULT_THRESHOLDS) -> Verdict:
+def judge_rows(rows, t0: float, thresholds: Thresholds = DEFAULT_THRESHOLDS, stage: str = TEST) -> Verdict:
     """:func:`judge` on metric rows (dicts with ``time``, ``stage``, ``height_kept``,
-    ``largest_cluster_fraction``, ``rods_left``) of the stage named ``stability``."""
-    test = [r for r in rows if r["stage"] == TEST and float(r["time"]) > t0]
+    ``largest_cluster_fraction``, ``rods_left``) of the test stage (named ``stage``)."""
+    test = [r for r in rows if r["stage"] == stage and float(r["time"]) > t0]
     if not test:
         raise RodwarpError("no samples of the stability test to judge; run a test longer than --save-every")
     col = lambda k: [float(r[k]) for r in test]  # noqa: E731

@@ -26,11 +26,12 @@ class SolveLaunches:
         change; the drive enters as three scalars."""
         m = self.model
         P = len(m.walls)
-        key = (id(control), P, tuple(control.on.tolist()), tuple(control.drive.direction.tolist()))
+        key = (id(control), P, tuple(control.on.tolist()), tuple(control.moving.tolist()),
+               tuple(control.drive.direction.tolist()))
         w = self._walls_struct
         if w is None or self._walls_key != key:
             dev = m.device
-            rows = device_rows(m.walls, control.on, control.drive.direction)
+            rows = device_rows(m.walls, control.on, control.drive.direction, control.moving)
             w = self._walls_struct = Walls()
             w.n = P
             for name, a in rows.items():

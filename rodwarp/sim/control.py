@@ -19,9 +19,9 @@ from rodwarp.errors import RodwarpError
 @dataclass
 class Drive:
     """Prescribed displacement of the moving walls along ``direction`` (m): A sin(2 pi f (t -
-    phase_time)) (a vibrated floor), or, with ``ramp_speed`` set, a ramp at that speed from
-    ``phase_time`` for ``ramp_duration`` then held (a piston that compresses, a container lifted
-    away)."""
+    phase_time)) (a vibrated floor), or a ramp (``ramp`` True): from ``ramp_start`` at
+    ``ramp_speed`` from ``phase_time`` for ``ramp_duration``, then held (a piston that
+    compresses, a container lifted away)."""
 
     amplitude: float = 0.0
     frequency: float = 0.0
@@ -29,19 +29,24 @@ class Drive:
     phase_time: float = 0.0
     ramp_speed: float = 0.0
     ramp_duration: float = math.inf
+    ramp_start: float = 0.0
+    ramp: bool = False
+    from_rest: bool = False
 
     def displacement(self, t: float) -> float:
         """Displacement at time t (m)."""
-        if self.ramp_speed != 0.0:
-            return self.ramp_speed * min(max(t - self.phase_time, 0.0), self.ramp_duration)
+        if self.ramp:
+            return self.ramp_start + self.ramp_speed * min(max(t - self.phase_time, 0.0), self.ramp_duration)
         if self.amplitude == 0.0 or self.frequency == 0.0:
             return 0.0
+        if self.from_rest:  # starts at rest at its lowest point: no jump in position or velocity
+            return self.amplitude * (1.0 - math.cos(2.0 * math.pi * self.frequency * (t - self.phase_time)))
         return self.amplitude * math.sin(2.0 * math.pi * self.frequency * (t - self.phase_time))
 
     @property
     def peak_speed(self) -> float:
         """Fastest wall speed (m/s): 2 pi f |A|, or the ramp's speed."""
-        if self.ramp_speed != 0.0:
+        if self.ramp:
             return abs(self.ramp_speed)
         return 2.0 * math.pi * self.frequency * abs(self.amplitude)
 
@@ -58,6 +63,7 @@ class Control:
     def __init__(self, model):
         self.model = model
         self.on = np.ones(len(model.walls), dtype=bool)
+        self.moving = np.array([w.moving for w in model.walls], dtype=bool)
         self.drive = Drive()
         self._torque = None
 
@@ -67,15 +73,20 @@ class Control:
         n = len(self.model.walls)
         if self.on.size < n:
             self.on = np.concatenate([self.on, np.ones(n - self.on.size, dtype=bool)])
+            self.moving = np.concatenate([self.moving, [w.moving for w in self.model.walls[self.moving.size:]]])
 
-    def remove_walls(self, names) -> None:
-        """Take walls out by name (e.g. the side walls and lid before the stability test)."""
-        self._sync()
-        names = set(names)
+    def _names(self, names) -> set:
+        names = {names} if isinstance(names, str) else set(names)
         known = {p.name for p in self.model.walls}
         unknown = sorted(names - known)
         if unknown:
             raise RodwarpError(f"no wall named {', '.join(unknown)}; the model has {', '.join(sorted(known))}")
+        return names
+
+    def remove_walls(self, names) -> None:
+        """Take walls out by name (e.g. the side walls and lid before the stability test)."""
+        self._sync()
+        names = self._names(names)
         for k, p in enumerate(self.model.walls):
             if p.name in names:
                 self.on[k] = False
@@ -87,26 +98,42 @@ class Control:
             if names is None or p.name in set(names):
                 self.on[k] = True
 
+    def set_moving(self, names) -> None:
+        """Exactly the walls ``names`` follow the drive (the model's ``moving`` flags say which
+        do by default): a scene whose floor is shaken in one stage and whose piston presses in
+        another."""
+        self._sync()
+        names = self._names(names)
+        self.moving = np.array([p.name in names for p in self.model.walls], dtype=bool)
+
     def walls_in_place(self) -> list[str]:
         self._sync()
         return [p.name for k, p in enumerate(self.model.walls) if self.on[k]]
 
-    def set_drive(self, amplitude: float, frequency: float, direction=(0.0, 0.0, 1.0), phase_time: float = 0.0) -> None:
-        """Moving walls follow x = A sin(2 pi f (t - phase_time)) along ``direction`` (m, Hz)."""
+    def set_drive(self, amplitude: float, frequency: float, direction=(0.0, 0.0, 1.0), phase_time: float = 0.0,
+                  from_rest: bool = False) -> None:
+        """Moving walls follow x = A sin(2 pi f (t - phase_time)) along ``direction`` (m, Hz); with
+        ``from_rest``, x = A (1 - cos(2 pi f (t - phase_time))): the same oscillation started at
+        rest at its lowest point, so a pile resting on the wall is not struck at the drive's
+        peak speed in the first step."""
         if frequency < 0:
             raise RodwarpError(f"drive frequency must be >= 0 Hz, got {frequency}")
         d = np.asarray(direction, float)
-        self.drive = Drive(float(amplitude), float(frequency), d / np.linalg.norm(d), float(phase_time))
+        self.drive = Drive(float(amplitude), float(frequency), d / np.linalg.norm(d), float(phase_time),
+                           from_rest=bool(from_rest))
 
     def set_ramp(self, speed: float, duration: float = math.inf, direction=(0.0, 0.0, 1.0),
-                 start_time: float = 0.0) -> None:
+                 start_time: float = 0.0, start: float = 0.0) -> None:
         """Moving walls travel at ``speed`` (m/s) along ``direction`` from ``start_time`` (s) for
-        ``duration`` (s), then stay: a piston pressing by speed x duration, a container lifted away."""
-        if not (math.isfinite(speed) and duration > 0):
-            raise RodwarpError(f"a ramp needs a finite speed and a positive duration, got {speed} m/s for {duration} s")
+        ``duration`` (s), then stay: a piston pressing by speed x duration, a container lifted
+        away. ``start`` (m) is their displacement when the ramp begins (a piston already
+        lowered onto the packing)."""
+        if not (math.isfinite(speed) and math.isfinite(start) and duration > 0):
+            raise RodwarpError(f"a ramp needs a finite speed and start and a positive duration, got {speed} m/s "
+                               f"from {start} m for {duration} s")
         d = np.asarray(direction, float)
         self.drive = Drive(direction=d / np.linalg.norm(d), phase_time=float(start_time), ramp_speed=float(speed),
-                           ramp_duration=float(duration))
+                           ramp_duration=float(duration), ramp_start=float(start), ramp=True)
 
     def floor_height(self, t: float) -> float | None:
         """Height z (m) at time t of the wall named ``floor`` (moving with the drive when it is
@@ -115,7 +142,7 @@ class Control:
         for k, p in enumerate(self.model.walls):
             if p.name == "floor" and p.kind == "plane" and self.on[k]:
                 z = p.offset / p.normal[2] if abs(p.normal[2]) > 0 else p.offset
-                if p.moving:
+                if self.moving[k]:
                     z += float(self.drive.direction[2]) * self.drive.displacement(t)
                 return float(z)
         return None

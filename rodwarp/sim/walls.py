@@ -64,9 +64,10 @@ class Plane(_Wall):
         shift = float(np.dot(self.normal, direction)) * displacement if self.moving else 0.0
         return np.asarray(x, float) @ self.normal - (self.offset + shift)
 
-    def device_row(self, drive_direction):
-        """(geom0, geom1, shift) of the device bundle (kernels/walls.py, ``plane_surface``)."""
-        shift = float(self.normal @ drive_direction) if self.moving else 0.0
+    def device_row(self, drive_direction, moving: bool):
+        """(geom0, geom1, shift) of the device bundle (kernels/walls.py, ``plane_surface``),
+        the wall following the drive when ``moving``."""
+        shift = float(self.normal @ drive_direction) if moving else 0.0
         return (*self.normal, self.offset), (0.0, 0.0, 0.0, 0.0), shift
 
     @classmethod
@@ -102,8 +103,9 @@ class Cylinder(_Wall):
     radius: float
     kind = "cylinder"
 
-    def device_row(self, drive_direction):
-        """(geom0, geom1, shift) of the device bundle (kernels/walls.py, ``cylinder_surface``)."""
+    def device_row(self, drive_direction, moving: bool):
+        """(geom0, geom1, shift) of the device bundle (kernels/walls.py, ``cylinder_surface``; a
+        moving cylinder's axis is displaced there)."""
         return (*self.point, self.radius), (*self.axis, 0.0), 0.0
 
     @classmethod
@@ -127,15 +129,17 @@ class Cylinder(_Wall):
         return self.radius - np.linalg.norm(rho, axis=-1)
 
 
-def device_rows(walls, on, drive_direction) -> dict:
+def device_rows(walls, on, drive_direction, moving=None) -> dict:
     """Per-wall arrays of the device bundle (``kernels.structs.Walls``), one row per wall; a
-    model without walls gets one inert row (arrays cannot be empty)."""
+    model without walls gets one inert row (arrays cannot be empty). ``on`` and ``moving``
+    (default the walls' own flags) say per wall whether it is in place and follows the drive."""
     rows = max(len(walls), 1)
     out = {"kind": np.zeros(rows, dtype=np.int32), "geom0": np.zeros((rows, 4)), "geom1": np.zeros((rows, 4)),
            "moving": np.zeros(rows, dtype=np.int32), "shift": np.zeros(rows), "mu": np.zeros(rows),
            "on": np.zeros(rows, dtype=np.int32)}
     for k, w in enumerate(walls):
+        mv = bool(w.moving if moving is None else moving[k])
         out["kind"][k] = KINDS[w.kind]
-        out["geom0"][k], out["geom1"][k], out["shift"][k] = w.device_row(drive_direction)
-        out["mu"][k], out["on"][k], out["moving"][k] = w.mu, int(on[k]), int(w.moving)
+        out["geom0"][k], out["geom1"][k], out["shift"][k] = w.device_row(drive_direction, mv)
+        out["mu"][k], out["on"][k], out["moving"][k] = w.mu, int(on[k]), int(mv)
     return out

@@ -1,0 +1,171 @@
+"""The laboratory protocol's scene (docs/experiments.md): rods poured into a cylinder on a
+plate, a piston above them, and what it measures that the paper's protocol does not (the
+fields at each compressive strain, the lifted packing's spread).
+
+The stages are :func:`rodwarp.experiments._plan.lab_plan`; the loop, checkpoints and outputs
+are the paper protocol's (:func:`rodwarp.experiments.run_protocol`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rodwarp.experiments._plan import FLOOR, PISTON, TUBE
+
+#: the piston starts this many rod lengths above the top of the pour column
+PISTON_CLEARANCE = 0.5
+#: what summary.json keeps of each strain's field statistics (rodwarp.analysis.field_statistics)
+STRAIN_STATS = ("mean_phi", "mean_S", "mean_c", "mean_e", "mean_n", "std_e", "cv_e", "median_e", "q1_e", "q3_e",
+                "iqr_e", "e_lb", "outlier_fraction", "n_valid_voxels", "radius", "spacing")
+
+
+def lab_packing(params, device):
+    """The rods released for the pour: ``params.rods`` straight rods at uniform random
+    positions and isotropic directions (random sequential addition, seed ``params.seed``)
+    inside the cylinder of radius ``container_radius`` l about the z axis, in a column from
+    one diameter above the floor to :meth:`~rodwarp.experiments.ProtocolParams.pour_height`.
+
+    Returns
+    -------
+    RodSet
+        The rods (m), ``box`` the column's bounding box.
+    """
+    from rodwarp.experiments._packing import random_packing
+
+    rc = params.container_radius * params.length
+    height = params.pour_height()
+    rods = random_packing(params.rods, params.length, params.diameter, (2 * rc, 2 * rc, height),
+                          n_vertices=params.vertices, seed=params.seed, device=device, cylinder=rc)
+    shift = np.array([-rc, -rc, params.diameter])
+    out = rods.with_points(rods.points + shift)
+    out.box = rods.box + shift
+    out.attrs.update(rods.attrs)
+    out.attrs.update({"pour": "cylinder", "container_radius_m": rc, "pour_height_m": height})
+    return out
+
+
+def lab_walls(builder, params, rods) -> tuple[np.ndarray, np.ndarray]:
+    """Add the lab's walls to ``builder``: the plate (``floor``, z = 0, shaken), the cylinder
+    (``tube``, radius ``container_radius`` l about the z axis) and the ``piston`` (the
+    half-space below it, PISTON_CLEARANCE l above the rods, pressing down). Returns the
+    scene's box (lo, hi) for the figures (m)."""
+    from rodwarp.sim.walls import Cylinder, Plane
+
+    rc = params.container_radius * params.length
+    top = float(rods.bounding_box()[1][2]) + PISTON_CLEARANCE * params.length
+    builder.add_wall(Plane.make((0.0, 0.0, 1.0), 0.0, moving=True, name=FLOOR))
+    builder.add_wall(Cylinder.make((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), rc, name=TUBE))
+    builder.add_wall(Plane.make((0.0, 0.0, -1.0), -top, moving=True, name=PISTON))
+    return np.array([-rc, -rc, 0.0]), np.array([rc, rc, top])
+
+
+def packing_top(model, x: np.ndarray) -> float:
+    """Height (m) of the packing's highest surface point above z = 0 (the plate at rest)."""
+    r = model.radius_np[model.vertex_rod_np]
+    return float(np.max(x[:, 2] + r))
+
+
+def spread_radius(model, x: np.ndarray) -> float:
+    """Largest horizontal distance (m) of a rod's mass centroid from the cylinder's axis: the
+    lifted packing's spread (it starts below ``container_radius`` l)."""
+    from rodwarp.experiments._verdict import rod_centroids
+
+    c = rod_centroids(x, model.vertex_rod_np, model.mass_np, model.n_rods)
+    return float(np.max(np.hypot(c[:, 0], c[:, 1])))
+
+
+def piston_height(model, control, t: float) -> float | None:
+    """Height (m) of the piston's face at time t, None when it is not in place."""
+    for k, w in enumerate(model.walls):
+        if w.name == PISTON and control.on[k]:
+            shift = control.drive.displacement(t) if control.moving[k] else 0.0
+            return float(-w.offset - shift)
+    return None
+
+
+def strain_fields(model, sim_rods, x, contacts, params, top: float, device):
+    """The fields of the pressed packing (the analysis of ``rodwarp analyze``: ball radius
+    sqrt(d l), spacing R / 2) in the box inscribed in the cylinder, from the plate to the
+    piston's face at ``top`` (m): balls that leave it are not counted.
+
+    Returns
+    -------
+    (Fields or None, dict)
+        The fields and the kept statistics (:data:`STRAIN_STATS`); (None, {"error": ...})
+        when no ball fits.
+    """
+    from rodwarp.analysis import compute_fields, field_statistics
+    from rodwarp.errors import RodwarpError
+
+    half = params.container_radius * params.length / math.sqrt(2.0)
+    rods = sim_rods.with_points(x)
+    rods.contacts = contacts
+    domain = np.array([[-half, -half, 0.0], [half, half, top]])
+    try:
+        f = compute_fields(rods, domain=domain, device=device)
+        st = field_statistics(f, power_laws=False)
+    except RodwarpError as e:  # no ball fits the pressed packing
+        return None, {"error": str(e)}
+    return f, {k: st.get(k) for k in STRAIN_STATS}
+
+
+def _stage_rows(rows, name: str) -> list:
+    return [r for r in rows if r["stage"] == name]
+
+
+def lab_summary(params, model, rows, loop, stages, thresholds) -> dict:
+    """summary.json's ``lab`` block: the scene, the pour, each strain, the lifted packing and
+    the shaking judged by cohesion (docs/experiments.md, "Judging a packing that is thrown").
+
+    The lift: the mass centroid's height and the spread radius at its end over their values
+    just before (``height_kept_after_lift``, ``spread_over_container``: above 1 the rods left
+    the container's footprint). The shaking: y_c(t) / y_c(0) at each sample (Fig. 1E, x axis
+    cycles N = (t - t_0) f), and cohesion alone: the largest contact cluster's share f(t), its
+    persistence tau_f (the share of the shaking with f >= the verdict's cluster threshold) and
+    the rods separated from it at the end, 1 - f. Height is no criterion while the plate throws
+    the packing: at A = 25 mm, 5 Hz (a/g = 2.5) it leaves the plate every cycle.
+    """
+    from rodwarp.experiments import _verdict as vd
+    from rodwarp.experiments._plan import LIFT, POUR, SHAKE
+
+    num = lambda r, k: None if r is None or r.get(k) in ("", None) else float(r[k])  # noqa: E731
+    names = [s.name for s in stages]
+    pour = _stage_rows(rows, POUR)
+    out = {"container_radius_m": params.container_radius * params.length, "pour_height_m": params.pour_height(),
+           "n_rods": model.n_rods, "fill_rule": None if params.n_rods is not None else
+           f"round(4 (Rc/l)^2 (H/l) 5.4 alpha) rods fill the cylinder to H = {params.fill_height:g} l at "
+           "phi = 5.4 / alpha", "stages": names,
+           "pour": {"centroid_height_m": num(pour[-1], "centroid_height"),
+                    "kinetic_energy_J": num(pour[-1], "kinetic_energy"),
+                    "contacts_per_rod": num(pour[-1], "contacts_per_rod")},
+           "strains": loop.marks.get("strains", [])}
+    if LIFT in names:
+        i = names.index(LIFT)
+        before = [r for r in rows if r["stage"] == names[i - 1]][-1]
+        lift = _stage_rows(rows, LIFT)
+        rc = params.container_radius * params.length
+        out["lift"] = {"height_kept_after_lift": num(lift[-1], "centroid_height") / num(before, "centroid_height"),
+                       "spread_radius_m": num(lift[-1], "spread_radius"),
+                       "spread_over_container": num(lift[-1], "spread_radius") / rc,
+                       "largest_cluster_fraction": num(lift[-1], "largest_cluster_fraction"),
+                       "kinetic_energy_J": num(lift[-1], "kinetic_energy")}
+    if SHAKE in names:
+        t0 = loop.stage_t0[SHAKE]
+        shake = [r for r in _stage_rows(rows, SHAKE) if float(r["time"]) > t0]
+        y0 = float([r for r in rows if float(r["time"]) <= t0][-1]["centroid_height"])
+        t = np.array([float(r["time"]) for r in shake])
+        f = np.array([float(r["largest_cluster_fraction"]) for r in shake])
+        out["shake"] = {"freq_hz": params.freq, "amplitude_m": params.amplitude, "a_over_g": params.a_over_g,
+                        "cycles": ((t - t0) * params.freq).tolist(),
+                        "centroid_height_ratio": [float(r["centroid_height"]) / y0 for r in shake],
+                        "cohesion": {"persistence": vd.persistence(t, t0, f >= thresholds.cluster),
+                                     "largest_cluster_fraction": float(f[-1]), "separated": float(1.0 - f[-1]),
+                                     "cohesive": bool(f[-1] >= thresholds.cluster and
+                                                      vd.persistence(t, t0, f >= thresholds.cluster)
+                                                      >= thresholds.persistence),
+                                     "rule": f"cohesive = f >= {thresholds.cluster:g} at the end and f >= "
+                                             f"{thresholds.cluster:g} for at least {thresholds.persistence:g} of "
+                                             "the shaking (height is not judged: the plate throws the packing)"}}
+    return out

@@ -1,0 +1,310 @@
+"""The paper's laboratory experiments in silico (docs/experiments.md): runs and report.
+
+``run`` makes each lab run of a set that is not finished (``rodwarp simulate --protocol lab``,
+one process at a time, continued with ``--resume`` where a killed run left checkpoints), so the
+set can be stopped and started again across sessions:
+
+    python scripts/lab_experiments.py run --set shake --runs RUNS_DIR [--alphas 38,66] [--seeds 0,1]
+    python scripts/lab_experiments.py run --set press --runs RUNS_DIR
+    python scripts/lab_experiments.py run --set container --runs RUNS_DIR
+
+``report`` collects the finished runs' summary.json files into
+``benchmarks/results/lab_experiments.json`` and ``.md`` and draws the figures: y_c(t)/y_c(0)
+against cycles (Fig. 1E), the persistence against alpha (Fig. 1F), the lifted packings, and the
+field statistics against strain beside the authors' experimental fields (their statistics from
+``benchmarks/results/paper_fields.json``, and with ``--paper-fields DIR`` the means of n, phi, S
+and c from the fields themselves):
+
+    python scripts/lab_experiments.py report --runs RUNS_DIR [--paper-fields DIR]
+
+The rods are the experiments' steel rods (l and d from the authors' data), real gravity, the
+plate shaken at f = 5 Hz, A = 25 mm. The cylinder holds the rods that fill it to one rod length
+at phi = 5.4 / alpha (``--fill-height``), radius one rod length unless a set says otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import subprocess
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+OUT = ROOT / "benchmarks" / "results"
+#: the experiments' rods: alpha -> (length, m); d = l / alpha (the authors' data repository)
+RODS = {38: 0.025, 66: 0.05, 76: 0.05, 100: 0.05, 200: 0.05}
+LAB = ["--protocol", "lab", "--gravity", "9.81", "--freq", "5", "--amplitude", "0.025", "--fields-every", "0",
+       "--quiet"]
+#: the sets: what each run adds to LAB (alpha, length and seed come from the grid)
+SETS = {
+    # Fig. 1A-F: poured, container lifted (1 s), shaken 10 s (50 cycles); a sample per cycle
+    "shake": dict(alphas=(38, 66, 76, 100, 200), seeds=(0, 1),
+                  args=["--duration", "10", "--lift-duration", "1", "--save-every", "0.2", "--checkpoint-every", "1"]),
+    # Fig. 2-3: poured, pressed to the CT's strains, each held; the fields at each
+    "press": dict(alphas=(38, 66, 76, 100), seeds=(0, 1),
+                  args=["--strains", "0,0.05,0.1,0.15", "--press-duration", "0.5", "--duration", "0",
+                        "--lift-duration", "0.2", "--save-every", "0.05", "--checkpoint-every", "1"]),
+    # container size: the shaking of alpha 38 and 66 in a cylinder 1.5 times as wide
+    "container": dict(alphas=(38, 66), seeds=(0, 1),
+                      args=["--container-radius", "1.5", "--duration", "10", "--lift-duration", "1",
+                            "--save-every", "0.2", "--checkpoint-every", "1"]),
+}
+
+
+def _name(kind: str, alpha: int, seed: int) -> str:
+    return f"{kind}_alpha{alpha}_seed{seed}"
+
+
+def _command(kind: str, alpha: int, seed: int, folder: Path) -> list[str]:
+    return ["rodwarp", "simulate", *LAB, "--alpha", str(alpha), "--length", str(RODS[alpha]), "--seed", str(seed),
+            *SETS[kind]["args"], "--out", str(folder)]
+
+
+def _finished(folder: Path) -> bool:
+    return (folder / "summary.json").exists()
+
+
+def run(args) -> int:
+    runs = Path(args.runs)
+    runs.mkdir(parents=True, exist_ok=True)
+    spec = SETS[args.set]
+    alphas = [int(a) for a in args.alphas.split(",")] if args.alphas else spec["alphas"]
+    seeds = [int(s) for s in args.seeds.split(",")] if args.seeds else spec["seeds"]
+    exe = str(Path(sys.executable).with_name("rodwarp"))
+    for seed in seeds:  # every alpha of a seed before the next seed: a stopped set still spans alpha
+        for alpha in alphas:
+            folder = runs / _name(args.set, alpha, seed)
+            if _finished(folder):
+                continue
+            cmd = _command(args.set, alpha, seed, folder)
+            cmd[0] = exe
+            if any(folder.glob("checkpoints/ckpt_*.npz")):
+                cmd.append("--resume")
+            t0 = time.perf_counter()
+            print(f"{datetime.now(timezone.utc):%H:%M:%S} {' '.join(shlex.quote(c) for c in cmd[1:])}", flush=True)
+            rc = subprocess.run(cmd).returncode
+            print(f"  -> exit {rc} after {time.perf_counter() - t0:.0f} s", flush=True)
+            if rc != 0 and not args.keep_going:
+                return rc
+    return 0
+
+
+# ----------------------------------------------------------------------------- report
+
+
+def _runs(runs: Path, kind: str) -> list[dict]:
+    out = []
+    for f in sorted(runs.glob(f"{kind}_alpha*_seed*/summary.json")):
+        s = json.loads(f.read_text())
+        out.append({"run": f.parent.name, "alpha": int(round(s["alpha"])), "seed": s["seed"], "summary": s})
+    return out
+
+
+def _paper_means(data: Path | None) -> dict:
+    """(alpha, strain) -> means of n, phi, S, c of the authors' fields (valid voxels: n > 0)."""
+    if data is None:
+        return {}
+    out = {}
+    for f in sorted(Path(data).glob("alpha*_epsilon*.npz")):
+        a, e = f.stem.replace("alpha", "").split("_epsilon")
+        z = np.load(f)
+        valid = np.asarray(z["n"]) > 0
+        out[(int(a), int(e) / 100)] = {k: float(np.nanmean(np.asarray(z[src])[valid]))
+                                       for k, src in (("mean_n", "n"), ("mean_phi", "phi"), ("mean_S", "s"),
+                                                      ("mean_c", "c"))}
+    return out
+
+
+def _rel(sim, exp):
+    return None if sim is None or exp in (None, 0) else (sim - exp) / exp
+
+
+def report(args) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rodwarp._util import versions
+
+    runs = Path(args.runs)
+    out = Path(args.out)
+    shake, press, cont = _runs(runs, "shake"), _runs(runs, "press"), _runs(runs, "container")
+    paper = {(int(f["alpha"]), float(f["epsilon"])): f
+             for f in json.loads((OUT / "paper_fields.json").read_text())["files"]}
+    paper_means = _paper_means(Path(args.paper_fields) if args.paper_fields else None)
+
+    def row(r):
+        s, lab = r["summary"], r["summary"]["lab"]
+        out = {"run": r["run"], "alpha": r["alpha"], "seed": r["seed"], "n_rods": s["n_rods"],
+               "length_m": s["length"], "diameter_m": s["diameter"], "rod_model": s["rod_model"],
+               "container_radius_m": lab["container_radius_m"], "wall_time_s": s["wall_time_s"],
+               "contact_law": s["contact_law"]["law"] if isinstance(s["contact_law"], dict) else s["contact_law"]}
+        if "lift" in lab:
+            out["lift"] = lab["lift"]
+        if "shake" in lab:
+            sh = lab["shake"]
+            out.update(cycles=sh["cycles"], y_ratio=sh["centroid_height_ratio"], cohesion=sh["cohesion"],
+                       persistence_h_and_f=s["persistence"], stable=s["stable"], a_over_g=sh["a_over_g"])
+        if lab.get("strains"):
+            out["strains"] = lab["strains"]
+        return out
+
+    table = {"shake": [row(r) for r in shake], "press": [row(r) for r in press],
+             "container": [row(r) for r in cont]}
+    # field statistics against strain beside the authors'
+    compare = []
+    keys = ("mean_n", "cv_e", "mean_e", "q1_e", "q3_e", "e_lb", "mean_phi", "mean_S", "mean_c")
+    for r in table["press"]:
+        for st in r.get("strains", []):
+            exp = {**paper.get((r["alpha"], st["strain"]), {}), **paper_means.get((r["alpha"], st["strain"]), {})}
+            compare.append({"alpha": r["alpha"], "seed": r["seed"], "strain": st["strain"],
+                            **{f"sim_{k}": st.get(k) for k in keys},
+                            **{f"exp_{k}": exp.get(k) for k in keys},
+                            **{f"rel_{k}": _rel(st.get(k), exp.get(k)) for k in keys}})
+    record = {"command": " ".join(shlex.quote(a) for a in sys.argv), "date": datetime.now(timezone.utc).isoformat(),
+              "versions": versions(), "sets": {k: v["args"] for k, v in SETS.items()}, "lab_args": LAB,
+              "rods": {str(a): {"length_m": l, "diameter_m": l / a} for a, l in RODS.items()},
+              "runs": table, "fields_vs_paper": compare}
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "lab_experiments.json").write_text(json.dumps(record, indent=1))
+
+    figs = []
+    if table["shake"]:
+        fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+        colors = {a: plt.cm.viridis(i / max(len(RODS) - 1, 1)) for i, a in enumerate(sorted(RODS))}
+        for r in table["shake"]:
+            ax[0].plot(r["cycles"], r["y_ratio"], color=colors.get(r["alpha"]), lw=1,
+                       label=f"alpha {r['alpha']}" if r["seed"] == min(x["seed"] for x in table["shake"]
+                                                                        if x["alpha"] == r["alpha"]) else None)
+        ax[0].set(xlabel="cycles N = t f", ylabel="y_c(t) / y_c(0)", title="Fig. 1E in silico (5 Hz, 25 mm)")
+        ax[0].legend(fontsize=8)
+        by = {}
+        for r in table["shake"]:
+            by.setdefault(r["alpha"], []).append(r["cohesion"]["persistence"])
+        al = sorted(by)
+        ax[1].plot(al, [np.median(by[a]) for a in al], "o-", label="median over seeds")
+        for a in al:
+            ax[1].plot([a] * len(by[a]), by[a], "k.", alpha=0.5)
+        ax[1].axvline(100, color="r", ls="--", label="paper's transition (~100)")
+        ax[1].set(xscale="log", xlabel="alpha", ylabel="tau_f (share of the shaking in one cluster)",
+                  title="Fig. 1F in silico", ylim=(-0.05, 1.05))
+        ax[1].legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(out / "lab_shake.png", dpi=120)
+        figs.append("lab_shake.png")
+        plt.close(fig)
+    lifted = [r for r in table["shake"] if "lift" in r]
+    if lifted:
+        fig, ax = plt.subplots(figsize=(5.5, 4))
+        for r in lifted:
+            ax.plot(r["alpha"], r["lift"]["height_kept_after_lift"], "o", color="C0")
+            ax.plot(r["alpha"], r["lift"]["spread_over_container"], "s", color="C1")
+        ax.plot([], [], "o", color="C0", label="centroid height after / before the lift")
+        ax.plot([], [], "s", color="C1", label="spread radius / container radius")
+        ax.set(xscale="log", xlabel="alpha", title="The container lifted away (Fig. 1A-B)")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(out / "lab_lift.png", dpi=120)
+        figs.append("lab_lift.png")
+        plt.close(fig)
+    if compare:
+        stats = [("mean_n", "mean n"), ("cv_e", "cv_e"), ("mean_e", "mean e"), ("e_lb", "e_lb")]
+        fig, axs = plt.subplots(1, len(stats), figsize=(4 * len(stats), 3.6))
+        for ax, (k, label) in zip(axs, stats):
+            for i, a in enumerate(sorted({c["alpha"] for c in compare})):
+                cs = [c for c in compare if c["alpha"] == a]
+                eps = sorted({c["strain"] for c in cs})
+                sim = [np.median([c[f"sim_{k}"] for c in cs if c["strain"] == e and c[f"sim_{k}"] is not None] or
+                                 [np.nan]) for e in eps]
+                exp = [next((c[f"exp_{k}"] for c in cs if c["strain"] == e), None) for e in eps]
+                ax.plot(eps, sim, "o-", color=f"C{i}", label=f"alpha {a} sim")
+                ax.plot(eps, [np.nan if v is None else v for v in exp], "x--", color=f"C{i}", label=f"alpha {a} CT")
+            ax.set(xlabel="strain epsilon", title=label)
+        axs[0].legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(out / "lab_fields_vs_strain.png", dpi=120)
+        figs.append("lab_fields_vs_strain.png")
+        plt.close(fig)
+    _write_md(out / "lab_experiments.md", record, figs)
+    print(f"wrote {out / 'lab_experiments.json'}, lab_experiments.md and {', '.join(figs) or 'no figures'}")
+    return 0
+
+
+def _fmt(v, nd=3):
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.{nd}g}"
+    return str(v)
+
+
+def _write_md(path: Path, record: dict, figs: list[str]) -> None:
+    L = ["# The laboratory experiments in silico", "",
+         f"Written by `scripts/lab_experiments.py report` on {record['date'][:10]} (rodwarp "
+         f"{record['versions'].get('rodwarp')}, Warp {record['versions'].get('warp')}); docs/experiments.md says "
+         "what was run and how it compares with the paper.", ""]
+    sh = record["runs"]["shake"]
+    if sh:
+        L += ["## Shaking at 5 Hz, 25 mm and the lifted container", "",
+              "| run | rods | model | Rc (mm) | lifted: h after/before | spread / Rc | tau_f | f end | "
+              "cohesive | tau (h and f) | wall (s) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+        for r in sorted(sh, key=lambda r: (r["alpha"], r["seed"])):
+            c, lf = r["cohesion"], r.get("lift", {})
+            L.append(f"| {r['run']} | {r['n_rods']} | {r['rod_model']} | {r['container_radius_m'] * 1e3:.0f} | "
+                     f"{_fmt(lf.get('height_kept_after_lift'))} | {_fmt(lf.get('spread_over_container'))} | "
+                     f"{_fmt(c['persistence'])} | {_fmt(c['largest_cluster_fraction'])} | {c['cohesive']} | "
+                     f"{_fmt(r['persistence_h_and_f'])} | {r['wall_time_s']:.0f} |")
+        L.append("")
+    ct = record["runs"]["container"]
+    if ct:
+        L += ["## Container size", "", "| run | rods | Rc (mm) | spread / Rc | tau_f | f end | wall (s) |",
+              "|---|---|---|---|---|---|---|"]
+        for r in sorted(ct + [s for s in sh if s["alpha"] in {c["alpha"] for c in ct}],
+                        key=lambda r: (r["alpha"], r["container_radius_m"], r["seed"])):
+            L.append(f"| {r['run']} | {r['n_rods']} | {r['container_radius_m'] * 1e3:.0f} | "
+                     f"{_fmt(r.get('lift', {}).get('spread_over_container'))} | {_fmt(r['cohesion']['persistence'])} | "
+                     f"{_fmt(r['cohesion']['largest_cluster_fraction'])} | {r['wall_time_s']:.0f} |")
+        L.append("")
+    cmp_ = record["fields_vs_paper"]
+    if cmp_:
+        keys = ("mean_n", "cv_e", "mean_e", "q1_e", "q3_e", "e_lb", "mean_phi", "mean_S", "mean_c")
+        L += ["## Fields of the pressed packings against the authors' CT fields", "",
+              "Each cell: simulated / experimental (relative difference). Ball radius sqrt(d l) on both sides.", "",
+              "| alpha | seed | strain | " + " | ".join(keys) + " |", "|---" * (3 + len(keys)) + "|"]
+        for c in sorted(cmp_, key=lambda c: (c["alpha"], c["strain"], c["seed"])):
+            cells = []
+            for k in keys:
+                s, e, r = c[f"sim_{k}"], c[f"exp_{k}"], c[f"rel_{k}"]
+                cells.append(f"{_fmt(s)} / {_fmt(e)} ({'-' if r is None else f'{r:+.0%}'})")
+            L.append(f"| {c['alpha']} | {c['seed']} | {c['strain']:g} | " + " | ".join(cells) + " |")
+        L.append("")
+    L += [f"![{f}]({f})" for f in figs]
+    path.write_text("\n".join(L) + "\n")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="what", required=True)
+    r = sub.add_parser("run", help="make the unfinished runs of a set")
+    r.add_argument("--set", choices=sorted(SETS), required=True)
+    r.add_argument("--runs", required=True, help="folder of the run folders (outside the repository)")
+    r.add_argument("--alphas", help="comma-separated subset of the set's aspect ratios")
+    r.add_argument("--seeds", help="comma-separated seeds (default the set's)")
+    r.add_argument("--keep-going", action="store_true", help="go on after a failed run")
+    p = sub.add_parser("report", help="collect the finished runs into benchmarks/results")
+    p.add_argument("--runs", required=True)
+    p.add_argument("--paper-fields", help="folder of the authors' alpha*_epsilon*.npz fields (for mean n, phi, S, c)")
+    p.add_argument("--out", default=str(OUT))
+    args = ap.parse_args(argv)
+    return run(args) if args.what == "run" else report(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,156 @@
+"""The laboratory protocol (docs/experiments.md) against what each stage must do: the pour
+fills the cylinder without overlaps, a single rod is left lying on the floor at rest when the
+container is lifted, the piston reaches each strain and holds it, and the plate moves as asked."""
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+import zarr
+
+from rodwarp.errors import RodwarpError
+from rodwarp.experiments import ProtocolParams, run_protocol
+from rodwarp.experiments._plan import FLOOR, LIFT, PISTON, POUR, SHAKE, TUBE, lab_plan, plan
+
+# steel rods of the paper's experiments' scale: l = 5 cm, real gravity
+LAB = dict(protocol="lab", alpha=20, length=0.05, gravity=9.81, freq=5.0, amplitude=0.025, save_every=0.05,
+           fields_every=0.0, checkpoint_every=0.5, device="cpu")
+
+
+def _rows(run):
+    with open(run / "metrics.csv") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _frame(run, k):
+    g = zarr.open_group(str(run / "trajectory.zarr"), mode="r")
+    return np.asarray(g["positions"][k]), float(g["time"][k])
+
+
+def test_the_lab_plan_pours_presses_lifts_and_shakes():
+    p = ProtocolParams(**LAB, strains=(0.0, 0.05, 0.1), duration=2.0)
+    stages = lab_plan(p)
+    assert [s.name for s in stages] == [POUR, "press0", "press0.05", "press0.1", LIFT, SHAKE]
+    assert plan(p) == stages
+    assert [s.strain for s in stages[1:4]] == [(0.0, 0.0), (0.0, 0.05), (0.05, 0.1)]
+    assert [s.name for s in stages if s.test] == [SHAKE]
+    assert stages[0].walls_out == (PISTON,) and stages[-1].walls_out == (TUBE, PISTON)
+    assert stages[-1].moving == (FLOOR,) and all(s.moving == (PISTON,) for s in stages[1:4])
+    # without shaking the lifted packing is the test; the paper's protocol is unchanged
+    assert [s.name for s in lab_plan(ProtocolParams(**{**LAB, "duration": 0.0}))] == [POUR, LIFT]
+    assert lab_plan(ProtocolParams(**{**LAB, "duration": 0.0}))[-1].test
+    assert [s.name for s in plan(ProtocolParams())] == ["entangle", "stability"]
+
+
+def test_the_cylinder_holds_the_rods_that_fill_it_to_the_fill_height():
+    p = ProtocolParams(**LAB)
+    # 4 (Rc/l)^2 (H/l) 5.4 alpha at Rc = H = 1 l
+    assert p.rods == round(4 * 5.4 * 20)
+    assert ProtocolParams(**LAB, container_radius=1.5, fill_height=2.0).rods == round(4 * 2.25 * 2 * 5.4 * 20)
+    assert ProtocolParams(**LAB, n_rods=7).rods == 7
+    # the pour column is dilute: phi alpha = 2 in it
+    v_rod = math.pi / 4 * p.diameter**2 * p.length
+    phi = p.rods * v_rod / (math.pi * p.length**2 * p.pour_height())
+    assert phi * p.alpha == pytest.approx(2.0)
+
+
+def test_the_pour_fills_the_cylinder_without_overlaps(tmp_path):
+    p = ProtocolParams(**LAB, n_rods=30, pour_duration=0.6, duration=0.0, lift_duration=0.05)
+    s = run_protocol(p, tmp_path / "run", progress=False)
+    rows = _rows(tmp_path / "run")
+    pour = [k for k, r in enumerate(rows) if r["stage"] == POUR]
+    x0, _ = _frame(tmp_path / "run", 0)
+    x, t = _frame(tmp_path / "run", pour[-1])
+    assert t == pytest.approx(0.6)
+    r = 0.5 * p.diameter
+    rc = p.container_radius * p.length
+    slop = 0.02 * p.diameter
+    # released above the floor inside the cylinder, fallen onto the floor, every rod still inside
+    assert x0[:, 2].min() > r and np.hypot(x0[:, 0], x0[:, 1]).max() <= rc - r
+    assert np.hypot(x[:, 0], x[:, 1]).max() <= rc - r + slop
+    assert x[:, 2].min() >= r - slop
+    assert x[:, 2].max() < 0.5 * x0[:, 2].max()
+    assert max(float(rows[k]["max_penetration_over_d"]) for k in pour) < 0.02
+    # settled: the kinetic energy has fallen by orders of magnitude from its peak in the fall
+    ke = [float(rows[k]["kinetic_energy"]) for k in pour]
+    assert ke[-1] < 1e-3 * max(ke)
+    assert s["lab"]["pour"]["contacts_per_rod"] > 1.0
+
+
+def test_the_lifted_container_leaves_a_single_rod_on_the_floor_at_rest(tmp_path):
+    p = ProtocolParams(**LAB, n_rods=1, pour_duration=0.4, duration=0.0, lift_duration=0.3)
+    s = run_protocol(p, tmp_path / "run", progress=False)
+    fin = np.load(tmp_path / "run" / "final.npz")
+    x, v = fin["points"], fin["velocities"]
+    r = 0.5 * p.diameter
+    assert x[:, 2] == pytest.approx(r, abs=0.02 * p.diameter)  # lying flat on the floor
+    assert np.abs(v).max() < 1e-6
+    assert s["lab"]["lift"]["largest_cluster_fraction"] == 1.0
+    assert s["lab"]["lift"]["spread_over_container"] < 1.0  # it stayed where it lay
+
+
+def test_the_piston_reaches_each_strain_and_holds_it(tmp_path):
+    strains = (0.0, 0.05, 0.1)
+    p = ProtocolParams(**LAB, n_rods=40, pour_duration=0.5, strains=strains, press_duration=0.2, duration=0.0,
+                       lift_duration=0.05)
+    s = run_protocol(p, tmp_path / "run", progress=False)
+    res = s["lab"]["strains"]
+    assert [e["strain"] for e in res] == list(strains)
+    h0 = res[0]["height0"]
+    rows = _rows(tmp_path / "run")
+    for e in res:
+        assert e["strain_reached"] == pytest.approx(e["strain"], abs=1e-9)
+        assert e["piston_height"] == pytest.approx(h0 * (1 - e["strain"]), rel=1e-12)
+        # the packing is under the piston (within the contact slop) and at rest when the hold ends
+        assert e["packing_top"] <= e["piston_height"] + 0.02 * p.diameter
+        assert e["max_speed"] < 1e-3
+        held = [float(r["piston_height"]) for r in rows if r["stage"] == e["stage"]][-2:]  # the hold's samples
+        assert held == pytest.approx([e["piston_height"]] * 2, rel=1e-12)
+    # the piston is out before and after pressing
+    assert all(r["piston_height"] == "" for r in rows if r["stage"] in (POUR, LIFT))
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["lab"]["strains"] == res
+
+
+def test_the_shaken_plate_moves_as_asked():
+    from rodwarp.experiments._protocol import _build
+    from rodwarp.experiments._lab import lab_packing
+
+    p = ProtocolParams(**LAB, n_rods=5, duration=1.0)
+    rods = lab_packing(p, "cpu")
+    model, solver, _ = _build(p, rods, "cpu", "rigid")
+    shake = lab_plan(p)[-1]
+    t0 = 1.3
+    control = shake.control(model, t0)
+    names = [w.name for w in model.walls]
+    assert control.walls_in_place() == [FLOOR]
+    assert control.moving.tolist() == [n == FLOOR for n in names]
+    # amplitude 25 mm at 5 Hz, started at rest at the plate's lowest point (z = 0)
+    z = lambda t: 0.025 * (1 - math.cos(2 * math.pi * 5.0 * (t - t0)))  # noqa: E731
+    for t in np.linspace(t0, t0 + 0.4, 9):
+        assert control.floor_height(t) == pytest.approx(z(t), abs=1e-15)
+    assert control.floor_height(t0 + 0.1) == pytest.approx(0.05)  # the top, half a period on
+    # what the kernels get: the floor displaced by the drive, its velocity the mean over the step
+    dt = 1e-3
+    w = solver._walls(control, t0 + 0.05, dt)
+    assert w.drive_disp == pytest.approx(z(t0 + 0.05))
+    assert w.drive_vel == pytest.approx((z(t0 + 0.051) - z(t0 + 0.05)) / dt)
+    assert abs(float(solver._walls(control, t0, dt).drive_vel)) < 0.02  # starts from rest
+    assert w.shift.numpy()[names.index(FLOOR)] == 1.0 and w.shift.numpy()[names.index(PISTON)] == 0.0
+    # a/g of the experiments: 4 pi^2 f^2 A / g = 2.5
+    assert p.a_over_g == pytest.approx(2.516, abs=1e-3)
+
+
+@pytest.mark.parametrize("kw, message", [
+    (dict(strains=(0.1,)), "only applies with --protocol lab"),
+    (dict(protocol="lab", box=(2.0, 2.0, 2.0)), "--box does not apply with --protocol lab"),
+    (dict(protocol="lab", strains=(0.1, 0.05)), "must not decrease"),
+    (dict(protocol="lab", strains=(0.6,)), "--strains"),
+    (dict(protocol="lab", container_radius=0.3), "--container-radius"),
+    (dict(protocol="lab", duration=0.0, lift_duration=0.0), "without a test"),
+    (dict(protocol="bench"), "--protocol must be paper or lab"),
+])
+def test_lab_options_are_refused_where_they_do_not_apply(kw, message):
+    with pytest.raises(RodwarpError, match=message):
+        ProtocolParams(**kw).validate()
