@@ -145,7 +145,7 @@ def report(args) -> int:
         out = {"run": r["run"], "alpha": r["alpha"], "seed": r["seed"], "n_rods": s["n_rods"],
                "length_m": s["length"], "diameter_m": s["diameter"], "rod_model": s["rod_model"],
                "container_radius_m": lab["container_radius_m"], "wall_time_s": s["wall_time_s"],
-               "contact_law": s["contact_law"]["law"] if isinstance(s["contact_law"], dict) else s["contact_law"]}
+               "contact_law": s["contact_law"]["name"], "mu": s["parameters"]["mu"]}
         if "lift" in lab:
             out["lift"] = lab["lift"]
         if "shake" in lab:
@@ -253,11 +253,12 @@ def _write_md(path: Path, record: dict, figs: list[str]) -> None:
     sh = record["runs"]["shake"]
     if sh:
         L += ["## Shaking at 5 Hz, 25 mm and the lifted container", "",
-              "| run | rods | model | Rc (mm) | lifted: h after/before | spread / Rc | tau_f | f end | "
-              "cohesive | tau (h and f) | wall (s) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+              "| run | rods | model | law (mu) | Rc (mm) | lifted: h after/before | spread / Rc | tau_f | f end | "
+              "cohesive | tau (h and f) | wall (s) |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in sorted(sh, key=lambda r: (r["alpha"], r["seed"])):
             c, lf = r["cohesion"], r.get("lift", {})
-            L.append(f"| {r['run']} | {r['n_rods']} | {r['rod_model']} | {r['container_radius_m'] * 1e3:.0f} | "
+            L.append(f"| {r['run']} | {r['n_rods']} | {r['rod_model']} | {r['contact_law']} ({r['mu']:g}) | "
+                     f"{r['container_radius_m'] * 1e3:.0f} | "
                      f"{_fmt(lf.get('height_kept_after_lift'))} | {_fmt(lf.get('spread_over_container'))} | "
                      f"{_fmt(c['persistence'])} | {_fmt(c['largest_cluster_fraction'])} | {c['cohesive']} | "
                      f"{_fmt(r['persistence_h_and_f'])} | {r['wall_time_s']:.0f} |")

@@ -173,7 +173,7 @@ class Recorder:
     def strain_result(self, stage, state, points, control, params, height0: float) -> dict:
         """At the end of a piston stage: the strain reached, the rest it came to, and the fields
         of the pressed packing (written to ``fields_<stage>.npz``; statistics returned)."""
-        from rodwarp.experiments._lab import piston_height, strain_fields
+        from rodwarp.experiments._lab import packing_top, piston_height, strain_fields
         from rodwarp.sim import rod_contacts
 
         x = state.positions()
@@ -187,7 +187,7 @@ class Recorder:
         num = lambda v: None if v is None else float(v)  # noqa: E731
         return {"stage": stage.name, "strain": float(stage.strain[1]), "height0": float(height0),
                 "piston_height": float(top), "strain_reached": 1.0 - float(top) / float(height0),
-                "packing_top": float(np.max(x[:, 2] + self.model.radius_np[self.model.vertex_rod_np])),
+                "packing_top": packing_top(self.model, x),
                 "max_speed": float(speed.max()), "kinetic_energy": float(self.solver.energy(state)["kinetic"]),
                 "contacts_per_rod": contacts_per_rod(self.model.n_rods, c),
                 "fields": name if f is not None else None, **{k: num(v) if not isinstance(v, str) else v
