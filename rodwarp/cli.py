@@ -246,6 +246,11 @@ def simulate(
     if params.law == "imc" and params.rolling:
         typer.echo("note: --rolling with --contact-law imc: DisMech's IMC friction acts on the centreline (no "
                    "rolling); this run lets the rods spin, which the paper's model did not", err=True)
+    if params.protocol == "lab":
+        from rodwarp.experiments._lab import landed_sampling_warning
+
+        if (why := landed_sampling_warning(params)) is not None:
+            typer.echo(f"note: {why}", err=True)
     outdir = out or Path("runs") / default_run_name(params)
     with _failure_recorded(outdir):
         summary = run_protocol(checked, outdir, progress=not quiet, resume=resume, overwrite=overwrite,

@@ -45,7 +45,7 @@ LAB = ["--protocol", "lab", "--gravity", "9.81", "--freq", "5", "--amplitude", "
 SETS = {
     # Fig. 1A-F: poured, container lifted (1 s), shaken 10 s (50 cycles); a sample per cycle
     "shake": dict(alphas=(38, 66, 76, 100, 200), seeds=(0, 1),
-                  args=["--duration", "10", "--lift-duration", "1", "--save-every", "0.2", "--checkpoint-every", "1"]),
+                  args=["--duration", "10", "--lift-duration", "1", "--save-every", "0.025", "--checkpoint-every", "1"]),
     # Fig. 2-3: poured, pressed to the CT's strains, each held; the fields at each
     "press": dict(alphas=(38, 66, 76, 100), seeds=(0, 1),
                   args=["--strains", "0,0.05,0.1,0.15", "--press-duration", "0.5", "--duration", "0",
@@ -53,7 +53,7 @@ SETS = {
     # container size: the shaking of alpha 38 and 66 in a cylinder 1.5 times as wide
     "container": dict(alphas=(38, 66), seeds=(0, 1),
                       args=["--container-radius", "1.5", "--duration", "10", "--lift-duration", "1",
-                            "--save-every", "0.2", "--checkpoint-every", "1"]),
+                            "--save-every", "0.025", "--checkpoint-every", "1"]),
 }
 
 
@@ -100,10 +100,68 @@ def run(args) -> int:
 
 def _runs(runs: Path, kind: str) -> list[dict]:
     out = []
-    for f in sorted(runs.glob(f"{kind}_alpha*_seed*/summary.json")):
-        s = json.loads(f.read_text())
-        out.append({"run": f.parent.name, "alpha": int(round(s["alpha"])), "seed": s["seed"], "summary": s})
+    for d in sorted(runs.glob(f"{kind}_alpha*_seed*")):
+        f = d / "summary.json"
+        s = json.loads(f.read_text()) if f.exists() else _in_progress(d)
+        if s is not None:
+            out.append({"run": d.name, "alpha": int(round(s["alpha"])), "seed": s["seed"], "summary": s})
     return out
+
+
+def _in_progress(folder: Path) -> dict | None:
+    """What summary.json will hold of a shaking run still going (or killed), from its metrics.csv
+    up to its last checkpoint: the lift and the shaking so far, ``incomplete`` with the seconds
+    shaken. None before the shaking has begun."""
+    import csv
+
+    from rodwarp.experiments import _verdict as vd
+    from rodwarp.experiments._lab import landed_heights
+
+    meta = json.loads((folder / "rodwarp-run.json").read_text())
+    p = meta["parameters"]
+    try:
+        with open(folder / "metrics.csv") as fh:
+            rows = list(csv.DictReader(fh))
+    except FileNotFoundError:
+        return None
+    shake = [r for r in rows if r["stage"] == "shake"]
+    if not shake or p["strains"]:
+        return None
+    t0 = p["pour_duration"] + p["lift_duration"]
+    shake = [r for r in shake if float(r["time"]) > t0]
+    before = [r for r in rows if float(r["time"]) <= t0]
+    y0 = float(before[-1]["centroid_height"])
+    t = np.array([float(r["time"]) for r in shake])
+    f = np.array([float(r["largest_cluster_fraction"]) for r in shake])
+    y = np.array([float(r["centroid_height"]) for r in shake]) / y0
+    thr = vd.DEFAULT_THRESHOLDS
+    tau_f = vd.persistence(t, t0, f >= thr.cluster)
+    k, landed = landed_heights(t - t0, y, p["freq"])
+    lift = [r for r in rows if r["stage"] == "lift"]
+    pour = [r for r in rows if r["stage"] == "pour"]
+    rc = p["container_radius"] * p["length"]
+    started = datetime.fromisoformat(meta["started"].replace("+0000", "+00:00"))
+    n_rods = round(4 * p["container_radius"] ** 2 * p["fill_height"] * 5.4 * p["alpha"])
+    return {"alpha": p["alpha"], "seed": p["seed"], "n_rods": n_rods, "length": p["length"],
+            "diameter": p["length"] / p["alpha"], "rod_model": f"{p['rod_model']} (see the run)",
+            "contact_law": {"name": p["contact_law"] or "exact"}, "parameters": p,
+            "wall_time_s": (datetime.now(timezone.utc) - started).total_seconds(),
+            "incomplete": {"shaken_s": float(t[-1] - t0), "of_s": p["duration"], "status": meta["status"]},
+            "persistence": None, "stable": None,
+            "max_penetration_over_d": max(float(r["max_penetration_over_d"]) for r in rows),
+            "lab": {"container_radius_m": rc,
+                    "lift": {"height_kept_after_lift": float(lift[-1]["centroid_height"]) /
+                             float(pour[-1]["centroid_height"]),
+                             "spread_radius_m": float(lift[-1]["spread_radius"]),
+                             "spread_over_container": float(lift[-1]["spread_radius"]) / rc,
+                             "largest_cluster_fraction": float(lift[-1]["largest_cluster_fraction"]),
+                             "kinetic_energy_J": float(lift[-1]["kinetic_energy"])},
+                    "shake": {"cycles": ((t - t0) * p["freq"]).tolist(), "centroid_height_ratio": y.tolist(),
+                              "a_over_g": 4 * np.pi**2 * p["freq"] ** 2 * p["amplitude"] / p["gravity"],
+                              "landed": {"cycle": k.tolist(), "centroid_height_ratio": landed.tolist()},
+                              "cohesion": {"persistence": tau_f, "largest_cluster_fraction": float(f[-1]),
+                                           "separated": float(1 - f[-1]),
+                                           "cohesive": bool(f[-1] >= thr.cluster and tau_f >= thr.persistence)}}}}
 
 
 def _paper_means(data: Path | None) -> dict:
@@ -143,6 +201,7 @@ def report(args) -> int:
     def row(r):
         s, lab = r["summary"], r["summary"]["lab"]
         out = {"run": r["run"], "alpha": r["alpha"], "seed": r["seed"], "n_rods": s["n_rods"],
+               "incomplete": s.get("incomplete"),
                "length_m": s["length"], "diameter_m": s["diameter"], "rod_model": s["rod_model"],
                "container_radius_m": lab["container_radius_m"], "wall_time_s": s["wall_time_s"],
                "contact_law": s["contact_law"]["name"], "mu": s["parameters"]["mu"]}
@@ -151,7 +210,9 @@ def report(args) -> int:
         if "shake" in lab:
             sh = lab["shake"]
             out.update(cycles=sh["cycles"], y_ratio=sh["centroid_height_ratio"], cohesion=sh["cohesion"],
-                       persistence_h_and_f=s["persistence"], stable=s["stable"], a_over_g=sh["a_over_g"])
+                       landed_cycle=sh["landed"]["cycle"], landed_y_ratio=sh["landed"]["centroid_height_ratio"],
+                       persistence_h_and_f=s["persistence"], stable=s["stable"], a_over_g=sh["a_over_g"],
+                       max_penetration_over_d=s.get("max_penetration_over_d"))
         if lab.get("strains"):
             out["strains"] = lab["strains"]
         return out
@@ -171,19 +232,21 @@ def report(args) -> int:
     record = {"command": " ".join(shlex.quote(a) for a in sys.argv), "date": datetime.now(timezone.utc).isoformat(),
               "versions": versions(), "sets": {k: v["args"] for k, v in SETS.items()}, "lab_args": LAB,
               "rods": {str(a): {"length_m": l, "diameter_m": l / a} for a, l in RODS.items()},
-              "runs": table, "fields_vs_paper": compare}
+              "runs": table, "transition": transition(table["shake"]), "fields_vs_paper": compare}
     out.mkdir(parents=True, exist_ok=True)
     (out / "lab_experiments.json").write_text(json.dumps(record, indent=1))
 
     figs = []
     if table["shake"]:
         fig, ax = plt.subplots(1, 2, figsize=(11, 4))
-        colors = {a: plt.cm.viridis(i / max(len(RODS) - 1, 1)) for i, a in enumerate(sorted(RODS))}
+        colors = {a: f"C{i}" for i, a in enumerate(sorted(RODS))}
         for r in table["shake"]:
-            ax[0].plot(r["cycles"], r["y_ratio"], color=colors.get(r["alpha"]), lw=1,
+            ax[0].plot(r["landed_cycle"], r["landed_y_ratio"], color=colors.get(r["alpha"]), lw=1,
+                       ls="-" if r["seed"] == 0 else "--",
                        label=f"alpha {r['alpha']}" if r["seed"] == min(x["seed"] for x in table["shake"]
                                                                         if x["alpha"] == r["alpha"]) else None)
-        ax[0].set(xlabel="cycles N = t f", ylabel="y_c(t) / y_c(0)", title="Fig. 1E in silico (5 Hz, 25 mm)")
+        ax[0].set(xlabel="cycles N = t f", ylabel="y_c / y_c(0), landed (lowest of each cycle)",
+                  title="Fig. 1E in silico (5 Hz, 25 mm; seeds solid, dashed)", ylim=(0, None))
         ax[0].legend(fontsize=8)
         by = {}
         for r in table["shake"]:
@@ -192,7 +255,11 @@ def report(args) -> int:
         ax[1].plot(al, [np.median(by[a]) for a in al], "o-", label="median over seeds")
         for a in al:
             ax[1].plot([a] * len(by[a]), by[a], "k.", alpha=0.5)
-        ax[1].axvline(100, color="r", ls="--", label="paper's transition (~100)")
+        ax[1].axvline(100, color="r", ls="--", label="paper's experiments (~100)")
+        ax[1].axvline(35, color="gray", ls=":", label="rodwarp, paper's numerical protocol (35)")
+        tr = record["transition"].get("tau_f", {})
+        if tr.get("alpha_star"):
+            ax[1].axvline(tr["alpha_star"], color="C0", ls="-.", label=f"in silico lab: {tr['alpha_star']:.0f}")
         ax[1].set(xscale="log", xlabel="alpha", ylabel="tau_f (share of the shaking in one cluster)",
                   title="Fig. 1F in silico", ylim=(-0.05, 1.05))
         ax[1].legend(fontsize=8)
@@ -237,6 +304,31 @@ def report(args) -> int:
     return 0
 
 
+def transition(shake: list[dict]) -> dict:
+    """alpha* of the shaken packings, three ways: the seed mean of tau_f, of the cohesive verdict
+    and of f at the end (the paper's f >= 0.5) crossing 1/2, interpolated in log alpha between the
+    bracketing alphas, with a bootstrap over seeds (rodwarp.experiments._phase, as the sweeps')."""
+    import random
+
+    from rodwarp.experiments._phase import _bracketed
+
+    by: dict = {}
+    for r in shake:
+        by.setdefault(r["alpha"], []).append(r)
+    if len(by) < 2:
+        return {}
+    alphas = sorted(by)
+    out = {}
+    for key, value in (("tau_f", lambda r: r["cohesion"]["persistence"]),
+                       ("cohesive", lambda r: float(r["cohesion"]["cohesive"])),
+                       ("f_end", lambda r: r["cohesion"]["largest_cluster_fraction"])):
+        x, err, lo, hi, boot, note = _bracketed(alphas, by, value, random.Random(0), 200)
+        out[key] = {"alpha_star": x, "bracket_lo": lo, "bracket_hi": hi, "boot_std": boot, "note": note,
+                    "seed_mean": {str(a): float(np.mean([value(r) for r in by[a]])) for a in alphas},
+                    "seeds": {str(a): len(by[a]) for a in alphas}}
+    return out
+
+
 def _fmt(v, nd=3):
     if v is None:
         return "-"
@@ -257,11 +349,31 @@ def _write_md(path: Path, record: dict, figs: list[str]) -> None:
               "cohesive | tau (h and f) | wall (s) |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in sorted(sh, key=lambda r: (r["alpha"], r["seed"])):
             c, lf = r["cohesion"], r.get("lift", {})
-            L.append(f"| {r['run']} | {r['n_rods']} | {r['rod_model']} | {r['contact_law']} ({r['mu']:g}) | "
+            inc = r.get("incomplete")
+            name = r["run"] + (f" (in progress: {inc['shaken_s']:.0f} of {inc['of_s']:.0f} s shaken)" if inc else "")
+            L.append(f"| {name} | {r['n_rods']} | {r['rod_model']} | {r['contact_law']} ({r['mu']:g}) | "
                      f"{r['container_radius_m'] * 1e3:.0f} | "
                      f"{_fmt(lf.get('height_kept_after_lift'))} | {_fmt(lf.get('spread_over_container'))} | "
                      f"{_fmt(c['persistence'])} | {_fmt(c['largest_cluster_fraction'])} | {c['cohesive']} | "
                      f"{_fmt(r['persistence_h_and_f'])} | {r['wall_time_s']:.0f} |")
+        L.append("")
+    tr = record.get("transition") or {}
+    if tr:
+        L += ["## The transition in the shaken packings", "",
+              "Seed means per alpha, and alpha* where they cross 1/2 (interpolated in log alpha; bracket; "
+              "bootstrap over seeds). The paper's experiments put the transition near alpha 100; rodwarp on the "
+              "paper's numerical protocol, 35 (25-50) (docs/transition.md).", "",
+              "| measure | " + " | ".join(f"alpha {a}" for a in tr["tau_f"]["seed_mean"]) + " | alpha* | bracket |",
+              "|---" * (3 + len(tr["tau_f"]["seed_mean"])) + "|"]
+        names = {"tau_f": "tau_f (share of the shaking with f >= 0.8)", "cohesive": "cohesive (share of seeds)",
+                 "f_end": "f at the end (paper: f >= 0.5)"}
+        for k, v in tr.items():
+            star = v["note"] if v["alpha_star"] is None else f"{v['alpha_star']:.0f}"
+            if v["alpha_star"] is not None and v["boot_std"] is not None:
+                star += f" (bootstrap {v['boot_std']:.0f})"
+            br = f"{_fmt(v['bracket_lo'])}-{_fmt(v['bracket_hi'])}"
+            L.append(f"| {names[k]} | " + " | ".join(f"{m:.2f}" for m in v["seed_mean"].values())
+                     + f" | {star} | {br} |")
         L.append("")
     ct = record["runs"]["container"]
     if ct:

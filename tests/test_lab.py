@@ -142,6 +142,59 @@ def test_the_shaken_plate_moves_as_asked():
     assert p.a_over_g == pytest.approx(2.516, abs=1e-3)
 
 
+def _inelastic_ball_on_plate(amplitude, freq, cycles, dt=1e-5, g=9.81):
+    """A perfectly inelastic ball on a plate z_p = A (1 - cos 2 pi f t) (the lab's shaking):
+    it leaves the plate when the plate's acceleration falls below -g, flies, and sticks where
+    it lands. Returns t and the ball's height above the plate (m)."""
+    w = 2 * math.pi * freq
+    t = np.arange(0.0, cycles / freq + dt / 2, dt)
+    zp = amplitude * (1 - np.cos(w * t))
+    vp = amplitude * w * np.sin(w * t)
+    z = np.zeros_like(t)
+    zc, v, stuck = 0.0, 0.0, True
+    for i in range(1, len(t)):
+        if stuck and amplitude * w * w * math.cos(w * t[i]) < -g:
+            stuck, v = False, vp[i - 1]
+        if stuck:
+            zc = zp[i]
+        else:
+            v -= g * dt
+            zc += v * dt
+            if zc <= zp[i]:
+                zc, stuck = zp[i], True
+        z[i] = zc
+    return t, z - zp
+
+
+def test_fig_1e_takes_the_landed_height_of_a_packing_the_plate_throws():
+    from rodwarp.experiments._lab import landed_heights
+
+    # at 5 Hz, 25 mm (a/g = 2.5) a ball resting 10 mm above the plate is thrown every cycle
+    y0 = 0.01
+    t, dz = _inelastic_ball_on_plate(0.025, 5.0, cycles=6)
+    y = (y0 + dz) / y0
+    step = round(0.025 / 1e-5)  # --save-every 0.025: 8 samples per cycle
+    k, landed = landed_heights(t[::step], y[::step], 5.0)
+    assert k.tolist() == [1, 2, 3, 4, 5, 6]
+    # landed every cycle: the lowest height of each cycle is the height it rests at
+    assert landed == pytest.approx(1.0, abs=1e-12)
+    # a sample once per cycle at the plate's lowest point catches the ball in flight, ~4 y_c(0)
+    once = y[:: round(0.2 / 1e-5)][1:]
+    assert once.min() > 3.5 and once.max() < 5.0
+    # samples too sparse to see the landing are not landed heights: one per cycle at that phase
+    k1, l1 = landed_heights(t[:: round(0.2 / 1e-5)], y[:: round(0.2 / 1e-5)], 5.0)
+    assert l1 == pytest.approx(once)
+
+
+def test_too_few_samples_per_cycle_for_the_landed_height_are_flagged():
+    from rodwarp.experiments._lab import landed_sampling_warning
+
+    # 5 Hz: one sample per cycle is flagged, eight are not; a gentle drive (a/g < 1) never is
+    assert "samples per cycle" in landed_sampling_warning(ProtocolParams(**{**LAB, "save_every": 0.2}))
+    assert landed_sampling_warning(ProtocolParams(**{**LAB, "save_every": 0.025})) is None
+    assert landed_sampling_warning(ProtocolParams(**{**LAB, "save_every": 0.2, "amplitude": 0.005})) is None
+
+
 @pytest.mark.parametrize("kw, message", [
     (dict(strains=(0.1,)), "only applies with --protocol lab"),
     (dict(protocol="lab", box=(2.0, 2.0, 2.0)), "--box does not apply with --protocol lab"),

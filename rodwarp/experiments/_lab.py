@@ -117,6 +117,45 @@ def strain_fields(model, sim_rods, x, contacts, params, top: float, device):
     return f, {k: st.get(k) for k in STRAIN_STATS}
 
 
+def landed_heights(t: np.ndarray, y: np.ndarray, freq: float) -> tuple[np.ndarray, np.ndarray]:
+    """Fig. 1E's y_c(N) / y_c(0) for a packing the plate throws: per whole cycle N = 1, 2, ...
+    (the samples with N - 1 < t f <= N), the lowest of the sampled heights ``y`` (the centroid
+    above the plate over its value before the shaking).
+
+    At a/g > 1 the packing leaves the plate every cycle; a sample at one fixed phase catches it
+    in flight (y_c / y_c(0) of 3 to 4 at alpha 38 with the plate at its lowest point), while the
+    lowest height of a cycle is the packing landed on the plate. It needs several samples per
+    cycle (``--save-every`` well below 1 / f). ``t`` is time since the shaking began (s).
+
+    Returns
+    -------
+    (cycles, heights)
+        The cycle numbers N and their lowest heights; cycles without a sample are left out.
+    """
+    t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
+    k = np.ceil(t * freq - 1e-9).astype(int)
+    cyc = np.unique(k[k >= 1])
+    return cyc, np.array([y[k == c].min() for c in cyc])
+
+
+#: samples per drive period below which a cycle's lowest sample may miss the landed packing
+LANDED_SAMPLES = 4
+
+
+def landed_sampling_warning(params) -> str | None:
+    """Why Fig. 1E's landed heights of a shaken lab run cannot be trusted, or None: the plate
+    throws the packing (a/g > 1) and ``save_every`` gives fewer than LANDED_SAMPLES samples per
+    cycle, so the lowest sample of a cycle may be in flight."""
+    if params.duration <= 0 or params.freq <= 0 or params.a_over_g <= 1.0:
+        return None
+    per = 1.0 / (params.freq * params.save_every)
+    if per >= LANDED_SAMPLES - 1e-9:
+        return None
+    return (f"--save-every {params.save_every:g} s gives {per:.3g} samples per cycle at {params.freq:g} Hz; at "
+            f"a/g = {params.a_over_g:.2g} the plate throws the packing, and the landed height of Fig. 1E needs "
+            f"at least {LANDED_SAMPLES} (--save-every {1.0 / (LANDED_SAMPLES * params.freq):g} or less)")
+
+
 def _stage_rows(rows, name: str) -> list:
     return [r for r in rows if r["stage"] == name]
 
@@ -164,9 +203,17 @@ def lab_summary(params, model, rows, loop, stages, thresholds) -> dict:
         t = np.array([float(r["time"]) for r in shake])
         f = np.array([float(r["largest_cluster_fraction"]) for r in shake])
         tau_f = vd.persistence(t, t0, f >= thresholds.cluster)
+        y = np.array([float(r["centroid_height"]) for r in shake]) / y0
+        k_cyc, y_landed = landed_heights(t - t0, y, params.freq)
         out["shake"] = {"freq_hz": params.freq, "amplitude_m": params.amplitude, "a_over_g": params.a_over_g,
                         "cycles": ((t - t0) * params.freq).tolist(),
-                        "centroid_height_ratio": [float(r["centroid_height"]) / y0 for r in shake],
+                        "centroid_height_ratio": y.tolist(),
+                        "landed": {"cycle": k_cyc.tolist(), "centroid_height_ratio": y_landed.tolist(),
+                                   "samples_per_cycle": float(1.0 / (params.freq * params.save_every)),
+                                   "warning": landed_sampling_warning(params),
+                                   "rule": "per cycle N (samples with N-1 < (t - t0) f <= N), the lowest "
+                                           "centroid height above the plate over y_c(0): the packing landed, "
+                                           "not in flight"},
                         "cohesion": {"persistence": tau_f,
                                      "largest_cluster_fraction": float(f[-1]), "separated": float(1.0 - f[-1]),
                                      "cohesive": bool(f[-1] >= thresholds.cluster and tau_f >= thresholds.persistence),
