@@ -179,6 +179,46 @@ def _paper_means(data: Path | None) -> dict:
     return out
 
 
+#: the fields whose distributions are compared with the authors' (their README: e and n the most
+#: trustworthy; their phi is mis-scaled and their S takes the wrong eigenvalue in some paths)
+DIST_FIELDS = ("e", "n", "phi", "S", "c")
+
+
+def _quartiles(path: Path) -> dict:
+    """Quartiles (q1, median, q3) and mean of each of DIST_FIELDS over the valid voxels of a
+    field file (rodwarp's fields_press<E>.npz or the authors' npz)."""
+    from rodwarp.analysis._fieldset import Fields
+
+    f = Fields.load(path)
+    v = f.valid
+    out = {}
+    for k in DIST_FIELDS:
+        a = np.asarray(f.get(k))[v]
+        a = a[np.isfinite(a)]
+        if a.size:
+            q1, med, q3 = np.quantile(a, [0.25, 0.5, 0.75])
+            out[k] = {"mean": float(a.mean()), "q1": float(q1), "median": float(med), "q3": float(q3)}
+    return out
+
+
+def _distributions(runs: Path, press: list[dict], data: Path | None) -> list[dict]:
+    """Per (alpha, strain): the quartiles of each field, simulated (every seed's file pooled as a
+    list) beside the authors'."""
+    out = []
+    for r in press:
+        for st in r["summary"]["lab"].get("strains", []):
+            f = runs / r["run"] / f"fields_press{st['strain']:g}.npz"
+            if not f.exists():
+                continue
+            exp = None
+            if data is not None:
+                e = Path(data) / f"alpha{r['alpha']}_epsilon{round(100 * st['strain']):02d}.npz"
+                exp = _quartiles(e) if e.exists() else None
+            out.append({"alpha": r["alpha"], "seed": r["seed"], "strain": st["strain"], "sim": _quartiles(f),
+                        "exp": exp})
+    return out
+
+
 def _rel(sim, exp):
     return None if sim is None or exp in (None, 0) else (sim - exp) / exp
 
@@ -232,7 +272,9 @@ def report(args) -> int:
     record = {"command": " ".join(shlex.quote(a) for a in sys.argv), "date": datetime.now(timezone.utc).isoformat(),
               "versions": versions(), "sets": {k: v["args"] for k, v in SETS.items()}, "lab_args": LAB,
               "rods": {str(a): {"length_m": l, "diameter_m": l / a} for a, l in RODS.items()},
-              "runs": table, "transition": transition(table["shake"]), "fields_vs_paper": compare}
+              "runs": table, "transition": transition(table["shake"]), "fields_vs_paper": compare,
+              "field_distributions": _distributions(runs, press, Path(args.paper_fields) if args.paper_fields
+                                                    else None)}
     out.mkdir(parents=True, exist_ok=True)
     (out / "lab_experiments.json").write_text(json.dumps(record, indent=1))
 
@@ -397,6 +439,26 @@ def _write_md(path: Path, record: dict, figs: list[str]) -> None:
                 s, e, r = c[f"sim_{k}"], c[f"exp_{k}"], c[f"rel_{k}"]
                 cells.append(f"{_fmt(s)} / {_fmt(e)} ({'-' if r is None else f'{r:+.0%}'})")
             L.append(f"| {c['alpha']} | {c['seed']} | {c['strain']:g} | " + " | ".join(cells) + " |")
+        L.append("")
+    dist = record.get("field_distributions") or []
+    if dist:
+        L += ["## Distributions of the fields: quartiles q1 / median / q3", "",
+              "Simulated (seeds pooled: the median of the seeds' quartiles) and the authors' CT fields, valid voxels "
+              "(n > 0). The authors' phi is mis-scaled and their S takes the wrong eigenvalue in some paths "
+              "(their data's README); e and n are the comparable ones.", "",
+              "| alpha | strain | " + " | ".join(f"{k} sim | {k} CT" for k in DIST_FIELDS) + " |",
+              "|---" * (2 + 2 * len(DIST_FIELDS)) + "|"]
+        keys = sorted({(d["alpha"], d["strain"]) for d in dist})
+        for a, e in keys:
+            ds = [d for d in dist if (d["alpha"], d["strain"]) == (a, e)]
+            cells = []
+            for k in DIST_FIELDS:
+                sim = [d["sim"][k] for d in ds if k in d["sim"]]
+                q = "/".join(_fmt(float(np.median([x[j] for x in sim]))) for j in ("q1", "median", "q3")) \
+                    if sim else "-"
+                ex = ds[0]["exp"].get(k) if ds[0]["exp"] else None
+                cells += [q, "/".join(_fmt(ex[j]) for j in ("q1", "median", "q3")) if ex else "-"]
+            L.append(f"| {a} | {e:g} | " + " | ".join(cells) + " |")
         L.append("")
     L += [f"![{f}]({f})" for f in figs]
     path.write_text("\n".join(L) + "\n")
