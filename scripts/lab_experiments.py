@@ -114,8 +114,10 @@ def _in_progress(folder: Path) -> dict | None:
     shaken. None before the shaking has begun."""
     import csv
 
-    from rodwarp.experiments import _verdict as vd
-    from rodwarp.experiments._lab import landed_heights
+    from rodwarp.experiments import ProtocolParams
+    from rodwarp.experiments._lab import shake_result
+    from rodwarp.experiments._params import rod_model_rule
+    from rodwarp.experiments._verdict import DEFAULT_THRESHOLDS
 
     meta = json.loads((folder / "rodwarp-run.json").read_text())
     p = meta["parameters"]
@@ -124,44 +126,29 @@ def _in_progress(folder: Path) -> dict | None:
             rows = list(csv.DictReader(fh))
     except FileNotFoundError:
         return None
-    shake = [r for r in rows if r["stage"] == "shake"]
-    if not shake or p["strains"]:
+    if p["strains"] or not any(r["stage"] == "shake" and float(r["time"]) > p["pour_duration"] + p["lift_duration"]
+                               for r in rows):
         return None
-    t0 = p["pour_duration"] + p["lift_duration"]
-    shake = [r for r in shake if float(r["time"]) > t0]
-    before = [r for r in rows if float(r["time"]) <= t0]
-    y0 = float(before[-1]["centroid_height"])
-    t = np.array([float(r["time"]) for r in shake])
-    f = np.array([float(r["largest_cluster_fraction"]) for r in shake])
-    y = np.array([float(r["centroid_height"]) for r in shake]) / y0
-    thr = vd.DEFAULT_THRESHOLDS
-    tau_f = vd.persistence(t, t0, f >= thr.cluster)
-    k, landed = landed_heights(t - t0, y, p["freq"])
+    params = ProtocolParams(**{**p, "box": tuple(p["box"]), "strains": ()})
+    sh = shake_result(params, rows, p["pour_duration"] + p["lift_duration"], DEFAULT_THRESHOLDS)
     lift = [r for r in rows if r["stage"] == "lift"]
     pour = [r for r in rows if r["stage"] == "pour"]
     rc = p["container_radius"] * p["length"]
     started = datetime.fromisoformat(meta["started"].replace("+0000", "+00:00"))
-    n_rods = round(4 * p["container_radius"] ** 2 * p["fill_height"] * 5.4 * p["alpha"])
-    return {"alpha": p["alpha"], "seed": p["seed"], "n_rods": n_rods, "length": p["length"],
-            "diameter": p["length"] / p["alpha"], "rod_model": f"{p['rod_model']} (see the run)",
+    return {"alpha": p["alpha"], "seed": p["seed"], "n_rods": params.rods, "length": p["length"],
+            "diameter": params.diameter, "rod_model": rod_model_rule(params)["rod_model"],
             "contact_law": {"name": p["contact_law"] or "exact"}, "parameters": p,
             "wall_time_s": (datetime.now(timezone.utc) - started).total_seconds(),
-            "incomplete": {"shaken_s": float(t[-1] - t0), "of_s": p["duration"], "status": meta["status"]},
+            "incomplete": {"shaken_s": sh["shaken_s"], "of_s": p["duration"], "status": meta["status"]},
             "persistence": None, "stable": None,
             "max_penetration_over_d": max(float(r["max_penetration_over_d"]) for r in rows),
-            "lab": {"container_radius_m": rc,
+            "lab": {"container_radius_m": rc, "shake": sh,
                     "lift": {"height_kept_after_lift": float(lift[-1]["centroid_height"]) /
                              float(pour[-1]["centroid_height"]),
                              "spread_radius_m": float(lift[-1]["spread_radius"]),
                              "spread_over_container": float(lift[-1]["spread_radius"]) / rc,
                              "largest_cluster_fraction": float(lift[-1]["largest_cluster_fraction"]),
-                             "kinetic_energy_J": float(lift[-1]["kinetic_energy"])},
-                    "shake": {"cycles": ((t - t0) * p["freq"]).tolist(), "centroid_height_ratio": y.tolist(),
-                              "a_over_g": 4 * np.pi**2 * p["freq"] ** 2 * p["amplitude"] / p["gravity"],
-                              "landed": {"cycle": k.tolist(), "centroid_height_ratio": landed.tolist()},
-                              "cohesion": {"persistence": tau_f, "largest_cluster_fraction": float(f[-1]),
-                                           "separated": float(1 - f[-1]),
-                                           "cohesive": bool(f[-1] >= thr.cluster and tau_f >= thr.persistence)}}}}
+                             "kinetic_energy_J": float(lift[-1]["kinetic_energy"])}}}
 
 
 def _paper_means(data: Path | None) -> dict:

@@ -197,27 +197,40 @@ def lab_summary(params, model, rows, loop, stages, thresholds) -> dict:
                        "largest_cluster_fraction": num(lift[-1], "largest_cluster_fraction"),
                        "kinetic_energy_J": num(lift[-1], "kinetic_energy")}
     if SHAKE in names:
-        t0 = loop.stage_t0[SHAKE]
-        shake = [r for r in _stage_rows(rows, SHAKE) if float(r["time"]) > t0]
-        y0 = float([r for r in rows if float(r["time"]) <= t0][-1]["centroid_height"])
-        t = np.array([float(r["time"]) for r in shake])
-        f = np.array([float(r["largest_cluster_fraction"]) for r in shake])
-        tau_f = vd.persistence(t, t0, f >= thresholds.cluster)
-        y = np.array([float(r["centroid_height"]) for r in shake]) / y0
-        k_cyc, y_landed = landed_heights(t - t0, y, params.freq)
-        out["shake"] = {"freq_hz": params.freq, "amplitude_m": params.amplitude, "a_over_g": params.a_over_g,
-                        "cycles": ((t - t0) * params.freq).tolist(),
-                        "centroid_height_ratio": y.tolist(),
-                        "landed": {"cycle": k_cyc.tolist(), "centroid_height_ratio": y_landed.tolist(),
-                                   "samples_per_cycle": float(1.0 / (params.freq * params.save_every)),
-                                   "warning": landed_sampling_warning(params),
-                                   "rule": "per cycle N (samples with N-1 < (t - t0) f <= N), the lowest "
-                                           "centroid height above the plate over y_c(0): the packing landed, "
-                                           "not in flight"},
-                        "cohesion": {"persistence": tau_f,
-                                     "largest_cluster_fraction": float(f[-1]), "separated": float(1.0 - f[-1]),
-                                     "cohesive": bool(f[-1] >= thresholds.cluster and tau_f >= thresholds.persistence),
-                                     "rule": f"cohesive = f >= {thresholds.cluster:g} at the end and f >= "
-                                             f"{thresholds.cluster:g} for at least {thresholds.persistence:g} of "
-                                             "the shaking (height is not judged: the plate throws the packing)"}}
+        out["shake"] = shake_result(params, rows, loop.stage_t0[SHAKE], thresholds)
     return out
+
+
+def shake_result(params, rows, t0: float, thresholds) -> dict:
+    """summary.json's ``lab.shake`` block from the metrics rows (dicts as in metrics.csv) of a
+    run whose shaking began at ``t0`` (s): y_c(t) / y_c(0) at each sample and its landed value
+    per cycle (:func:`landed_heights`, Fig. 1E), and the cohesion verdict: the largest contact
+    cluster's share f(t), its persistence tau_f (the share of the shaking with f >= the
+    verdict's cluster threshold) and the rods separated from it at the last sample, 1 - f. A
+    run still going gives the shaking so far."""
+    from rodwarp.experiments import _verdict as vd
+    from rodwarp.experiments._plan import SHAKE
+
+    shake = [r for r in _stage_rows(rows, SHAKE) if float(r["time"]) > t0]
+    y0 = float([r for r in rows if float(r["time"]) <= t0][-1]["centroid_height"])
+    t = np.array([float(r["time"]) for r in shake])
+    f = np.array([float(r["largest_cluster_fraction"]) for r in shake])
+    tau_f = vd.persistence(t, t0, f >= thresholds.cluster)
+    y = np.array([float(r["centroid_height"]) for r in shake]) / y0
+    k_cyc, y_landed = landed_heights(t - t0, y, params.freq)
+    return {"freq_hz": params.freq, "amplitude_m": params.amplitude, "a_over_g": params.a_over_g,
+            "shaken_s": float(t[-1] - t0),
+            "cycles": ((t - t0) * params.freq).tolist(),
+            "centroid_height_ratio": y.tolist(),
+            "landed": {"cycle": k_cyc.tolist(), "centroid_height_ratio": y_landed.tolist(),
+                       "samples_per_cycle": float(1.0 / (params.freq * params.save_every)),
+                       "warning": landed_sampling_warning(params),
+                       "rule": "per cycle N (samples with N-1 < (t - t0) f <= N), the lowest "
+                               "centroid height above the plate over y_c(0): the packing landed, "
+                               "not in flight"},
+            "cohesion": {"persistence": tau_f,
+                         "largest_cluster_fraction": float(f[-1]), "separated": float(1.0 - f[-1]),
+                         "cohesive": bool(f[-1] >= thresholds.cluster and tau_f >= thresholds.persistence),
+                         "rule": f"cohesive = f >= {thresholds.cluster:g} at the end and f >= "
+                                 f"{thresholds.cluster:g} for at least {thresholds.persistence:g} of "
+                                 "the shaking (height is not judged: the plate throws the packing)"}}
