@@ -54,6 +54,10 @@ SETS = {
     "container": dict(alphas=(38, 66), seeds=(0, 1),
                       args=["--container-radius", "1.5", "--duration", "10", "--lift-duration", "1",
                             "--save-every", "0.025", "--checkpoint-every", "1"]),
+    # the lab's fill height: rods poured to about 100 mm (4 l at alpha 38, 2 l at l = 50 mm), then the
+    # container lifted away (the test, 1.5 s); no shaking
+    "tall": dict(alphas=(38, 100), seeds=(0, 1), fill_to_m=0.1,
+                 args=["--duration", "0", "--lift-duration", "1.5", "--save-every", "0.05", "--checkpoint-every", "0.5"]),
 }
 
 
@@ -62,8 +66,10 @@ def _name(kind: str, alpha: int, seed: int) -> str:
 
 
 def _command(kind: str, alpha: int, seed: int, folder: Path) -> list[str]:
+    fill = SETS[kind].get("fill_to_m")
+    extra = ["--fill-height", f"{fill / RODS[alpha]:g}"] if fill else []
     return ["rodwarp", "simulate", *LAB, "--alpha", str(alpha), "--length", str(RODS[alpha]), "--seed", str(seed),
-            *SETS[kind]["args"], "--out", str(folder)]
+            *SETS[kind]["args"], *extra, "--out", str(folder)]
 
 
 def _finished(folder: Path) -> bool:
@@ -151,19 +157,35 @@ def _in_progress(folder: Path) -> dict | None:
                              "kinetic_energy_J": float(lift[-1]["kinetic_energy"])}}}
 
 
-def _paper_means(data: Path | None) -> dict:
-    """(alpha, strain) -> means of n, phi, S, c of the authors' fields (valid voxels: n > 0)."""
+def _paper_means(data: Path | None) -> tuple[dict, dict]:
+    """(alpha, strain) -> the authors' fields' statistics: the means of n, phi, S, c over their
+    valid voxels (n > 0), and the statistics of e and n (rodwarp.analysis.field_statistics) over
+    the interior, the valid voxels at least one ball radius from an empty voxel or the grid's
+    edge, where a ball lies wholly inside the packing as the simulated balls do."""
+    from scipy import ndimage as ndi
+
+    from rodwarp.analysis import field_statistics
+    from rodwarp.analysis._fieldset import Fields
+
     if data is None:
-        return {}
-    out = {}
+        return {}, {}
+    means, interior = {}, {}
     for f in sorted(Path(data).glob("alpha*_epsilon*.npz")):
         a, e = f.stem.replace("alpha", "").split("_epsilon")
-        z = np.load(f)
-        valid = np.asarray(z["n"]) > 0
-        out[(int(a), int(e) / 100)] = {k: float(np.nanmean(np.asarray(z[src])[valid]))
-                                       for k, src in (("mean_n", "n"), ("mean_phi", "phi"), ("mean_S", "s"),
-                                                      ("mean_c", "c"))}
-    return out
+        key = (int(a), int(e) / 100)
+        fl = Fields.load(f)
+        valid = fl.valid
+        means[key] = {k: float(np.nanmean(np.asarray(fl.get(src))[valid]))
+                      for k, src in (("mean_n", "n"), ("mean_phi", "phi"), ("mean_S", "S"), ("mean_c", "c"))}
+        steps = int(round(fl.radius / fl.spacing))
+        inner = ndi.binary_erosion(valid, iterations=steps, border_value=0)
+        n = np.asarray(fl.get("n")).copy()
+        n[~inner] = 0
+        fl.n = n
+        st = field_statistics(fl, power_laws=False)
+        interior[key] = {k: st.get(k) for k in ("mean_n", "cv_e", "mean_e", "q1_e", "q3_e", "e_lb")}
+        interior[key]["share_of_valid"] = float(inner.sum() / valid.sum())
+    return means, interior
 
 
 #: the fields whose distributions are compared with the authors' (their README: e and n the most
@@ -221,9 +243,10 @@ def report(args) -> int:
     runs = Path(args.runs)
     out = Path(args.out)
     shake, press, cont = _runs(runs, "shake"), _runs(runs, "press"), _runs(runs, "container")
+    tall = _runs(runs, "tall")
     paper = {(int(f["alpha"]), float(f["epsilon"])): f
              for f in json.loads((OUT / "paper_fields.json").read_text())["files"]}
-    paper_means = _paper_means(Path(args.paper_fields) if args.paper_fields else None)
+    paper_means, paper_interior = _paper_means(Path(args.paper_fields) if args.paper_fields else None)
 
     def row(r):
         s, lab = r["summary"], r["summary"]["lab"]
@@ -231,7 +254,8 @@ def report(args) -> int:
                "incomplete": s.get("incomplete"),
                "length_m": s["length"], "diameter_m": s["diameter"], "rod_model": s["rod_model"],
                "container_radius_m": lab["container_radius_m"], "wall_time_s": s["wall_time_s"],
-               "contact_law": s["contact_law"]["name"], "mu": s["parameters"]["mu"]}
+               "contact_law": s["contact_law"]["name"], "mu": s["parameters"]["mu"],
+               "fill_height_m": s["parameters"]["fill_height"] * s["length"]}
         if "lift" in lab:
             out["lift"] = lab["lift"]
         if "shake" in lab:
@@ -245,18 +269,24 @@ def report(args) -> int:
         return out
 
     table = {"shake": [row(r) for r in shake], "press": [row(r) for r in press],
-             "container": [row(r) for r in cont]}
+             "container": [row(r) for r in cont], "tall": [row(r) for r in tall]}
     # field statistics against strain beside the authors'
     compare = []
     keys = ("mean_n", "cv_e", "mean_e", "q1_e", "q3_e", "e_lb", "mean_phi", "mean_S", "mean_c")
     for r in table["press"]:
         for st in r.get("strains", []):
             exp = {**paper.get((r["alpha"], st["strain"]), {}), **paper_means.get((r["alpha"], st["strain"]), {})}
+            inner = paper_interior.get((r["alpha"], st["strain"]), {})
             compare.append({"alpha": r["alpha"], "seed": r["seed"], "strain": st["strain"],
                             **{f"sim_{k}": st.get(k) for k in keys},
                             **{f"exp_{k}": exp.get(k) for k in keys},
-                            **{f"rel_{k}": _rel(st.get(k), exp.get(k)) for k in keys}})
-    record = {"command": " ".join(shlex.quote(a) for a in sys.argv), "date": datetime.now(timezone.utc).isoformat(),
+                            **{f"rel_{k}": _rel(st.get(k), exp.get(k)) for k in keys},
+                            **{f"expin_{k}": v for k, v in inner.items()},
+                            **{f"relin_{k}": _rel(st.get(k), v) for k, v in inner.items() if k in keys}})
+    # the command as run, its folders named without the machine's paths
+    argv = [Path(a).name if i and sys.argv[i - 1] in ("--runs", "--paper-fields", "--out") else a
+            for i, a in enumerate(sys.argv)]
+    record = {"command": " ".join(shlex.quote(a) for a in ["python", "scripts/lab_experiments.py", *argv[1:]]), "date": datetime.now(timezone.utc).isoformat(),
               "versions": versions(), "sets": {k: v["args"] for k, v in SETS.items()}, "lab_args": LAB,
               "rods": {str(a): {"length_m": l, "diameter_m": l / a} for a, l in RODS.items()},
               "runs": table, "transition": transition(table["shake"]), "fields_vs_paper": compare,
@@ -296,14 +326,17 @@ def report(args) -> int:
         fig.savefig(out / "lab_shake.png", dpi=120)
         figs.append("lab_shake.png")
         plt.close(fig)
-    lifted = [r for r in table["shake"] if "lift" in r]
+    lifted = [r for r in table["shake"] + table["tall"] if "lift" in r]
     if lifted:
         fig, ax = plt.subplots(figsize=(5.5, 4))
         for r in lifted:
-            ax.plot(r["alpha"], r["lift"]["height_kept_after_lift"], "o", color="C0")
-            ax.plot(r["alpha"], r["lift"]["spread_over_container"], "s", color="C1")
+            full = r in table["tall"]
+            ax.plot(r["alpha"], r["lift"]["height_kept_after_lift"], "o", color="C0", mfc="none" if full else "C0")
+            ax.plot(r["alpha"], r["lift"]["spread_over_container"], "s", color="C1", mfc="none" if full else "C1")
         ax.plot([], [], "o", color="C0", label="centroid height after / before the lift")
         ax.plot([], [], "s", color="C1", label="spread radius / container radius")
+        if table["tall"]:
+            ax.plot([], [], "o", color="k", mfc="none", label="open: filled to 100 mm, as in the lab")
         ax.set(xscale="log", xlabel="alpha", title="The container lifted away (Fig. 1A-B)")
         ax.legend(fontsize=8)
         fig.tight_layout()
@@ -404,6 +437,18 @@ def _write_md(path: Path, record: dict, figs: list[str]) -> None:
             L.append(f"| {names[k]} | " + " | ".join(f"{m:.2f}" for m in v["seed_mean"].values())
                      + f" | {star} | {br} |")
         L.append("")
+    tl = record["runs"].get("tall") or []
+    if tl:
+        L += ["## The lifted container at the lab's fill height (about 100 mm)", "",
+              "| run | rods | fill height (mm) | Rc (mm) | h after/before | spread / Rc | f | kinetic energy (J) | "
+              "wall (s) |", "|---|---|---|---|---|---|---|---|---|"]
+        for r in sorted(tl, key=lambda r: (r["alpha"], r["seed"])):
+            lf = r["lift"]
+            L.append(f"| {r['run']} | {r['n_rods']} | {r['fill_height_m'] * 1e3:.0f} | "
+                     f"{r['container_radius_m'] * 1e3:.0f} | {_fmt(lf['height_kept_after_lift'])} | "
+                     f"{_fmt(lf['spread_over_container'])} | {_fmt(lf['largest_cluster_fraction'])} | "
+                     f"{_fmt(lf['kinetic_energy_J'], 2)} | {r['wall_time_s']:.0f} |")
+        L.append("")
     ct = record["runs"]["container"]
     if ct:
         L += ["## Container size", "", "| run | rods | Rc (mm) | spread / Rc | tau_f | f end | wall (s) |",
@@ -427,6 +472,23 @@ def _write_md(path: Path, record: dict, figs: list[str]) -> None:
                 cells.append(f"{_fmt(s)} / {_fmt(e)} ({'-' if r is None else f'{r:+.0%}'})")
             L.append(f"| {c['alpha']} | {c['seed']} | {c['strain']:g} | " + " | ".join(cells) + " |")
         L.append("")
+        inner = ("mean_n", "cv_e", "mean_e", "q1_e", "q3_e", "e_lb")
+        if any(c.get("expin_mean_e") is not None for c in cmp_):
+            L += ["### Against the interior of the CT fields", "",
+                  "The simulated balls lie wholly inside the packing (the box inscribed in the cylinder, from the "
+                  "plate to the piston); the authors' statistics count every voxel with a rod in its ball, the "
+                  "packing's surface included. Here the CT side keeps only the voxels at least one ball radius "
+                  "from an empty voxel or the grid's edge (share of their valid voxels in the last column). "
+                  "Each cell: simulated / CT interior (relative difference).", "",
+                  "| alpha | seed | strain | " + " | ".join(inner) + " | CT share |", "|---" * (4 + len(inner)) + "|"]
+            for c in sorted(cmp_, key=lambda c: (c["alpha"], c["strain"], c["seed"])):
+                cells = []
+                for k in inner:
+                    s, e, r = c[f"sim_{k}"], c.get(f"expin_{k}"), c.get(f"relin_{k}")
+                    cells.append(f"{_fmt(s)} / {_fmt(e)} ({'-' if r is None else f'{r:+.0%}'})")
+                L.append(f"| {c['alpha']} | {c['seed']} | {c['strain']:g} | " + " | ".join(cells)
+                         + f" | {_fmt(c.get('expin_share_of_valid'), 2)} |")
+            L.append("")
     dist = record.get("field_distributions") or []
     if dist:
         L += ["## Distributions of the fields: quartiles q1 / median / q3", "",
