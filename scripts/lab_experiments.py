@@ -137,11 +137,12 @@ def _in_progress(folder: Path) -> dict | None:
             rows = list(csv.DictReader(fh))
     except FileNotFoundError:
         return None
-    if p["strains"] or not any(r["stage"] == "shake" and float(r["time"]) > p["pour_duration"] + p["lift_duration"]
-                               for r in rows):
-        return None
+    t_lifted = p["pour_duration"] + p["lift_duration"]
+    if p["strains"] or not any(r["stage"] == "lift" and float(r["time"]) >= t_lifted - 1e-9 for r in rows):
+        return None  # not yet through the lift
     params = ProtocolParams(**{**p, "box": tuple(p["box"]), "strains": ()})
-    sh = shake_result(params, rows, p["pour_duration"] + p["lift_duration"], DEFAULT_THRESHOLDS)
+    shaken = any(r["stage"] == "shake" and float(r["time"]) > t_lifted for r in rows)
+    sh = shake_result(params, rows, t_lifted, DEFAULT_THRESHOLDS) if shaken else None
     lift = [r for r in rows if r["stage"] == "lift"]
     pour = [r for r in rows if r["stage"] == "pour"]
     rc = p["container_radius"] * p["length"]
@@ -150,10 +151,10 @@ def _in_progress(folder: Path) -> dict | None:
             "diameter": params.diameter, "rod_model": rod_model_rule(params)["rod_model"],
             "contact_law": {"name": p["contact_law"] or "exact"}, "parameters": p,
             "wall_time_s": (datetime.now(timezone.utc) - started).total_seconds(),
-            "incomplete": {"shaken_s": sh["shaken_s"], "of_s": p["duration"], "status": meta["status"]},
+            "incomplete": {"shaken_s": sh["shaken_s"] if sh else 0.0, "of_s": p["duration"], "status": meta["status"]},
             "persistence": None, "stable": None,
             "max_penetration_over_d": max(float(r["max_penetration_over_d"]) for r in rows),
-            "lab": {"container_radius_m": rc, "shake": sh,
+            "lab": {"container_radius_m": rc, **({"shake": sh} if sh else {}),
                     "lift": {"height_kept_after_lift": float(lift[-1]["centroid_height"]) /
                              float(pour[-1]["centroid_height"]),
                              "spread_radius_m": float(lift[-1]["spread_radius"]),
@@ -310,6 +311,8 @@ def report(args) -> int:
         colors = {a: f"C{i}" for i, a in enumerate(sorted(RODS))}
         seen = set()
         for r in table["shake"] + table["shake_rigid"]:
+            if "landed_cycle" not in r:  # not yet shaken
+                continue
             key = (r["alpha"], r["rod_model"])
             label = None if key in seen else f"alpha {r['alpha']} ({r['rod_model']}" + (
                 ", in progress)" if r["incomplete"] else ")")
@@ -332,7 +335,7 @@ def report(args) -> int:
                 ax[1].plot(al, [np.median(by[a]) for a in al], style, mfc="none", label=label)
                 for a in al:
                     ax[1].plot([a] * len(by[a]), by[a], "k.", alpha=0.5)
-        for r in [r for r in table["shake"] if r["incomplete"]]:
+        for r in [r for r in table["shake"] if r["incomplete"] and "cohesion" in r]:
             ax[1].plot(r["alpha"], r["cohesion"]["persistence"], "x", color="C3",
                        label=f"alpha {r['alpha']} {r['rod_model']}: first {r['incomplete']['shaken_s']:.1f} s only")
         ax[1].axvline(100, color="r", ls="--", label="paper's experiments (~100)")
@@ -347,7 +350,7 @@ def report(args) -> int:
         fig.savefig(out / "lab_shake.png", dpi=120)
         figs.append("lab_shake.png")
         plt.close(fig)
-    lifted = [r for r in table["shake"] + table["tall"] if "lift" in r]
+    lifted = [r for r in table["shake"] + table["shake_rigid"] + table["tall"] if "lift" in r]
     if lifted:
         fig, ax = plt.subplots(figsize=(5.5, 4))
         for r in lifted:
@@ -431,14 +434,14 @@ def _write_md(path: Path, record: dict, figs: list[str]) -> None:
               "| run | rods | model | law (mu) | Rc (mm) | lifted: h after/before | spread / Rc | tau_f | f end | "
               "cohesive | tau (h and f) | wall (s) |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in sorted(sh, key=lambda r: (r["alpha"], r["seed"])):
-            c, lf = r["cohesion"], r.get("lift", {})
+            c, lf = r.get("cohesion", {}), r.get("lift", {})
             inc = r.get("incomplete")
             name = r["run"] + (f" (in progress: {inc['shaken_s']:.0f} of {inc['of_s']:.0f} s shaken)" if inc else "")
             L.append(f"| {name} | {r['n_rods']} | {r['rod_model']} | {r['contact_law']} ({r['mu']:g}) | "
                      f"{r['container_radius_m'] * 1e3:.0f} | "
                      f"{_fmt(lf.get('height_kept_after_lift'))} | {_fmt(lf.get('spread_over_container'))} | "
-                     f"{_fmt(c['persistence'])} | {_fmt(c['largest_cluster_fraction'])} | {c['cohesive']} | "
-                     f"{_fmt(r['persistence_h_and_f'])} | {r['wall_time_s']:.0f} |")
+                     f"{_fmt(c.get('persistence'))} | {_fmt(c.get('largest_cluster_fraction'))} | "
+                     f"{c.get('cohesive', '-')} | {_fmt(r.get('persistence_h_and_f'))} | {r['wall_time_s']:.0f} |")
         L.append("")
     for which, tr in (record.get("transition") or {}).items():
         if not tr:
