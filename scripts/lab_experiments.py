@@ -310,7 +310,7 @@ def report(args) -> int:
         fig, ax = plt.subplots(1, 2, figsize=(11, 4))
         colors = {a: f"C{i}" for i, a in enumerate(sorted(RODS))}
         seen = set()
-        for r in table["shake"] + table["shake_rigid"]:
+        for r in sorted(table["shake"] + table["shake_rigid"], key=lambda r: (r["alpha"], r["rod_model"], r["seed"])):
             if "landed_cycle" not in r:  # not yet shaken
                 continue
             key = (r["alpha"], r["rod_model"])
@@ -335,9 +335,12 @@ def report(args) -> int:
                 ax[1].plot(al, [np.median(by[a]) for a in al], style, mfc="none", label=label)
                 for a in al:
                     ax[1].plot([a] * len(by[a]), by[a], "k.", alpha=0.5)
-        for r in [r for r in table["shake"] if r["incomplete"] and "cohesion" in r]:
-            ax[1].plot(r["alpha"], r["cohesion"]["persistence"], "x", color="C3",
-                       label=f"alpha {r['alpha']} {r['rod_model']}: first {r['incomplete']['shaken_s']:.1f} s only")
+        going = [r for r in table["shake"] + table["shake_rigid"] if r["incomplete"] and "cohesion" in r]
+        for r in going:
+            ax[1].plot(r["alpha"], r["cohesion"]["persistence"], "x", color="C3")
+        if going:
+            ax[1].plot([], [], "x", color="C3", label="runs in progress: tau_f of the shaking so far ("
+                       + ", ".join(f"{r['incomplete']['shaken_s']:.1f}" for r in going) + " s)")
         ax[1].axvline(100, color="r", ls="--", label="paper's experiments (~100)")
         ax[1].axvline(35, color="gray", ls=":", label="rodwarp, paper's numerical protocol (35)")
         tr = (record["transition"]["sag_rule"] or record["transition"]["rigid"]).get("tau_f", {})
@@ -355,8 +358,13 @@ def report(args) -> int:
         fig, ax = plt.subplots(figsize=(5.5, 4))
         for r in lifted:
             full = r in table["tall"]
-            ax.plot(r["alpha"], r["lift"]["height_kept_after_lift"], "o", color="C0", mfc="none" if full else "C0")
-            ax.plot(r["alpha"], r["lift"]["spread_over_container"], "s", color="C1", mfc="none" if full else "C1")
+            el = r["rod_model"] == "elastic"
+            ax.plot(r["alpha"], r["lift"]["height_kept_after_lift"], "D" if el else "o", color="C0",
+                    mfc="none" if full else "C0")
+            ax.plot(r["alpha"], r["lift"]["spread_over_container"], "P" if el else "s", color="C1",
+                    mfc="none" if full else "C1")
+        if any(r["rod_model"] == "elastic" for r in lifted):
+            ax.plot([], [], "D", color="k", label="diamond, plus: elastic rods (else rigid)")
         ax.plot([], [], "o", color="C0", label="centroid height after / before the lift")
         ax.plot([], [], "s", color="C1", label="spread radius / container radius")
         if table["tall"]:
