@@ -300,6 +300,7 @@ def report(args) -> int:
                   "sag_rule": transition([r for r in table["shake"] if not r["incomplete"]]),
                   "rigid": transition([r for r in table["shake"] + table["shake_rigid"]
                                        if not r["incomplete"] and r["rod_model"] == "rigid"])}, "fields_vs_paper": compare,
+              "same_span": same_span(runs, table["shake"] + table["shake_rigid"]),
               "field_distributions": _distributions(runs, press, Path(args.paper_fields) if args.paper_fields
                                                     else None)}
     out.mkdir(parents=True, exist_ok=True)
@@ -423,6 +424,37 @@ def transition(shake: list[dict]) -> dict:
     return out
 
 
+def same_span(runs: Path, rows: list[dict]) -> dict:
+    """The runs still shaking beside the finished ones over the same span: X = the shortest
+    shaking of a run in progress (s); for every shaken run, f at X, tau_f over [0, X] and the
+    landed y_c / y_c(0) of the last whole cycle within X, from its metrics.csv."""
+    import csv
+
+    from rodwarp.experiments._verdict import DEFAULT_THRESHOLDS, persistence
+
+    going = [r for r in rows if r["incomplete"] and "cohesion" in r]
+    if not going:
+        return {}
+    span = min(r["incomplete"]["shaken_s"] for r in going)
+    out = []
+    for r in rows:
+        if "cohesion" not in r:
+            continue
+        with open(runs / r["run"] / "metrics.csv") as fh:
+            sh = [x for x in csv.DictReader(fh) if x["stage"] == "shake"]
+        p = json.loads((runs / r["run"] / "rodwarp-run.json").read_text())["parameters"]
+        t0 = p["pour_duration"] + p["lift_duration"]
+        keep = [x for x in sh if t0 < float(x["time"]) <= t0 + span + 1e-9]
+        t = np.array([float(x["time"]) for x in keep])
+        f = np.array([float(x["largest_cluster_fraction"]) for x in keep])
+        n_cyc = int(np.floor(span * p["freq"] + 1e-9))
+        y = [v for k, v in zip(r["landed_cycle"], r["landed_y_ratio"]) if k <= n_cyc]
+        out.append({"run": r["run"], "alpha": r["alpha"], "seed": r["seed"], "rod_model": r["rod_model"],
+                    "f": float(f[-1]), "tau_f": persistence(t, t0, f >= DEFAULT_THRESHOLDS.cluster),
+                    "landed_y_ratio": y[-1] if y else None, "cycles": n_cyc, "in_progress": bool(r["incomplete"])})
+    return {"span_s": span, "runs": out}
+
+
 def _fmt(v, nd=3):
     if v is None:
         return "-"
@@ -470,6 +502,16 @@ def _write_md(path: Path, record: dict, figs: list[str]) -> None:
             br = f"{_fmt(v['bracket_lo'])}-{_fmt(v['bracket_hi'])}" if v["bracket_lo"] and v["bracket_hi"] else "-"
             L.append(f"| {names[k]} | " + " | ".join(f"{m:.2f}" for m in v["seed_mean"].values())
                      + f" | {star} | {br} |")
+        L.append("")
+    ss = record.get("same_span") or {}
+    if ss:
+        L += [f"## Every shaken run over the first {ss['span_s']:.1f} s ({ss['runs'][0]['cycles']} cycles), the "
+              "span the runs in progress have reached", "",
+              "| run | model | f at that time | tau_f over it | landed y_c / y_c(0), last whole cycle |",
+              "|---|---|---|---|---|"]
+        for r in sorted(ss["runs"], key=lambda r: (r["alpha"], r["rod_model"], r["seed"])):
+            L.append(f"| {r['run']}{' (in progress)' if r['in_progress'] else ''} | {r['rod_model']} | "
+                     f"{_fmt(r['f'])} | {_fmt(r['tau_f'])} | {_fmt(r['landed_y_ratio'])} |")
         L.append("")
     tl = record["runs"].get("tall") or []
     if tl:
