@@ -476,7 +476,7 @@ def _write_md(path: Path, record: dict, figs: list[str]) -> None:
         for r in sorted(sh, key=lambda r: (r["alpha"], r["seed"])):
             c, lf = r.get("cohesion", {}), r.get("lift", {})
             inc = r.get("incomplete")
-            name = r["run"] + (f" (in progress: {inc['shaken_s']:.0f} of {inc['of_s']:.0f} s shaken)" if inc else "")
+            name = r["run"] + (f" (in progress: {inc['shaken_s']:.3g} of {inc['of_s']:g} s shaken)" if inc else "")
             L.append(f"| {name} | {r['n_rods']} | {r['rod_model']} | {r['contact_law']} ({r['mu']:g}) | "
                      f"{r['container_radius_m'] * 1e3:.0f} | "
                      f"{_fmt(lf.get('height_kept_after_lift'))} | {_fmt(lf.get('spread_over_container'))} | "
