@@ -150,7 +150,8 @@ def _in_progress(folder: Path) -> dict | None:
     return {"alpha": p["alpha"], "seed": p["seed"], "n_rods": params.rods, "length": p["length"],
             "diameter": params.diameter, "rod_model": rod_model_rule(params)["rod_model"],
             "contact_law": {"name": p["contact_law"] or "exact"}, "parameters": p,
-            "wall_time_s": (datetime.now(timezone.utc) - started).total_seconds(),
+            # to its last checkpoint (metrics.csv is written then), so a killed run's time stops growing
+            "wall_time_s": (folder / "metrics.csv").stat().st_mtime - started.timestamp(),
             "incomplete": {"shaken_s": sh["shaken_s"] if sh else 0.0, "of_s": p["duration"], "status": meta["status"]},
             "persistence": None, "stable": None,
             "max_penetration_over_d": max(float(r["max_penetration_over_d"]) for r in rows),
@@ -194,8 +195,9 @@ def _paper_means(data: Path | None) -> tuple[dict, dict]:
     return means, interior
 
 
-#: the fields whose distributions are compared with the authors' (their README: e and n the most
-#: trustworthy; their phi is mis-scaled and their S takes the wrong eigenvalue in some paths)
+#: the fields whose distributions are compared with the authors' (their data's README: e and n the
+#: most trustworthy; their S is the eigenvalue of largest magnitude, and their c has another
+#: normalisation; docs/experiments.md says which compare)
 DIST_FIELDS = ("e", "n", "phi", "S", "c")
 
 
@@ -569,8 +571,8 @@ def _write_md(path: Path, record: dict, figs: list[str]) -> None:
     if dist:
         L += ["## Distributions of the fields: quartiles q1 / median / q3", "",
               "Simulated (seeds pooled: the median of the seeds' quartiles) and the authors' CT fields, valid voxels "
-              "(n > 0). The authors' phi is mis-scaled and their S takes the wrong eigenvalue in some paths "
-              "(their data's README); e and n are the comparable ones.", "",
+              "(n > 0). e, n and phi compare; the authors' S is the eigenvalue of largest magnitude and their c "
+              "has another normalisation (docs/experiments.md).", "",
               "| alpha | strain | " + " | ".join(f"{k} sim | {k} CT" for k in DIST_FIELDS) + " |",
               "|---" * (2 + 2 * len(DIST_FIELDS)) + "|"]
         keys = sorted({(d["alpha"], d["strain"]) for d in dist})
