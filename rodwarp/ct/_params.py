@@ -256,6 +256,9 @@ class SegmentResult:
     spacing : float
         Edge of the working voxel in the units of the ``voxel_size`` given (1 without one):
         physical coordinates are ``rods.points * spacing``.
+    doubt : rodwarp.ct._doubt.Doubt, optional
+        Per-rod confidence and the foreground no trace explains (``quality["unexplained"]``
+        holds its summary).
     """
 
     rods: RodSet
@@ -264,3 +267,4 @@ class SegmentResult:
     timings: dict = field(default_factory=dict)
     quality: dict = field(default_factory=dict)
     spacing: float = 1.0
+    doubt: object = None

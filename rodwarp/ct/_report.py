@@ -150,6 +150,70 @@ def plot_qa_projection(path, volume, rods_vox: RodSet) -> Path:
     return save_figure(fig, path)
 
 
+def write_filaments_csv(path, rods: RodSet, doubt) -> Path:
+    """``rod,length,radius,confidence,support,crowding,open_ends,doubts``: one row per rod or
+    filament (lengths and radii in the rod set's units; ``doubts`` joined with "; ")."""
+    L = rods.rod_lengths()
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["rod", "length", "radius", "confidence", "support", "crowding", "open_ends", "doubts"])
+    for k in range(rods.n_rods):
+        w.writerow([k, repr(float(L[k])), repr(float(rods.radii[k])), f"{doubt.confidence[k]:.3f}",
+                    f"{doubt.support[k]:.3f}", f"{doubt.crowding[k]:.3f}", int(doubt.open_ends[k]),
+                    "; ".join(doubt.doubts[k])])
+    return write_text(path, buf.getvalue())
+
+
+def plot_qa_confidence(path, rods_vox: RodSet, doubt) -> Path:
+    """Projections along z and y of the binarised foreground's depth (grey), the depth of the
+    foreground no trace explains (magenta) and every trace coloured by its confidence (thick:
+    doubtful, numbered)."""
+    from matplotlib import colormaps
+    from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure
+
+    from rodwarp.ct._doubt import DOUBT_CONFIDENCE
+
+    fig = Figure(figsize=(13, 6))
+    p0, p1, rod = rods_vox.segments()
+    cmap = colormaps["RdYlGn"]
+    norm = Normalize(0.0, 1.0)
+    q = doubt.summary()
+    axes = []
+    for k, (mip, (i, j), name) in enumerate(((doubt.mip_z, (0, 1), "along z (x-y)"),
+                                              (doubt.mip_y, (0, 2), "along y (x-z)"))):
+        ax = fig.add_subplot(1, 2, k + 1)
+        axes.append(ax)
+        # foreground depth in grey; unexplained depth in magenta, opaque at its 99th percentile
+        fgd = mip[0].astype(float)
+        ax.imshow(fgd, cmap="gray", vmin=0, vmax=max(float(np.percentile(fgd, 99.5)), 1.0), origin="upper",
+                  interpolation="nearest")
+        und = mip[1].astype(float)
+        top = max(float(np.percentile(und[und > 0], 99)) if np.any(und > 0) else 1.0, 1.0)
+        over = np.zeros(und.shape + (4,))
+        over[..., 0] = over[..., 2] = 1.0
+        over[..., 3] = np.clip(und / top, 0.0, 1.0) * 0.85
+        ax.imshow(over, origin="upper", interpolation="nearest")
+        conf = doubt.confidence
+        for a, b, ri in zip(p0, p1, rod):
+            ax.plot([a[i], b[i]], [a[j], b[j]], "-", color=cmap(norm(conf[ri])),
+                    lw=2.2 if conf[ri] < DOUBT_CONFIDENCE else 1.2)
+        for ri in doubt.doubtful:
+            c = rods_vox.rod(int(ri)).mean(0)
+            ax.text(c[i], c[j], str(int(ri)), color="white", fontsize=7, ha="center", va="center")
+        ax.set_title(f"projection {name}")
+        ax.set_xlabel("x (column)")
+        ax.set_ylabel("y (row)" if k == 0 else "z (slice)")
+    import matplotlib.cm as cm
+
+    sm = cm.ScalarMappable(norm=norm, cmap=cmap)
+    fig.colorbar(sm, ax=axes, fraction=0.025, label="trace confidence")
+    fig.suptitle(f"{rods_vox.n_rods} traces, {q['doubtful']} doubtful (confidence < {DOUBT_CONFIDENCE:g}, numbered); "
+                 f"unexplained foreground (magenta) {100 * q['fraction']:.1f}% in {q['regions']} regions; "
+                 f"grey: foreground depth")
+    return save_figure(fig, path)
+
+
 def _mip(volume, axis: int, block: int = 64) -> np.ndarray:
     """Maximum projection of a (possibly lazy) volume, a block of slices at a time."""
     nz = volume.shape[0]
@@ -194,6 +258,9 @@ def write_outputs(outdir, result, volume, *, voxel_size: float, units: str, summ
     phys.save(outdir / "rods.npz")
     write_rods_csv(outdir / "rods.csv", phys)
     write_contacts_csv(outdir / "contacts.csv", phys)
+    doubt = getattr(result, "doubt", None)
+    if doubt is not None:
+        write_filaments_csv(outdir / "filaments.csv", phys, doubt)
     out = dict(summary)
     out.update({
         "n_rods": int(phys.n_rods),
@@ -209,6 +276,12 @@ def write_outputs(outdir, result, volume, *, voxel_size: float, units: str, summ
         "files": ["rods.npz", "rods.csv", "contacts.csv", "summary.json"],
     })
     out["shape"] = result.quality.get("shape", "straight")
+    if doubt is not None:
+        out["files"].insert(3, "filaments.csv")
+        L = phys.rod_lengths()
+        out["filaments"] = [{"rod": k, "length": float(L[k]), "radius": float(phys.radii[k]),
+                             "confidence": float(doubt.confidence[k]), "doubts": doubt.doubts[k]}
+                            for k in range(phys.n_rods)]
     if figures:
         qa = rods_vox
         if grid_scale is not None and not np.allclose(grid_scale, 1.0):
@@ -219,6 +292,9 @@ def write_outputs(outdir, result, volume, *, voxel_size: float, units: str, summ
         plot_qa_slices(outdir / "qa_slices.png", volume, qa)
         plot_qa_projection(outdir / "qa_projection.png", volume, qa)
         out["files"] += ["qa_slices.png", "qa_projection.png"]
+        if doubt is not None and doubt.mip_z is not None:
+            plot_qa_confidence(outdir / "qa_confidence.png", rods_vox, doubt)
+            out["files"].append("qa_confidence.png")
     write_json(outdir / "summary.json", out)
     return out
 
@@ -361,4 +437,5 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
 
 
 __all__ = ["run_segment", "parse_voxel_size_text", "default_out", "to_physical", "write_rods_csv",
-           "write_contacts_csv", "plot_qa_slices", "plot_qa_projection", "write_outputs"]
+           "write_contacts_csv", "write_filaments_csv", "plot_qa_slices", "plot_qa_projection",
+           "plot_qa_confidence", "write_outputs"]

@@ -55,6 +55,7 @@ from rodwarp.rodset import RodSet, detect_contacts
 
 if TYPE_CHECKING:  # annotations only: _prepare and _curved load when a run needs them
     from rodwarp.ct._curved import FilamentResult
+    from rodwarp.ct._doubt import Doubt
     from rodwarp.ct._prepare import Prepared
 
 __all__ = ["segment_volume", "AUTO_BEND_FRACTION"]
@@ -238,8 +239,19 @@ def segment_volume(volume, params: SegmentParams | None = None,
     timings["contacts"] = time.perf_counter() - tic
     straight = _Straight(merged=nm, refine=ref_stats, per_rod_radius=bool(mixed), rejected=reasons,
                          fit_residual=fit_residual, contacts_rejected=rej)
+    doubt = _assess(reader, st, out, P, timings)
     return _assemble_result(out, contacts, r_glob, radius_spread, P, prep, st, cnr, timings, t_all,
-                            trace=trace, candidates=candidates, straight=straight)
+                            trace=trace, candidates=candidates, straight=straight, doubt=doubt)
+
+
+def _assess(reader, st, rods, P, timings):
+    """Per-rod confidence and unexplained foreground (``_doubt``), timed as ``doubt``."""
+    from rodwarp.ct._doubt import assess
+
+    tic = time.perf_counter()
+    d = assess(reader, st, rods, P)
+    timings["doubt"] = time.perf_counter() - tic
+    return d
 
 
 #: ``shape="auto"`` traces filaments when more than this share of the long skeleton branches
@@ -277,8 +289,9 @@ def _finish_curved(reader, st, P, prep, cnr, timings, t_all, progress, trace=Non
     r_glob = float(np.median(radii))
     radius_spread = float(np.std(radii))  # of the sorted radii, as always (the sum's order counts)
     timings["contacts"] = time.perf_counter() - tic
+    doubt = _assess(reader, st, out, P, timings)
     return _assemble_result(out, contacts, r_glob, radius_spread, P, prep, st, cnr, timings, t_all,
-                            trace=trace, candidates=candidates, filaments=fil)
+                            trace=trace, candidates=candidates, filaments=fil, doubt=doubt)
 
 
 class _Straight(NamedTuple):
@@ -295,7 +308,7 @@ class _Straight(NamedTuple):
 def _assemble_result(out: RodSet, contacts, r_glob: float, radius_spread: float, P: SegmentParams,
                      prep: Prepared, st: _Levels, cnr: float, timings: dict, t_all: float, *,
                      trace: TraceStats | None = None, candidates: int = 0, straight: _Straight | None = None,
-                     filaments: FilamentResult | None = None) -> SegmentResult:
+                     filaments: FilamentResult | None = None, doubt: Doubt | None = None) -> SegmentResult:
     """The :class:`SegmentResult` of either path, its ``quality`` composed from the stages' results.
 
     The one place that writes ``quality``: keys in the order ``summary.json`` has always listed
@@ -325,7 +338,8 @@ def _assemble_result(out: RodSet, contacts, r_glob: float, radius_spread: float,
     if filaments is not None:
         f = filaments
         q.update(skeleton_voxels=f.skeleton_voxels, skeleton_junctions=f.skeleton_junctions, branches=f.branches,
-                 bend_fraction=f.bend_fraction, joins=f.joins, rods_rejected={"faint": f.faint} if f.faint else {},
+                 bend_fraction=f.bend_fraction, joins=f.joins, bridges=f.bridges, duplicates=f.duplicates,
+                 rods_rejected={"faint": f.faint} if f.faint else {},
                  filaments=f.filaments, radius_spread=radius_spread)
     else:
         s = straight
@@ -337,9 +351,13 @@ def _assemble_result(out: RodSet, contacts, r_glob: float, radius_spread: float,
                      end_offset=r.end_offset)
         q.update(per_rod_radius=s.per_rod_radius, rods_rejected=s.rejected, fit_residual=s.fit_residual,
                  radius_spread=radius_spread, contacts_rejected_by_image=s.contacts_rejected)
+    if doubt is not None:
+        if filaments is not None:  # the curved path has no detection figure of its own
+            q["foreground_explained"] = 1.0 - doubt.unexplained_fraction
+        q["unexplained"] = doubt.summary()
     q["flags"] = _flags(q, shape)
     return SegmentResult(rods=out, contacts=contacts, diameter=2.0 * r_glob, timings=timings, quality=q,
-                         spacing=prep.spacing)
+                         spacing=prep.spacing, doubt=doubt)
 
 
 def _flags(quality: dict, shape: str) -> list[str]:
@@ -365,6 +383,11 @@ def _flags(quality: dict, shape: str) -> list[str]:
     if shape == "straight" and quality.get("bend_fraction", 0.0) > 0.15:
         flags.append(f"{100 * quality['bend_fraction']:.0f}% of the skeleton bends: the rods may be curved "
                      f"(--shape curved)")
+    un = quality.get("unexplained") or {}
+    nd, nr = un.get("doubtful", 0), un.get("traces", 0)
+    if nd and nr and nd > 0.1 * nr:
+        flags.append(f"{nd} of {nr} traces are doubtful (confidence below {un['doubt_confidence']:g}): "
+                     f"see filaments.csv and qa_confidence.png")
     cnr = quality.get("cnr")
     if cnr is not None and np.isfinite(cnr) and cnr < 1.5:
         flags.append(f"contrast-to-noise {cnr:.1f} is below 1.5: expect missed rods and false contacts")

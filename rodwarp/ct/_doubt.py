@@ -1,0 +1,277 @@
+"""Where the trace is unsure: a confidence per traced rod or filament, and the foreground no
+trace explains.
+
+Run by :func:`rodwarp.ct.segment_volume` after either path (straight rods or curved
+filaments), in one pass over the prepared volume, a block of slices at a time:
+
+* the volume is smoothed (``smooth_sigma``) and binarised at the stage-1 threshold, as
+  detection saw it;
+* the voxels within ``r + 1.5`` of a traced axis (each rod its own radius) are *explained*;
+  the rest of the foreground is *unexplained*: a missed rod, a rod traced too short, a fused
+  mass of fibres, debris.  Its share, its connected regions (largest first, centres in
+  working voxels) and its projections (for ``qa_confidence.png``) are returned;
+* each traced axis is sampled every voxel.  Three things lower its confidence:
+
+  - **support**: the share of the axis on the foreground (a trace cutting across a gap, or
+    fitted through noise, is off it);
+  - **crowding**: the share of a ring of radius ``r + 2.5`` about the axis that is unexplained
+    foreground (a lone rod's ring is background; a rod traced through a fused mass, or
+    beside a neighbour nobody traced, is surrounded by it);
+  - **open ends**: an end past which the unexplained foreground continues (the filament goes on:
+    broken, or cut short at a crossing);
+
+  and a radius far from the median (a thick trace is often two fused fibres).  The confidence
+  is ``support x (1 - crowding) x 0.75^open_ends`` (x 0.7 for the radius), from 0 to 1; a rod
+  below :data:`DOUBT_CONFIDENCE` is *doubtful*, with its reasons in words.
+
+The cost is one Gaussian smoothing and one rasterisation of the traces over the volume (a few
+per cent of a segmentation).  This module must not import warp.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+__all__ = ["Doubt", "assess", "DOUBT_CONFIDENCE"]
+
+#: a rod or filament below this confidence is doubtful (named in ``quality.flags`` and the QA)
+DOUBT_CONFIDENCE = 0.7
+#: explained: within this many voxels of a trace's surface (as ``foreground_explained``)
+EXPLAIN_MARGIN = 1.5
+#: the crowding ring lies this far outside a rod's surface (voxels): beyond its own blurred edge
+RING_MARGIN = 2.5
+#: an end is open when unexplained foreground lies this far past it (voxels beyond the cap)
+END_MARGIN = 2.5
+#: radius outside this range of the median's: doubtful (thick traces are often fused fibres)
+RADIUS_RANGE = (0.6, 1.6)
+#: blocks of this many slices
+BLOCK = 64
+
+
+@dataclass(frozen=True)
+class Doubt:
+    """What :func:`assess` measured (per rod arrays in the rod set's order).
+
+    Attributes
+    ----------
+    confidence : ndarray (n,)
+        0 to 1; below :data:`DOUBT_CONFIDENCE` a rod is doubtful.
+    support : ndarray (n,)
+        Share of the axis (sampled every voxel) on the binarised foreground.
+    crowding : ndarray (n,)
+        Share of the ring of radius ``r + 2.5`` about the axis on unexplained foreground.
+    open_ends : ndarray (n,) int
+        Ends (0, 1 or 2) past which unexplained foreground continues.
+    doubts : list of list of str
+        Per rod, the reasons in words (empty: none).
+    foreground_voxels, unexplained_voxels : int
+        Binarised foreground, and the part of it farther than ``r + 1.5`` from every trace.
+    regions : list of dict
+        Connected unexplained regions at least a rod's cross-section in size, largest first (at
+        most 20): ``centre`` (x, y, z, working voxels) and ``voxels``.
+    n_regions : int
+        Number of such regions.
+    mip_z, mip_y : ndarray (2, ...) of uint16
+        Projections along z (y, x) and along y (z, x): voxels of foreground ([0]) and of
+        unexplained foreground ([1]) along each ray (for ``qa_confidence.png``).
+    """
+
+    confidence: np.ndarray
+    support: np.ndarray
+    crowding: np.ndarray
+    open_ends: np.ndarray
+    doubts: list
+    foreground_voxels: int
+    unexplained_voxels: int
+    regions: list = field(default_factory=list)
+    n_regions: int = 0
+    mip_z: np.ndarray | None = None
+    mip_y: np.ndarray | None = None
+
+    @property
+    def unexplained_fraction(self) -> float:
+        """Unexplained share (0 to 1) of the binarised foreground (0 without foreground)."""
+        return self.unexplained_voxels / self.foreground_voxels if self.foreground_voxels else 0.0
+
+    @property
+    def doubtful(self) -> np.ndarray:
+        """Indices of the doubtful rods."""
+        return np.flatnonzero(self.confidence < DOUBT_CONFIDENCE)
+
+    def summary(self) -> dict:
+        """The ``quality.unexplained`` entry of summary.json."""
+        return {"fraction": self.unexplained_fraction, "foreground_voxels": self.foreground_voxels,
+                "unexplained_voxels": self.unexplained_voxels, "regions": self.n_regions,
+                "largest_regions": self.regions[:10], "traces": int(len(self.confidence)),
+                "doubtful": int(len(self.doubtful)),
+                "doubt_confidence": DOUBT_CONFIDENCE}
+
+
+def _axis_samples(rods, step: float = 1.0):
+    """Points every ``step`` along each axis (x, y, z), their rod, and each rod's end points and
+    outward tangents."""
+    from rodwarp.ct._score import resample_polyline
+
+    pts, owner, ends = [], [], []
+    for k in range(rods.n_rods):
+        p = rods.rod(k)
+        q = resample_polyline(p, step)
+        pts.append(q)
+        owner.append(np.full(len(q), k))
+        for a, b in ((q[0], q[min(3, len(q) - 1)]), (q[-1], q[max(len(q) - 4, 0)])):
+            t = a - b
+            n = float(np.linalg.norm(t))
+            ends.append((a, t / n if n > 0 else np.zeros(3)))
+    return np.concatenate(pts), np.concatenate(owner), ends
+
+
+def _ring(r: float, n: int = 12) -> np.ndarray:
+    a = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
+    return np.stack([np.cos(a), np.sin(a)], 1) * r
+
+
+def assess(reader, st, rods, P, block: int = BLOCK) -> Doubt:
+    """Confidence of every traced rod and the foreground no trace explains.
+
+    Parameters
+    ----------
+    reader : rodwarp.ct._reader._Reader
+        The prepared volume (z, y, x).
+    st : rodwarp.ct._levels._Levels
+        Levels of stage 1 (``threshold``, ``bg``, ``fg_smooth``).
+    rods : RodSet
+        The traced rods or filaments in working voxels (x, y, z), with their radii.
+    P : SegmentParams
+        ``smooth_sigma``.
+    block : int
+        Slices per block (memory: about 20 bytes a voxel of a block).
+
+    Returns
+    -------
+    Doubt
+    """
+    from rodwarp.ct._tracing import _rasterize
+
+    shape = reader.shape
+    n = rods.n_rods
+    radii = np.asarray(rods.radii, float) if n else np.zeros(0)
+    p0, p1, seg_rod = rods.segments() if n else (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, int))
+    seg_r = radii[seg_rod] + EXPLAIN_MARGIN if n else np.zeros(0)
+    pts, owner, ends = _axis_samples(rods) if n else (np.zeros((0, 3)), np.zeros(0, int), [])
+    # ring points about every axis sample (normal plane of its segment direction)
+    t = np.zeros_like(pts)
+    for k in range(n):
+        sel = owner == k
+        q = pts[sel]
+        if len(q) >= 2:
+            g = np.gradient(q, axis=0)
+            t[sel] = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+    ref = np.where(np.abs(t[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    e1 = np.cross(t, ref)
+    e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-12)
+    e2 = np.cross(t, e1)
+    ring = _ring(1.0)
+    rr = (radii[owner] + RING_MARGIN)[:, None, None] if n else np.zeros((0, 1, 1))
+    ring_pts = pts[:, None, :] + rr * (ring[None, :, 0, None] * e1[:, None, :] + ring[None, :, 1, None] * e2[:, None, :])
+    end_pts = np.array([a + (radii[i // 2] + END_MARGIN) * tt for i, (a, tt) in enumerate(ends)]) if n else \
+        np.zeros((0, 3))
+    on_axis = np.zeros(len(pts), bool)
+    ring_un = np.zeros(ring_pts.shape[:2], bool)
+    end_un = np.zeros(len(end_pts), bool)
+
+    halo = int(math.ceil(4 * P.smooth_sigma)) + 1
+    fg = un = 0
+    mip_z = np.zeros((2,) + shape[1:], np.uint16)
+    mip_y = np.zeros((2, shape[0], shape[2]), np.uint16)
+    down = []
+    thr = np.float32(st.threshold)
+    zmin_seg = np.minimum(p0[:, 2], p1[:, 2]) - seg_r if n else np.zeros(0)
+    zmax_seg = np.maximum(p0[:, 2], p1[:, 2]) + seg_r if n else np.zeros(0)
+
+    def lookup(q, z0, z1, vol):
+        """Values of ``vol`` (a core block from slice z0) at the nearest voxel of points q in it."""
+        idx = np.rint(q[:, ::-1]).astype(np.int64)
+        inb = (idx[:, 0] >= z0) & (idx[:, 0] < z1) & np.all(idx[:, 1:] >= 0, 1) & \
+            (idx[:, 1] < shape[1]) & (idx[:, 2] < shape[2])
+        out = np.zeros(len(q), bool)
+        out[inb] = vol[idx[inb, 0] - z0, idx[inb, 1], idx[inb, 2]]
+        return inb, out
+
+    for z0 in range(0, shape[0], block):
+        z1 = min(shape[0], z0 + block)
+        lo, hi = max(0, z0 - halo), min(shape[0], z1 + halo)
+        raw = reader.read((lo, 0, 0), (hi, shape[1], shape[2]))
+        g = ndimage.gaussian_filter(raw, P.smooth_sigma, truncate=3.0) if P.smooth_sigma > 0 else raw
+        mask = g[z0 - lo:z1 - lo] > thr
+        del raw, g
+        if n:
+            sel = np.flatnonzero((zmax_seg >= z0 - 1) & (zmin_seg <= z1))
+            lines = [(p0[i], p1[i]) for i in sel]
+            cov = _rasterize(lines, mask.shape, (z0, 0, 0), seg_r[sel]) if len(sel) else np.zeros(mask.shape, bool)
+        else:
+            cov = np.zeros(mask.shape, bool)
+        unex = mask & ~cov
+        fg += int(mask.sum())
+        un += int(unex.sum())
+        mip_z[0] += mask.sum(0, dtype=np.uint16)
+        mip_z[1] += unex.sum(0, dtype=np.uint16)
+        mip_y[0, z0:z1] = mask.sum(1, dtype=np.uint16)
+        mip_y[1, z0:z1] = unex.sum(1, dtype=np.uint16)
+        # 2 x 2 x 2 blocks (any) for the regions; blocks start on even slices
+        zz = (z1 - z0) // 2 * 2
+        yy, xx = shape[1] // 2 * 2, shape[2] // 2 * 2
+        d = unex[:zz, :yy, :xx].reshape(zz // 2, 2, yy // 2, 2, xx // 2, 2).any(axis=(1, 3, 5))
+        down.append(d)
+        if n:
+            inb, v = lookup(pts, z0, z1, mask)
+            on_axis[inb] = v[inb]
+            rp = ring_pts.reshape(-1, 3)
+            inb, v = lookup(rp, z0, z1, unex)
+            ring_un.reshape(-1)[inb] = v[inb]
+            inb, v = lookup(end_pts, z0, z1, mask)
+            end_un[inb] = v[inb]
+    # regions of unexplained foreground (on the 2x grid), at least a rod's cross-section in size
+    regions, n_regions = [], 0
+    if down:
+        D = np.concatenate(down, 0)
+        lab, nl = ndimage.label(D, structure=np.ones((3, 3, 3), bool))
+        if nl:
+            sizes = np.bincount(lab.ravel(), minlength=nl + 1)[1:] * 8
+            r_med = float(np.median(radii)) if n else float(st.r0)
+            min_vox = max(8, int(math.pi * r_med ** 2 * 2 * r_med))  # a rod piece as long as it is wide
+            big = np.flatnonzero(sizes >= min_vox)
+            n_regions = int(len(big))
+            if len(big):
+                cen = ndimage.center_of_mass(D, lab, big + 1)
+                order = np.argsort(-sizes[big], kind="stable")[:20]
+                for o in order:
+                    c = np.asarray(cen[o]) * 2 + 0.5  # back to working voxels (z, y, x)
+                    regions.append({"centre": [float(c[2]), float(c[1]), float(c[0])], "voxels": int(sizes[big[o]])})
+    # per rod
+    support = np.array([on_axis[owner == k].mean() if np.any(owner == k) else 0.0 for k in range(n)])
+    crowding = np.array([ring_un[owner == k].mean() if np.any(owner == k) else 0.0 for k in range(n)])
+    open_ends = end_un.reshape(-1, 2).sum(1).astype(int) if n else np.zeros(0, int)
+    r_med = float(np.median(radii)) if n else 0.0
+    conf = support * (1.0 - crowding) * 0.75 ** open_ends
+    doubts = []
+    for k in range(n):
+        why = []
+        if support[k] < 0.9:
+            why.append(f"axis off the foreground for {100 * (1 - support[k]):.0f}% of its length")
+        if crowding[k] > 0.1:
+            why.append(f"{100 * crowding[k]:.0f}% of its surroundings is untraced foreground "
+                       f"(fused fibres or a missed neighbour)")
+        if open_ends[k]:
+            why.append(f"the foreground continues past {open_ends[k]} end{'s' if open_ends[k] > 1 else ''} "
+                       f"(broken, or cut short)")
+        if r_med > 0 and not (RADIUS_RANGE[0] <= radii[k] / r_med <= RADIUS_RANGE[1]):
+            conf[k] *= 0.7
+            why.append(f"radius {radii[k] / r_med:.1f} x the median")
+        doubts.append(why if conf[k] < DOUBT_CONFIDENCE else [])
+    return Doubt(confidence=np.clip(conf, 0.0, 1.0), support=support, crowding=crowding, open_ends=open_ends,
+                 doubts=doubts, foreground_voxels=fg, unexplained_voxels=un, regions=regions,
+                 n_regions=n_regions, mip_z=mip_z, mip_y=mip_y)
