@@ -56,26 +56,32 @@ print(json.dumps({"time_s": dt, "n_rods": int(r.n_rods), "n_contacts": int(len(c
 """
 
 
-def baseline_tree() -> Path:
-    """A copy of ``rodwarp/`` at the baseline commit, extracted once per process."""
-    d = Path(tempfile.gettempdir()) / f"rodwarp-baseline-{BASELINE_COMMIT}"
-    if not (d / "rodwarp" / "segment.py").exists():
+#: the commit before issue 33's work: the 512^3 timing compares today's code with it too
+PREVIOUS_COMMIT = "9d9e737"
+
+
+def baseline_tree(commit: str = BASELINE_COMMIT) -> Path:
+    """A copy of ``rodwarp/`` at ``commit``, extracted once per process."""
+    d = Path(tempfile.gettempdir()) / f"rodwarp-baseline-{commit}"
+    if not (d / "rodwarp" / "__init__.py").exists():
         d.mkdir(parents=True, exist_ok=True)
-        arch = subprocess.run(["git", "archive", BASELINE_COMMIT, "rodwarp"], cwd=common.ROOT, capture_output=True,
+        arch = subprocess.run(["git", "archive", commit, "rodwarp"], cwd=common.ROOT, capture_output=True,
                               check=True).stdout
         subprocess.run(["tar", "-x", "-C", str(d)], input=arch, check=True)
     return d
 
 
-def segment_before(volume, spacing_x: float = 1.0) -> dict:
-    """Run the baseline segmenter on ``volume`` in a subprocess: {rods, contacts, time_s} or {error}."""
+def segment_before(volume, spacing_x: float = 1.0, commit: str = BASELINE_COMMIT) -> dict:
+    """Run the segmenter of ``commit`` on ``volume`` in a subprocess: {rods, contacts, time_s} or {error}."""
     from rodwarp.rodset import Contacts, RodSet
 
+    script = _BASELINE_SCRIPT if commit == BASELINE_COMMIT else \
+        _BASELINE_SCRIPT.replace("from rodwarp.segment import segment_volume", "from rodwarp.ct import segment_volume")
     with tempfile.TemporaryDirectory() as tmp:
         vin, vout = Path(tmp) / "vol.npy", Path(tmp) / "out.npz"
         np.save(vin, np.asarray(volume))
-        env = dict(os.environ, PYTHONPATH=str(baseline_tree()))
-        p = subprocess.run([sys.executable, "-c", _BASELINE_SCRIPT, str(vin), str(vout)], capture_output=True,
+        env = dict(os.environ, PYTHONPATH=str(baseline_tree(commit)))
+        p = subprocess.run([sys.executable, "-c", script, str(vin), str(vout)], capture_output=True,
                            text=True, env=env, cwd=tmp)
         if p.returncode != 0:
             return {"error": "baseline crashed: " + (p.stderr.strip().splitlines() or ["?"])[-1]}
@@ -98,7 +104,7 @@ def segment_after(volume, voxel_size=(1.0, 1.0, 1.0)) -> dict:
     except RodwarpError as e:
         return {"error": str(e), "time_s": time.perf_counter() - t}
     return {"rods": res.rods, "contacts": res.contacts, "time_s": time.perf_counter() - t,
-            "flags": res.quality.get("flags", []), "shape": res.quality.get("shape")}
+            "flags": res.quality.get("flags", []), "shape": res.quality.get("shape"), "doubt": res.doubt}
 
 
 def score(case, out: dict) -> dict:
@@ -142,31 +148,90 @@ def run_case(name: str, seed: int = 0, before: bool = True, after: bool = True) 
     if before:
         rec["before"] = score(case, segment_before(case.volume, spacing_x=case.voxel_size[2]))
     if after:
-        rec["after"] = score(case, segment_after(case.volume, case.voxel_size))
+        out = segment_after(case.volume, case.voxel_size)
+        rec["after"] = score(case, out)
+        if "rods" in out:
+            rec["after"].update(_doubt_scores(case, out))
+        if case.curved and "rods" in out:
+            rec["cv_e"] = {"found": _cv_e(out["rods"]), "truth": _cv_e(case.truth)}
     return rec
 
 
-def _sweep_volume(radius, blur, seed):
-    from rodwarp import ct
+def _doubt_scores(case, out) -> dict:
+    """How the per-trace confidence sorts the traces: doubtful share of the matched and of the
+    unmatched found traces, and the unexplained foreground."""
+    from rodwarp.ct import match_polylines, match_rods
 
-    shape = (128, 128, 128)
-    truth = ct.scene_random_packing(shape, n_rods=30, radius=radius, aspect=48.0 / (2 * radius) + 0.0,
-                                    seed=seed, max_attempts=200000)
-    vol = ct.render_phantom(truth, shape, blur_sigma=blur, cnr=5.0, seed=seed)
-    return truth, vol
+    d = out.get("doubt")
+    if d is None:
+        return {}
+    m = (match_polylines if case.curved else match_rods)(out["rods"], case.truth)
+    hit = np.zeros(out["rods"].n_rods, bool)
+    hit[m.pairs[:, 0]] = True
+    low = d.confidence < 0.7
+    return {"doubtful_matched": float(low[hit].mean()) if hit.any() else None,
+            "doubtful_unmatched": float(low[~hit].mean()) if (~hit).any() else None,
+            "unexplained": float(d.unexplained_fraction)}
+
+
+def _cv_e(rods) -> float | None:
+    """cv_e (the paper's sigma_e / mu_e) of a rod set at its own default ball radius sqrt(d l)."""
+    from rodwarp.analysis import compute_fields, field_statistics
+
+    st = field_statistics(compute_fields(rods, device="cpu"))
+    return st.get("cv_e")
+
+
+#: the seeds of every case are drawn from this generator seed (the issue number), never picked
+SEED_DRAW = 33
+
+
+def drawn_seeds(n: int) -> list[int]:
+    """The ``n`` case seeds the benchmark draws (the same first seeds for any ``n``)."""
+    return [int(v) for v in np.random.default_rng(SEED_DRAW).integers(0, 2 ** 31, max(int(n), 1))]
+
+
+def _task(args):
+    name, seed = args
+    return run_case(name, seed)
+
+
+def _stats(vals) -> dict | None:
+    v = [x for x in vals if x is not None]
+    return {"median": float(np.median(v)), "worst": float(np.min(v)), "n": len(v)} if v else None
 
 
 def run(quick: bool, device: str) -> dict:
+    from concurrent.futures import ProcessPoolExecutor
+
     from rodwarp.ct import CASES
 
-    out: dict = {"title": TITLE, "baseline_commit": BASELINE_COMMIT}
+    seeds = drawn_seeds(3 if quick else 10)
+    out: dict = {"title": TITLE, "baseline_commit": BASELINE_COMMIT, "seed_draw": SEED_DRAW, "seeds": seeds}
+    tasks = [(name, s) for name in CASES for s in seeds]
+    workers = max(1, min(2, os.cpu_count() or 1))
+    with ProcessPoolExecutor(workers) as ex:  # scores do not depend on the load; times are per task
+        recs = list(ex.map(_task, tasks))
     rows = []
     for name in CASES:
-        rec = run_case(name, 0)
-        b, a = rec["before"], rec["after"]
-        log(f"{name}: before F1 {b['rod_f1']:.3f} {b.get('error', '')[:60]} | after F1 {a['rod_f1']:.3f} "
-            f"{a.get('error', '')[:60]} ({fmt(b['time_s'])} s / {fmt(a['time_s'])} s)")
-        rows.append(rec)
+        rr = [r for r in recs if r["case"] == name]
+        agg = {"case": name, "notes": rr[0]["notes"], "seeds": [r["seed"] for r in rr], "runs": rr}
+        for side in ("before", "after"):
+            agg[side] = {k: _stats([r[side].get(k) for r in rr])
+                         for k in ("rod_f1", "contact_recall", "contact_precision", "time_s")}
+            agg[side]["errors"] = sum("error" in r[side] for r in rr)
+        if "cv_e" in rr[0]:
+            rel = [abs(r["cv_e"]["found"] / r["cv_e"]["truth"] - 1.0) for r in rr
+                   if r.get("cv_e") and r["cv_e"]["found"] and r["cv_e"]["truth"]]
+            agg["cv_e_rel_error"] = {"median": float(np.median(rel)), "max": float(np.max(rel)), "n": len(rel)} \
+                if rel else None
+        for k in ("doubtful_matched", "doubtful_unmatched", "unexplained"):
+            v = [r["after"].get(k) for r in rr if r["after"].get(k) is not None]
+            agg.setdefault("doubt", {})[k] = float(np.mean(v)) if v else None
+        a, b = agg["after"]["rod_f1"], agg["before"]["rod_f1"]
+        log(f"{name}: F1 median/worst before {b['median']:.3f}/{b['worst']:.3f}, after {a['median']:.3f}/"
+            f"{a['worst']:.3f} over {len(rr)} seeds")
+        rows.append(agg)
     out["cases"] = rows
 
     from rodwarp.ct import ScanCase
@@ -190,17 +255,24 @@ def run(quick: bool, device: str) -> dict:
         truth = ct.scene_random_packing(shape, n_rods=800, radius=3.0, aspect=30.0, seed=0, max_attempts=400000)
         vol = ct.render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=0)
         case = ScanCase(name="512", volume=vol, truth=truth)
-        tb, ta, sb, sa = [], [], None, None
-        for _ in range(2):  # alternate, so that load from other work hits both alike
+        tb, ta, tp, sb, sa, sp = [], [], [], None, None, None
+        for _ in range(3):  # alternate, so that load from other work hits all alike
             ob = segment_before(vol)
             tb.append(ob.get("time_s"))
             sb = score(case, ob)
+            op = segment_before(vol, commit=PREVIOUS_COMMIT)
+            tp.append(op.get("time_s"))
+            sp = score(case, op)
             oa = segment_after(vol)
             ta.append(oa.get("time_s"))
             sa = score(case, oa)
         out["timing_512"] = {"n_rods": truth.n_rods, "before_s": common.spread(tb), "after_s": common.spread(ta),
-                             "ratio": float(np.median(ta) / np.median(tb)), "before": sb, "after": sa}
-        log(f"512^3: before {np.median(tb):.1f} s, after {np.median(ta):.1f} s")
+                             "previous_s": common.spread(tp), "previous_commit": PREVIOUS_COMMIT,
+                             "ratio": float(np.median(ta) / np.median(tb)),
+                             "ratio_previous": float(np.median(ta) / np.median(tp)),
+                             "ratios_previous": [float(a / p) for a, p in zip(ta, tp)],
+                             "before": sb, "after": sa, "previous": sp}
+        log(f"512^3: before {np.median(tb):.1f} s, previous {np.median(tp):.1f} s, after {np.median(ta):.1f} s")
     return out
 
 
@@ -214,20 +286,44 @@ def _cell(row: dict) -> str:
     return s
 
 
+def _med(agg: dict, key: str) -> str:
+    v = agg.get(key)
+    return "-" if v is None else f"{v['median']:.2f} (worst {v['worst']:.2f})"
+
+
 def summary(rec: dict) -> list[dict]:
     rows = []
+    n = len(rec.get("seeds", [])) or 1
     for c in rec["cases"]:
         b, a = c["before"], c["after"]
-        ratio = (f"{a['time_s'] / b['time_s']:.2f}x time" if b.get("time_s") and a.get("time_s") and "error" not in b
-                 else None)
-        rows.append({"benchmark": f"{c['case']}: {c['notes']}", "rodwarp": _cell(a),
-                     "peer": f"before ({rec['baseline_commit']}): {_cell(b)}", "ratio": ratio})
+        cell = f"F1 {_med(a, 'rod_f1')}, contact recall {_med(a, 'contact_recall')}"
+        if c.get("cv_e_rel_error"):
+            cell += f", cv_e off by {100 * c['cv_e_rel_error']['median']:.0f}% (max {100 * c['cv_e_rel_error']['max']:.0f}%)"
+        d = c.get("doubt") or {}
+        if d.get("doubtful_unmatched") is not None and d.get("doubtful_matched") is not None:
+            cell += (f", doubtful: {100 * d['doubtful_unmatched']:.0f}% of unmatched / "
+                     f"{100 * d['doubtful_matched']:.0f}% of matched traces")
+        if a.get("errors"):
+            cell += f", {a['errors']} errors"
+        ratio = (f"{a['time_s']['median'] / b['time_s']['median']:.2f}x time"
+                 if a.get("time_s") and b.get("time_s") else None)
+        rows.append({"benchmark": f"{c['case']}: {c['notes']} (median and worst of {n} drawn seeds)",
+                     "rodwarp": cell,
+                     "peer": f"before ({rec['baseline_commit']}): F1 {_med(b, 'rod_f1')}, contact recall "
+                             f"{_med(b, 'contact_recall')}" + (f", {b['errors']} errors" if b.get("errors") else ""),
+                     "ratio": ratio})
     if "timing_512" in rec:
         t = rec["timing_512"]
         rows.append({"benchmark": f"512^3, {t['n_rods']} rods (CNR 5, blur 1): time",
                      "rodwarp": f"{fmt(t['after_s']['median'])} s, F1 {t['after']['rod_f1']:.3f}",
                      "peer": f"before {fmt(t['before_s']['median'])} s, F1 {t['before']['rod_f1']:.3f}",
                      "ratio": f"{t['ratio']:.2f}x time"})
+        if "previous_s" in t:
+            rows.append({"benchmark": f"512^3, {t['n_rods']} rods: today against the previous commit "
+                                      f"({t['previous_commit']}), alternated",
+                         "rodwarp": f"{fmt(t['after_s']['median'])} s, F1 {t['after']['rod_f1']:.3f}",
+                         "peer": f"previous {fmt(t['previous_s']['median'])} s, F1 {t['previous']['rod_f1']:.3f}",
+                         "ratio": f"{t['ratio_previous']:.2f}x time"})
     for kind in ("radius", "blur"):
         ss = [s for s in rec["sweep"] if s["kind"] == kind]
         rows.append({"benchmark": f"rod F1 against {kind} (128^3, 30 rods, CNR 5"
@@ -258,19 +354,25 @@ def plot(rec: dict, outdir) -> list[dict]:
     fig, ax = plt.subplots(figsize=(10, 4.4))
     names = [c["case"] for c in rec["cases"]]
     x = np.arange(len(names))
-    ax.bar(x - 0.2, [c["before"]["rod_f1"] for c in rec["cases"]], 0.4, color="C7", label="before")
-    ax.bar(x + 0.2, [c["after"]["rod_f1"] for c in rec["cases"]], 0.4, color="C0", label="after")
+    for side, dx, col in (("before", -0.2, "C7"), ("after", 0.2, "C0")):
+        med = np.array([c[side]["rod_f1"]["median"] for c in rec["cases"]])
+        worst = np.array([c[side]["rod_f1"]["worst"] for c in rec["cases"]])
+        ax.bar(x + dx, med, 0.4, color=col, label=f"{side}: median")
+        ax.errorbar(x + dx, med, yerr=[med - worst, np.zeros_like(med)], fmt="none", ecolor="k", capsize=2,
+                    lw=0.8, label="worst seed" if side == "after" else None)
     ax.set_xticks(x, names, rotation=35, ha="right", fontsize=8)
     ax.set_ylabel("rod / filament F1")
     ax.axhline(0.95, color="k", lw=0.6, ls=":")
     ax.legend(fontsize=8)
-    ax.set_title("Realistic-scan phantoms: rod F1 before and after")
+    ax.set_title(f"Realistic-scan phantoms: rod F1 before and after, median and worst of "
+                 f"{len(rec.get('seeds', [])) or 1} drawn seeds")
     fig.tight_layout()
     f2 = common.save_figure(fig, outdir / "segment_scans_cases.png")
     return [{"file": f1, "title": "rod F1 against radius and blur, before and after",
              "reading": "dotted line: the 0.95 target; grey: the baseline commit, blue: today"},
             {"file": f2, "title": "rod F1 on every realistic-scan case, before and after",
-             "reading": "each pair of bars is one phantom case (benchmarks/RESULTS.md table for contacts)"}]
+             "reading": "each pair of bars is one phantom case, median over the drawn seeds, the whisker down to the worst "
+                        "seed (benchmarks/RESULTS.md table for contacts)"}]
 
 
 if __name__ == "__main__":

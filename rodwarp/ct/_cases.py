@@ -147,6 +147,15 @@ def _case_bundles(seed):
     return (truth, vol), {}
 
 
+def _case_dense(seed):
+    # a dense packing: 110 rods (volume fraction about 0.08), 80% of them touching another
+    shape = (160, 160, 160)
+    truth = scene_random_packing(shape, n_rods=110, radius=3.0, aspect=12.0, touching_fraction=0.8, seed=seed,
+                                 max_attempts=400000)
+    vol = render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=seed)
+    return (truth, vol), {}
+
+
 def _case_thin(seed):
     return _packing((160, 160, 160), seed, n_rods=60, radius=1.5, aspect=20.0, blur=1.2), {}
 
@@ -199,6 +208,7 @@ CASES = {
     "cupping_rings": (_case_cupping_rings, "cupping 15% and ring artefacts (0.3 of the contrast), background 3.3x the contrast"),
     "mixed_radii": (_case_mixed_radii, "radii mixed uniformly in 2..5 voxels"),
     "bundles": (_case_bundles, "10 bundles of 3-5 parallel touching rods, 128^3"),
+    "dense": (_case_dense, "a dense packing: 110 rods r 3, 80% touching, 160^3"),
     "thin": (_case_thin, "thin rods: r 1.5 voxels at blur 1.2"),
     "thin_faint": (_case_thin_faint, "thin faint rods: r 2, blur 1.5, CNR 3"),
     "anisotropic": (_case_anisotropic, "z voxels twice as thick as x, y"),
