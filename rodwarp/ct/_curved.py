@@ -54,8 +54,9 @@ CURVED_JUNCTION = 0.5
 #: longest bridge between pieces: this many radii plus 6 voxels (8 r + 6 against 12 r + 6: same median)
 BRIDGE_GAP = 8.0
 #: tightest bend of a bridge, in radii (wire tangles: 0.5: 0.80, 1: 0.79, 2: 0.71 median F1; the
-#: wires themselves bend down to about 6 radii)
-BRIDGE_BEND = 1.0
+#: wires themselves bend down to about 6 radii, but a bridge guessed from two end tangents bends
+#: more sharply than the wire it replaces: a third of the true bridges have a radius under 1)
+BRIDGE_BEND = 0.5
 
 
 def _order_branch(pts: np.ndarray, pairs: np.ndarray):
