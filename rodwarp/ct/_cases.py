@@ -156,6 +156,28 @@ def _case_dense(seed):
     return (truth, vol), {}
 
 
+def _case_dense_bundles(seed):
+    # bundles inside a dense packing: 6 bundles of 3-5 touching rods, and the rods of a random
+    # packing (60% touching) that keep 2 voxels from every bundle rod
+    from rodwarp.rodset import segment_distance
+
+    shape = (160, 160, 160)
+    bun = scene_bundles(shape, n_bundles=6, sizes=(3, 5), radius=3.0, length=80.0, seed=seed)
+    pack = scene_random_packing(shape, n_rods=90, radius=3.0, aspect=12.0, touching_fraction=0.6, seed=seed + 1,
+                                max_attempts=400000)
+    A, B = bun.points[0::2], bun.points[1::2]
+    polys = [bun.rod(k) for k in range(bun.n_rods)]
+    for k in range(pack.n_rods):
+        p = pack.rod(k)
+        d = segment_distance(np.repeat(p[:1], len(A), 0), np.repeat(p[-1:], len(A), 0), A, B)
+        if d.min() >= 2 * 3.0 + 2.0:
+            polys.append(p)
+    truth = RodSet.from_polylines(polys, 3.0, units="voxel")
+    truth.contacts = phantom_truth(truth)
+    vol = render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=seed)
+    return (truth, vol), {}
+
+
 def _case_thin(seed):
     return _packing((160, 160, 160), seed, n_rods=60, radius=1.5, aspect=20.0, blur=1.2), {}
 
@@ -209,6 +231,7 @@ CASES = {
     "mixed_radii": (_case_mixed_radii, "radii mixed uniformly in 2..5 voxels"),
     "bundles": (_case_bundles, "10 bundles of 3-5 parallel touching rods, 128^3"),
     "dense": (_case_dense, "a dense packing: 110 rods r 3, 80% touching, 160^3"),
+    "dense_bundles": (_case_dense_bundles, "6 bundles of 3-5 touching rods inside a dense packing (about 60 more rods), 160^3"),
     "thin": (_case_thin, "thin rods: r 1.5 voxels at blur 1.2"),
     "thin_faint": (_case_thin_faint, "thin faint rods: r 2, blur 1.5, CNR 3"),
     "anisotropic": (_case_anisotropic, "z voxels twice as thick as x, y"),
