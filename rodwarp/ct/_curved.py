@@ -31,7 +31,7 @@ This module must not import warp.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage
@@ -372,6 +372,8 @@ class FilamentResult:
         Pieces joined by smooth bridges through the image (:mod:`rodwarp.ct._bridging`).
     duplicates : int
         Pieces dropped as lying along a longer filament (one skeleton for two touching ones).
+    mask : ndarray of bool
+        The binarised volume (reused by the confidence stage).
     """
 
     polylines: list
@@ -384,6 +386,7 @@ class FilamentResult:
     faint: int
     bridges: int = 0
     duplicates: int = 0
+    mask: object = field(default=None, repr=False, compare=False)
 
     @property
     def filaments(self) -> int:
@@ -462,4 +465,4 @@ def trace_filaments(raw: np.ndarray, st, P, progress=None) -> FilamentResult:
         progress("detect", 3, 3)
     return FilamentResult(polylines=polys, radii=radii, skeleton_voxels=n_sk, skeleton_junctions=int(len(junc)),
                           branches=n_branches, bend_fraction=bend, joins=joins, faint=faint, bridges=bridges,
-                          duplicates=duplicates)
+                          duplicates=duplicates, mask=mask)

@@ -134,7 +134,7 @@ def _ring(r: float, n: int = 12) -> np.ndarray:
     return np.stack([np.cos(a), np.sin(a)], 1) * r
 
 
-def assess(reader, st, rods, P, block: int = BLOCK) -> Doubt:
+def assess(reader, st, rods, P, block: int = BLOCK, mask=None) -> Doubt:
     """Confidence of every traced rod and the foreground no trace explains.
 
     Parameters
@@ -149,6 +149,8 @@ def assess(reader, st, rods, P, block: int = BLOCK) -> Doubt:
         ``smooth_sigma``.
     block : int
         Slices per block (memory: about 20 bytes a voxel of a block).
+    mask : ndarray of bool (z, y, x), optional
+        The binarised volume, when detection kept it (then nothing is read or smoothed).
 
     Returns
     -------
@@ -182,6 +184,8 @@ def assess(reader, st, rods, P, block: int = BLOCK) -> Doubt:
     on_axis = np.zeros(len(pts), bool)
     ring_un = np.zeros(ring_pts.shape[:2], bool)
     end_un = np.zeros(len(end_pts), bool)
+    if mask is not None and tuple(mask.shape) != tuple(shape):
+        mask = None
 
     halo = int(math.ceil(4 * P.smooth_sigma)) + 1
     fg = un = 0
@@ -192,52 +196,67 @@ def assess(reader, st, rods, P, block: int = BLOCK) -> Doubt:
     zmin_seg = np.minimum(p0[:, 2], p1[:, 2]) - seg_r if n else np.zeros(0)
     zmax_seg = np.maximum(p0[:, 2], p1[:, 2]) + seg_r if n else np.zeros(0)
 
-    def lookup(q, z0, z1, vol):
-        """Values of ``vol`` (a core block from slice z0) at the nearest voxel of points q in it."""
-        idx = np.rint(q[:, ::-1]).astype(np.int64)
-        inb = (idx[:, 0] >= z0) & (idx[:, 0] < z1) & np.all(idx[:, 1:] >= 0, 1) & \
-            (idx[:, 1] < shape[1]) & (idx[:, 2] < shape[2])
-        out = np.zeros(len(q), bool)
-        out[inb] = vol[idx[inb, 0] - z0, idx[inb, 1], idx[inb, 2]]
-        return inb, out
+    class _Lookup:
+        """Nearest-voxel values of a block's arrays at fixed points, the points sorted by slice
+        so that each block reads only its own."""
+
+        def __init__(self, q):
+            idx = np.rint(q.reshape(-1, 3)[:, ::-1]).astype(np.int64)
+            ok = np.all(idx >= 0, 1) & (idx[:, 0] < shape[0]) & (idx[:, 1] < shape[1]) & (idx[:, 2] < shape[2])
+            self.order = np.flatnonzero(ok)[np.argsort(idx[ok, 0], kind="stable")]
+            self.idx = idx[self.order]
+            self.z = self.idx[:, 0]
+            self.out = np.zeros(len(idx), bool)
+
+        def take(self, z0, z1, vol):
+            a, b = np.searchsorted(self.z, (z0, z1))
+            i = self.idx[a:b]
+            self.out[self.order[a:b]] = vol[i[:, 0] - z0, i[:, 1], i[:, 2]]
+
+    if n:
+        look_axis, look_ring, look_end = _Lookup(pts), _Lookup(ring_pts), _Lookup(end_pts)
 
     for z0 in range(0, shape[0], block):
         z1 = min(shape[0], z0 + block)
-        lo, hi = max(0, z0 - halo), min(shape[0], z1 + halo)
-        raw = reader.read((lo, 0, 0), (hi, shape[1], shape[2]))
-        g = ndimage.gaussian_filter(raw, P.smooth_sigma, truncate=3.0) if P.smooth_sigma > 0 else raw
-        mask = g[z0 - lo:z1 - lo] > thr
-        del raw, g
+        if mask is not None:
+            mb = mask[z0:z1]
+        else:
+            lo, hi = max(0, z0 - halo), min(shape[0], z1 + halo)
+            raw = reader.read((lo, 0, 0), (hi, shape[1], shape[2]))
+            g = ndimage.gaussian_filter(raw, P.smooth_sigma) if P.smooth_sigma > 0 else raw
+            mb = g[z0 - lo:z1 - lo] > thr
+            del raw, g
         if n:
             sel = np.flatnonzero((zmax_seg >= z0 - 1) & (zmin_seg <= z1))
             lines = [(p0[i], p1[i]) for i in sel]
-            cov = _rasterize(lines, mask.shape, (z0, 0, 0), seg_r[sel]) if len(sel) else np.zeros(mask.shape, bool)
+            cov = _rasterize(lines, mb.shape, (z0, 0, 0), seg_r[sel]) if len(sel) else np.zeros(mb.shape, bool)
         else:
-            cov = np.zeros(mask.shape, bool)
-        unex = mask & ~cov
-        fg += int(mask.sum())
-        un += int(unex.sum())
-        mip_z[0] += mask.sum(0, dtype=np.uint16)
-        mip_z[1] += unex.sum(0, dtype=np.uint16)
-        mip_y[0, z0:z1] = mask.sum(1, dtype=np.uint16)
-        mip_y[1, z0:z1] = unex.sum(1, dtype=np.uint16)
-        # 2 x 2 x 2 blocks (any) for the regions; blocks start on even slices
-        zz = (z1 - z0) // 2 * 2
-        yy, xx = shape[1] // 2 * 2, shape[2] // 2 * 2
-        d = unex[:zz, :yy, :xx].reshape(zz // 2, 2, yy // 2, 2, xx // 2, 2).any(axis=(1, 3, 5))
-        down.append(d)
+            cov = np.zeros(mb.shape, bool)
+        unex = mb & ~cov
+        fg += int(np.count_nonzero(mb))
+        nu = int(np.count_nonzero(unex))
+        un += nu
+        mip_z[0] += mb.sum(0, dtype=np.uint16)
+        mip_y[0, z0:z1] = mb.sum(1, dtype=np.uint16)
+        if nu:
+            mip_z[1] += unex.sum(0, dtype=np.uint16)
+            mip_y[1, z0:z1] = unex.sum(1, dtype=np.uint16)
+            down.append(np.argwhere(unex) + (z0, 0, 0))
         if n:
-            inb, v = lookup(pts, z0, z1, mask)
-            on_axis[inb] = v[inb]
-            rp = ring_pts.reshape(-1, 3)
-            inb, v = lookup(rp, z0, z1, unex)
-            ring_un.reshape(-1)[inb] = v[inb]
-            inb, v = lookup(end_pts, z0, z1, mask)
-            end_un[inb] = v[inb]
+            look_axis.take(z0, z1, mb)
+            look_ring.take(z0, z1, unex)
+            look_end.take(z0, z1, mb)
+    if n:
+        on_axis, end_un = look_axis.out, look_end.out
+        ring_un = look_ring.out.reshape(ring_pts.shape[:2])
     # regions of unexplained foreground (on the 2x grid), at least a rod's cross-section in size
     regions, n_regions = [], 0
     if down:
-        D = np.concatenate(down, 0)
+        # 2 x 2 x 2 cells holding unexplained voxels, over the box that holds them
+        c2 = np.concatenate(down, 0) // 2
+        lo2 = c2.min(0)
+        D = np.zeros(tuple(c2.max(0) - lo2 + 1), bool)
+        D[tuple((c2 - lo2).T)] = True
         lab, nl = ndimage.label(D, structure=np.ones((3, 3, 3), bool))
         if nl:
             sizes = np.bincount(lab.ravel(), minlength=nl + 1)[1:] * 8
@@ -249,7 +268,7 @@ def assess(reader, st, rods, P, block: int = BLOCK) -> Doubt:
                 cen = ndimage.center_of_mass(D, lab, big + 1)
                 order = np.argsort(-sizes[big], kind="stable")[:20]
                 for o in order:
-                    c = np.asarray(cen[o]) * 2 + 0.5  # back to working voxels (z, y, x)
+                    c = (np.asarray(cen[o]) + lo2) * 2 + 0.5  # back to working voxels (z, y, x)
                     regions.append({"centre": [float(c[2]), float(c[1]), float(c[0])], "voxels": int(sizes[big[o]])})
     # per rod
     support = np.array([on_axis[owner == k].mean() if np.any(owner == k) else 0.0 for k in range(n)])

@@ -165,6 +165,7 @@ def segment_volume(volume, params: SegmentParams | None = None,
     for ci, (clo, chi, blo, bhi) in enumerate(chunks):
         raw = reader.read(blo, bhi)
         got = _detect_block(raw, blo, st, P, reader.shape)
+        whole_mask = got.mask
         lines.extend(got.lines)
         block_stats.append(got.stats)
         note("detect", ci + 1, len(chunks))
@@ -239,17 +240,18 @@ def segment_volume(volume, params: SegmentParams | None = None,
     timings["contacts"] = time.perf_counter() - tic
     straight = _Straight(merged=nm, refine=ref_stats, per_rod_radius=bool(mixed), rejected=reasons,
                          fit_residual=fit_residual, contacts_rejected=rej)
-    doubt = _assess(reader, st, out, P, timings)
+    doubt = _assess(reader, st, out, P, timings, whole_mask if len(chunks) == 1 else None)
     return _assemble_result(out, contacts, r_glob, radius_spread, P, prep, st, cnr, timings, t_all,
                             trace=trace, candidates=candidates, straight=straight, doubt=doubt)
 
 
-def _assess(reader, st, rods, P, timings):
-    """Per-rod confidence and unexplained foreground (``_doubt``), timed as ``doubt``."""
+def _assess(reader, st, rods, P, timings, mask=None):
+    """Per-rod confidence and unexplained foreground (``_doubt``), timed as ``doubt``; ``mask``:
+    the binarised volume when detection kept it."""
     from rodwarp.ct._doubt import assess
 
     tic = time.perf_counter()
-    d = assess(reader, st, rods, P)
+    d = assess(reader, st, rods, P, mask=mask)
     timings["doubt"] = time.perf_counter() - tic
     return d
 
@@ -289,7 +291,7 @@ def _finish_curved(reader, st, P, prep, cnr, timings, t_all, progress, trace=Non
     r_glob = float(np.median(radii))
     radius_spread = float(np.std(radii))  # of the sorted radii, as always (the sum's order counts)
     timings["contacts"] = time.perf_counter() - tic
-    doubt = _assess(reader, st, out, P, timings)
+    doubt = _assess(reader, st, out, P, timings, fil.mask)
     return _assemble_result(out, contacts, r_glob, radius_spread, P, prep, st, cnr, timings, t_all,
                             trace=trace, candidates=candidates, filaments=fil, doubt=doubt)
 
@@ -351,9 +353,8 @@ def _assemble_result(out: RodSet, contacts, r_glob: float, radius_spread: float,
                      end_offset=r.end_offset)
         q.update(per_rod_radius=s.per_rod_radius, rods_rejected=s.rejected, fit_residual=s.fit_residual,
                  radius_spread=radius_spread, contacts_rejected_by_image=s.contacts_rejected)
-    if doubt is not None:
-        if filaments is not None:  # the curved path has no detection figure of its own
-            q["foreground_explained"] = 1.0 - doubt.unexplained_fraction
+    if doubt is not None:  # of the final traces (before issue 33: of the detected lines)
+        q["foreground_explained"] = 1.0 - doubt.unexplained_fraction
         q["unexplained"] = doubt.summary()
     q["flags"] = _flags(q, shape)
     return SegmentResult(rods=out, contacts=contacts, diameter=2.0 * r_glob, timings=timings, quality=q,
