@@ -89,9 +89,10 @@ def crop_straight(rods: RodSet, lo_xyz, hi_xyz, min_length: float = 0.0) -> RodS
     return out
 
 
-def _packing(shape, seed, cnr=5.0, blur=1.0, n_rods=40, radius=3.0, aspect=12.0, **render):
+def _packing(shape, seed, cnr=5.0, blur=1.0, n_rods=40, radius=3.0, aspect=12.0, touching_fraction=0.5, **render):
     truth = scene_random_packing(shape, n_rods=n_rods, radius=radius, aspect=aspect, seed=seed,
-                                    max_attempts=200000, fov_radius=render.pop("fov_radius", None))
+                                 touching_fraction=touching_fraction, max_attempts=400000,
+                                 fov_radius=render.pop("fov_radius", None))
     vol = render_phantom(truth, shape, blur_sigma=blur, cnr=cnr, seed=seed, **render)
     return truth, vol
 
@@ -149,11 +150,7 @@ def _case_bundles(seed):
 
 def _case_dense(seed):
     # a dense packing: 110 rods (volume fraction about 0.08), 80% of them touching another
-    shape = (160, 160, 160)
-    truth = scene_random_packing(shape, n_rods=110, radius=3.0, aspect=12.0, touching_fraction=0.8, seed=seed,
-                                 max_attempts=400000)
-    vol = render_phantom(truth, shape, blur_sigma=1.0, cnr=5.0, seed=seed)
-    return (truth, vol), {}
+    return _packing((160, 160, 160), seed, n_rods=110, touching_fraction=0.8), {}
 
 
 def _case_dense_bundles(seed):

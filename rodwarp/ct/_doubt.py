@@ -111,22 +111,25 @@ class Doubt:
                 "doubt_confidence": DOUBT_CONFIDENCE}
 
 
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+
+
 def _axis_samples(rods, step: float = 1.0):
-    """Points every ``step`` along each axis (x, y, z), their rod, and each rod's end points and
-    outward tangents."""
+    """Points every ``step`` along each axis (x, y, z), their rod, their unit tangents, and each
+    rod's two end points with their outward unit tangents (2 n, 3) each."""
     from rodwarp.ct._score import resample_polyline
 
-    pts, owner, ends = [], [], []
+    pts, owner, tang, ends, out = [], [], [], [], []
     for k in range(rods.n_rods):
-        p = rods.rod(k)
-        q = resample_polyline(p, step)
+        q = resample_polyline(rods.rod(k), step)
         pts.append(q)
         owner.append(np.full(len(q), k))
+        tang.append(_unit_rows(np.gradient(q, axis=0)))
         for a, b in ((q[0], q[min(3, len(q) - 1)]), (q[-1], q[max(len(q) - 4, 0)])):
-            t = a - b
-            n = float(np.linalg.norm(t))
-            ends.append((a, t / n if n > 0 else np.zeros(3)))
-    return np.concatenate(pts), np.concatenate(owner), ends
+            ends.append(a)
+            out.append(a - b)
+    return np.concatenate(pts), np.concatenate(owner), np.concatenate(tang), np.array(ends), _unit_rows(np.array(out))
 
 
 def _ring(r: float, n: int = 12) -> np.ndarray:
@@ -163,27 +166,19 @@ def assess(reader, st, rods, P, block: int = BLOCK, mask=None) -> Doubt:
     radii = np.asarray(rods.radii, float) if n else np.zeros(0)
     p0, p1, seg_rod = rods.segments() if n else (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, int))
     seg_r = radii[seg_rod] + EXPLAIN_MARGIN if n else np.zeros(0)
-    pts, owner, ends = _axis_samples(rods) if n else (np.zeros((0, 3)), np.zeros(0, int), [])
-    # ring points about every axis sample (normal plane of its segment direction)
-    t = np.zeros_like(pts)
-    for k in range(n):
-        sel = owner == k
-        q = pts[sel]
-        if len(q) >= 2:
-            g = np.gradient(q, axis=0)
-            t[sel] = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+    if n:
+        pts, owner, t, end_at, end_t = _axis_samples(rods)
+    else:
+        pts, t, end_at, end_t = (np.zeros((0, 3)),) * 4
+        owner = np.zeros(0, int)
+    # ring points about every axis sample, in its normal plane
     ref = np.where(np.abs(t[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
-    e1 = np.cross(t, ref)
-    e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-12)
+    e1 = _unit_rows(np.cross(t, ref))
     e2 = np.cross(t, e1)
     ring = _ring(1.0)
-    rr = (radii[owner] + RING_MARGIN)[:, None, None] if n else np.zeros((0, 1, 1))
+    rr = (radii[owner] + RING_MARGIN)[:, None, None]
     ring_pts = pts[:, None, :] + rr * (ring[None, :, 0, None] * e1[:, None, :] + ring[None, :, 1, None] * e2[:, None, :])
-    end_pts = np.array([a + (radii[i // 2] + END_MARGIN) * tt for i, (a, tt) in enumerate(ends)]) if n else \
-        np.zeros((0, 3))
-    on_axis = np.zeros(len(pts), bool)
-    ring_un = np.zeros(ring_pts.shape[:2], bool)
-    end_un = np.zeros(len(end_pts), bool)
+    end_pts = end_at + (np.repeat(radii, 2) + END_MARGIN)[:, None] * end_t
     if mask is not None and tuple(mask.shape) != tuple(shape):
         mask = None
 
@@ -213,8 +208,7 @@ def assess(reader, st, rods, P, block: int = BLOCK, mask=None) -> Doubt:
             i = self.idx[a:b]
             self.out[self.order[a:b]] = vol[i[:, 0] - z0, i[:, 1], i[:, 2]]
 
-    if n:
-        look_axis, look_ring, look_end = _Lookup(pts), _Lookup(ring_pts), _Lookup(end_pts)
+    look_axis, look_ring, look_end = _Lookup(pts), _Lookup(ring_pts), _Lookup(end_pts)
 
     for z0 in range(0, shape[0], block):
         z1 = min(shape[0], z0 + block)
@@ -242,13 +236,9 @@ def assess(reader, st, rods, P, block: int = BLOCK, mask=None) -> Doubt:
             mip_z[1] += unex.sum(0, dtype=np.uint16)
             mip_y[1, z0:z1] = unex.sum(1, dtype=np.uint16)
             down.append(np.argwhere(unex) + (z0, 0, 0))
-        if n:
-            look_axis.take(z0, z1, mb)
-            look_ring.take(z0, z1, unex)
-            look_end.take(z0, z1, mb)
-    if n:
-        on_axis, end_un = look_axis.out, look_end.out
-        ring_un = look_ring.out.reshape(ring_pts.shape[:2])
+        look_axis.take(z0, z1, mb)
+        look_ring.take(z0, z1, unex)
+        look_end.take(z0, z1, mb)
     # regions of unexplained foreground (on the 2x grid), at least a rod's cross-section in size
     regions, n_regions = [], 0
     if down:
@@ -271,9 +261,10 @@ def assess(reader, st, rods, P, block: int = BLOCK, mask=None) -> Doubt:
                     c = (np.asarray(cen[o]) + lo2) * 2 + 0.5  # back to working voxels (z, y, x)
                     regions.append({"centre": [float(c[2]), float(c[1]), float(c[0])], "voxels": int(sizes[big[o]])})
     # per rod
-    support = np.array([on_axis[owner == k].mean() if np.any(owner == k) else 0.0 for k in range(n)])
-    crowding = np.array([ring_un[owner == k].mean() if np.any(owner == k) else 0.0 for k in range(n)])
-    open_ends = end_un.reshape(-1, 2).sum(1).astype(int) if n else np.zeros(0, int)
+    count = np.maximum(np.bincount(owner, minlength=n), 1)
+    support = np.bincount(owner, weights=look_axis.out, minlength=n) / count
+    crowding = np.bincount(owner, weights=look_ring.out.reshape(ring_pts.shape[:2]).mean(1), minlength=n) / count
+    open_ends = look_end.out.reshape(-1, 2).sum(1).astype(int)
     r_med = float(np.median(radii)) if n else 0.0
     conf = support * (1.0 - crowding) * 0.75 ** open_ends
     doubts = []

@@ -329,12 +329,14 @@ def _assemble_result(out: RodSet, contacts, r_glob: float, radius_spread: float,
     out.attrs = attrs
     q = prep.info()
     q.update(background=st.bg, foreground=st.fg, threshold=st.threshold, cnr=cnr, coarse_radius=st.r0)
+    # of the final traces (before issue 33: of the detected lines), in its old place after the seeds
+    explained = 1.0 - doubt.unexplained_fraction if doubt is not None else None
     if trace is not None:
         q.update(skeleton_voxels=trace.skeleton_voxels, skeleton_junctions=trace.skeleton_junctions,
                  seeds=trace.seeds)
         for name in trace.events:  # only the counters that counted, in the order they first did
             q[name] = getattr(trace, name)
-        q.update(foreground_explained=trace.foreground_explained, candidates=candidates,
+        q.update(foreground_explained=explained, candidates=candidates,
                  bend_fraction=trace.bend_fraction, bent_branches=trace.bent_branches)
     q["shape"] = shape
     if filaments is not None:
@@ -353,8 +355,8 @@ def _assemble_result(out: RodSet, contacts, r_glob: float, radius_spread: float,
                      end_offset=r.end_offset)
         q.update(per_rod_radius=s.per_rod_radius, rods_rejected=s.rejected, fit_residual=s.fit_residual,
                  radius_spread=radius_spread, contacts_rejected_by_image=s.contacts_rejected)
-    if doubt is not None:  # of the final traces (before issue 33: of the detected lines)
-        q["foreground_explained"] = 1.0 - doubt.unexplained_fraction
+    if doubt is not None:
+        q.setdefault("foreground_explained", explained)  # the curved path has no detection block
         q["unexplained"] = doubt.summary()
     q["flags"] = _flags(q, shape)
     return SegmentResult(rods=out, contacts=contacts, diameter=2.0 * r_glob, timings=timings, quality=q,

@@ -40,10 +40,6 @@ class TraceStats:
         Traces recognised as bundles of touching rods, and the rods traced in them.
     residual_seeds : int
         Seeds taken from foreground that no traced rod explained (the second round).
-    foreground_voxels : int
-        Voxels of the binarised foreground.
-    explained_voxels : int
-        Of those, voxels within ``r + 1.5`` voxels of a traced rod.
     branch_voxels, bent_voxels, bent_branches : int
         Long skeleton branches judged for bending: their voxels, the voxels of those that bend
         smoothly, and how many do (``shape="auto"``).
@@ -61,8 +57,6 @@ class TraceStats:
     bundles_split: int = 0
     bundle_rods: int = 0
     residual_seeds: int = 0
-    foreground_voxels: int = 0
-    explained_voxels: int = 0
     branch_voxels: int = 0
     bent_voxels: int = 0
     bent_branches: int = 0
@@ -72,11 +66,6 @@ class TraceStats:
         setattr(self, name, getattr(self, name) + n)
         if name not in self.events:
             self.events = self.events + (name,)
-
-    @property
-    def foreground_explained(self) -> float:
-        """Fraction (0 to 1) of the binarised foreground within ``r + 1.5`` of a traced rod (0 without foreground)."""
-        return self.explained_voxels / self.foreground_voxels if self.foreground_voxels else 0.0
 
     @property
     def bend_fraction(self) -> float:
