@@ -13,7 +13,7 @@ import pytest
 
 from rodwarp import ct
 from rodwarp.ct import SegmentParams, segment_volume
-from rodwarp.ct._bridging import bridge_pieces, drop_duplicates, hermite
+from rodwarp.ct._bridging import drop_duplicates, hermite, pair_ends
 from rodwarp.ct._doubt import DOUBT_CONFIDENCE, assess
 from rodwarp.ct._levels import _measure_levels
 from rodwarp.ct._reader import _Reader
@@ -143,8 +143,7 @@ def test_bridges_join_a_broken_curve_through_a_crossing_wire():
     s = np.linspace(20.0, 60.0, 41)
     c = np.stack([s * math.cos(g), s * math.sin(g), np.full_like(s, 2 * r0)], 1)
     sampler, dist = _disc_sampler([arc, c], r0)
-    out, n = bridge_pieces([a, b, c], sampler, r0, 8 * r0 + 6, 0.5 * r0, support=dist, tube=r0, trim=r0,
-                           reach=3 * r0)
+    out, n = pair_ends([a, b, c], sampler, r0, 8 * r0 + 6)
     assert n == 1 and len(out) == 2
     merged = max(out, key=len)
     assert float(np.linalg.norm(np.diff(merged, axis=0), axis=1).sum()) == pytest.approx(40 * math.radians(289),
@@ -155,9 +154,48 @@ def test_bridges_join_a_broken_curve_through_a_crossing_wire():
     assert any(p.shape == c.shape and np.allclose(p, c) for p in out)  # the crossing wire is left alone
     # without the broken wire's foreground in the gap, no bridge
     sampler2, dist2 = _disc_sampler([a, b, c], r0)
-    out2, n2 = bridge_pieces([a, b, c], sampler2, r0, 8 * r0 + 6, 0.5 * r0, support=dist2, tube=r0, trim=r0,
-                             reach=3 * r0)
+    out2, n2 = pair_ends([a, b, c], sampler2, r0, 8 * r0 + 6)
     assert n2 == 0 and len(out2) == 3
+
+
+def test_pairing_at_a_shallow_crossing_goes_straight_through():
+    # two straight wires crossing at 35 degrees, one on top of the other (touching), each cut
+    # into two pieces by the junction gap: four ends in one blob, three ways to pair them; the
+    # straight-through pairing turns least (the swapped one turns 35 degrees twice)
+    r0 = 2.5
+    half = math.radians(17.5)
+    s = np.arange(-60.0, 61.0, 1.0)
+    u = np.stack([s * math.cos(half), s * math.sin(half), np.zeros_like(s)], 1)
+    v = np.stack([s * math.cos(half), -s * math.sin(half), np.full_like(s, 2 * r0)], 1)
+    sampler, _ = _disc_sampler([u, v], r0)
+    cut = np.abs(s) > 7
+    pieces = [u[cut & (s < 0)], u[cut & (s > 0)], v[cut & (s < 0)], v[cut & (s > 0)]]
+    out, n = pair_ends(pieces, sampler, r0, 8 * r0 + 6)
+    assert n == 2 and len(out) == 2
+    for f in out:
+        # each filament is one of the two wires: all of it within half a radius of that line
+        on_u = np.linalg.norm(f - (f @ [math.cos(half), math.sin(half), 0])[:, None] *
+                              np.array([math.cos(half), math.sin(half), 0]), axis=1)
+        on_v = np.linalg.norm((f - [0, 0, 2 * r0]) - (f @ [math.cos(half), -math.sin(half), 0])[:, None] *
+                              np.array([math.cos(half), -math.sin(half), 0]), axis=1)
+        assert min(on_u.max(), on_v.max()) < 0.5 * r0
+        assert float(np.linalg.norm(f[-1] - f[0])) > 110
+
+
+def test_ends_are_fitted_with_the_bend():
+    # the end tangent of a circle of radius 15 (6 radii: the tightest bend of the wire tangles)
+    # from a quadratic fit is the circle's tangent; a chord over the same stretch lags by half
+    # the turn (here 14 degrees)
+    from rodwarp.ct._bridging import _ends
+
+    th = np.arange(0.0, 2.0, 1.0 / 15.0)
+    p = np.stack([15 * np.cos(th), 15 * np.sin(th), np.zeros_like(th)], 1)
+    (e0, t0, s0), (e1, t1, s1) = _ends([p], 2.5, 7.5)
+    # the last end, 2.5 voxels in: angle 2 - 2.5/15 rad, outward tangent along +theta
+    a = th[-1] - 2.5 / 15
+    assert np.allclose(e1, [15 * math.cos(a), 15 * math.sin(a), 0], atol=0.05)
+    assert math.degrees(math.acos(float(t1 @ [-math.sin(a), math.cos(a), 0]))) < 1.0
+    assert s1 == pytest.approx(15 * th[-1] - 2.5, abs=0.05)
 
 
 def test_duplicates_along_a_longer_filament_are_dropped():

@@ -10,16 +10,14 @@ Pipeline (:func:`trace_filaments`):
    near a junction (a skeleton voxel with 3 or more neighbours: where filaments touch or
    cross) are removed, so the skeleton falls apart into *branches*, each a simple path ordered
    by the geodesic distance from one of its ends and averaged per unit of that distance.
-2. **joining** -- branch ends are joined through the junction gaps by direction and
-   continuity: two ends are joined when they face each other (outward tangents within
-   ``join_angle`` of antiparallel, the joining chord within ``join_angle`` of both), lie
-   within the gap a junction leaves, and the image is foreground along the chord; candidates
-   are taken cheapest first (angle plus distance), each end once, so at a crossing the two
-   straight-through pairings win over the turns.  Chains of joined branches are filaments.
-3. **centreline** -- each filament is resampled every voxel, smoothed along its length,
-   and refined against the greyscale: every vertex moves to the intensity centroid of the
-   disc normal to the filament, ignoring voxels nearer to another filament (so touching
-   filaments do not pull each other), then smoothed again.
+2. **centreline** -- each branch is resampled every voxel, smoothed along its length, and
+   refined against the greyscale: every vertex moves to the intensity centroid of the disc
+   normal to the branch, ignoring voxels nearer to another branch (so touching filaments do
+   not pull each other), then smoothed again.
+3. **joining** -- branch ends are paired through the junction gaps by a minimum-cost matching
+   of smooth bridges the image supports (:func:`rodwarp.ct._bridging.pair_ends`); chains of
+   paired branches are filaments, refined once more as wholes; faint chains (noise) and
+   duplicates (one skeleton drawn for two touching filaments) are dropped.
 4. **radius** -- per filament, from the intensity mass per unit length (voxels assigned to
    their nearest filament), which blur does not change: ``mass = C pi r^2 (L + 4 r / 3)``.
 5. **contacts** -- pairs of *distinct* filaments whose surfaces come within the contact
@@ -39,28 +37,12 @@ from scipy import ndimage
 
 __all__ = ["trace_filaments", "bend_fraction", "FilamentResult"]
 
-#: largest angle (degrees) between facing end tangents, and between each and the chord, of a
-#: join (skeleton ends bend towards the junction they were cut from; on the wire tangles 45
-#: degrees joined too little: filament F1 0.72, 60: 0.84, 70: 0.905, 75: 0.905)
-JOIN_ANGLE = 70.0
-#: reach of a join, in units of the gap a junction's removal leaves (2 (junction_radius r + 1) + 2 r + 2)
-JOIN_GAP = 1.5
-#: end tangents are measured over this many radii of the branch (at least 4 voxels)
-JOIN_TANGENT = 1.5
-#: ... behind the point this share of that reach inside the end (the last voxel bends towards the
-#: junction; wire tangles, 16 dev seeds, F1 median / worst: 0: 0.80 / 0.60, 0.27: 0.83 / 0.65,
-#: 0.67: 0.71 / 0.59 on 8 of them)
-JOIN_SKIP = 0.27
 #: the junction neighbourhood removed is this share of the straight path's (``junction_radius``):
 #: smaller gaps to bridge (wire tangles, 8 dev seeds, filament F1 median / worst: 1.0: 0.79 / 0.53,
-#: 0.5: 0.80 / 0.68, with the bridges below)
+#: 0.5: 0.80 / 0.68, with greedy bridges)
 CURVED_JUNCTION = 0.5
-#: longest bridge between pieces: this many radii plus 6 voxels (8 r + 6 against 12 r + 6: same median)
+#: longest bridge between pieces: this many radii plus 6 voxels
 BRIDGE_GAP = 8.0
-#: tightest bend of a bridge, in radii (wire tangles: 0.5: 0.80, 1: 0.79, 2: 0.71 median F1; the
-#: wires themselves bend down to about 6 radii, but a bridge guessed from two end tangents bends
-#: more sharply than the wire it replaces: a third of the true bridges have a radius under 1)
-BRIDGE_BEND = 0.5
 
 
 def _order_branch(pts: np.ndarray, pairs: np.ndarray):
@@ -161,116 +143,6 @@ def bend_fraction(branches, tol: float, min_length: float) -> float:
     return bent / tot if tot > 0 else 0.0
 
 
-def _end_tangent(b: np.ndarray, side: int, reach: float, skip: float = 0.0) -> np.ndarray:
-    """Outward unit tangent at one end of an ordered branch (side 0: first point, 1: last), over
-    ``reach`` voxels behind the point ``skip`` voxels inside the end (as far as the branch allows)."""
-    q = b if side == 1 else b[::-1]
-    seg = np.linalg.norm(np.diff(q[::-1], axis=0), axis=1)
-    cum = np.concatenate([[0.0], np.cumsum(seg)])
-    skip = min(skip, 0.3 * cum[-1])
-    j = min(int(np.searchsorted(cum, skip)), len(q) - 2)
-    k = int(np.searchsorted(cum, skip + reach))
-    k = min(max(k, j + 1), len(q) - 1)
-    t = q[-1 - j] - q[-1 - k]
-    n = float(np.linalg.norm(t))
-    return t / n if n > 0 else np.zeros(3)
-
-
-def _chord_filled(sampler, p, q, level=0.5):
-    L = float(np.linalg.norm(q - p))
-    if L < 1e-9:
-        return True
-    ss = np.linspace(0.0, 1.0, max(2, int(math.ceil(L / 0.5)) + 1))
-    v = sampler(p + ss[:, None] * (q - p))
-    v = v[np.isfinite(v)]
-    return bool(v.size and np.min(v) >= level)
-
-
-def _join(branches, r0, P, sampler, max_angle=None, gap_scale=None):
-    """Chains of branch ends joined through junction gaps: list of [(branch, reversed), ...]."""
-    from scipy.spatial import cKDTree
-
-    max_angle = JOIN_ANGLE if max_angle is None else max_angle
-    gap_scale = JOIN_GAP if gap_scale is None else gap_scale
-    nbr = len(branches)
-    if nbr == 0:
-        return []
-    reach_t = max(4.0, JOIN_TANGENT * r0)
-    ends = []
-    for i, b in enumerate(branches):
-        for side in (0, 1):
-            ends.append((i, side, b[0] if side == 0 else b[-1], _end_tangent(b, side, reach_t, JOIN_SKIP * reach_t)))
-    E = np.array([e[2] for e in ends])
-    gap = gap_scale * (2.0 * (P.junction_radius * r0 + 1.0) + 2.0 * r0 + 2.0)
-    cos_max = math.cos(math.radians(max_angle))
-    cand = []
-    for a, b in cKDTree(E).query_pairs(gap, output_type="ndarray"):
-        ia, sa, pa, ta = ends[a]
-        ib, sb, pb, tb = ends[b]
-        if ia == ib:
-            continue
-        if float(ta @ -tb) < cos_max:
-            continue
-        c = pb - pa
-        dist = float(np.linalg.norm(c))
-        if dist > 1.5:
-            cu = c / dist
-            ca, cb = float(ta @ cu), float(-tb @ cu)
-            if ca < cos_max or cb < cos_max:
-                continue
-        else:
-            ca = cb = 1.0
-        # angle terms in radians, the distance in units of the junction gap
-        cost = (math.acos(min(1.0, float(ta @ -tb))) + math.acos(min(1.0, ca)) + math.acos(min(1.0, cb))
-                + dist / gap)
-        cand.append((cost, a, b))
-    cand.sort()
-    partner = {}
-    for cost, a, b in cand:
-        if a in partner or b in partner:
-            continue
-        if not _chord_filled(sampler, ends[a][2], ends[b][2]):
-            continue
-        partner[a] = b
-        partner[b] = a
-    # walk the chains: end index e = 2 * branch + side
-    seen = np.zeros(nbr, bool)
-    chains = []
-    for start in range(nbr):
-        if seen[start]:
-            continue
-        # go to one free end of this chain (or around a loop)
-        i, side = start, 0
-        steps = 0
-        while (2 * i + side) in partner and steps <= nbr:
-            e = partner[2 * i + side]
-            i, side = e // 2, 1 - (e % 2)
-            steps += 1
-            if i == start:
-                break
-        # now walk forward from end (i, side): the branch is traversed from `side` to the other end
-        chain = []
-        cur, s_in = i, side
-        while not seen[cur]:
-            seen[cur] = True
-            chain.append((cur, s_in == 1))  # entered at its last point: reversed
-            out_end = 2 * cur + (1 - s_in)
-            if out_end not in partner:
-                break
-            e = partner[out_end]
-            cur, s_in = e // 2, e % 2
-        chains.append(chain)
-    return chains
-
-
-def _assemble(branches, chain):
-    parts = []
-    for i, rev in chain:
-        b = branches[i]
-        parts.append(b[::-1] if rev else b)
-    return np.concatenate(parts)
-
-
 def _refine_centrelines(polys, sampler, r0, n_iter=3, own_weight=None):
     """Move every vertex to the intensity centroid of its normal disc, ignoring samples nearer
     to another filament; vertices are unit-spaced, so the disc is also a unit-thick slab."""
@@ -364,12 +236,10 @@ class FilamentResult:
         Skeleton branches left once the junctions are removed.
     bend_fraction : float
         Share (0 to 1) of the long branches' length that bends (see :func:`bend_fraction`).
-    joins : int
-        Branch ends joined through junction gaps.
     faint : int
-        Chains rejected because their axis is fainter than ``0.8 min_fill`` of the plateau.
+        Filaments rejected because their axis is fainter than ``0.8 min_fill`` of the plateau.
     bridges : int
-        Pieces joined by smooth bridges through the image (:mod:`rodwarp.ct._bridging`).
+        Branch ends joined by smooth bridges through the junction gaps (:mod:`rodwarp.ct._bridging`).
     duplicates : int
         Pieces dropped as lying along a longer filament (one skeleton for two touching ones).
     mask : ndarray of bool
@@ -382,7 +252,6 @@ class FilamentResult:
     skeleton_junctions: int
     branches: int
     bend_fraction: float
-    joins: int
     faint: int
     bridges: int = 0
     duplicates: int = 0
@@ -430,18 +299,19 @@ def trace_filaments(raw: np.ndarray, st, P, progress=None) -> FilamentResult:
     bend = bend_fraction(branches, max(1.5, 0.5 * r0), 6.0 * r0)
     if progress is not None:
         progress("detect", 1, 3)
-    chains = _join(branches, r0, P, sampler)
-    joins = int(sum(len(c) - 1 for c in chains))
-    polys = []
-    for ch in chains:
-        p = _resample(_assemble(branches, ch), 1.0)
-        L = float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
-        if L < max(P.min_length * r0, 3.0):
-            continue
-        polys.append(_resample(_smooth(p, max(1.0, 0.5 * r0)), 1.0))
+    # every branch is refined on its own first: its ends then point where the filament goes,
+    # not towards the junction it was cut from
+    pieces = [_resample(b, 1.0) for b in branches]
+    pieces = [_resample(_smooth(p, max(1.0, 0.5 * r0)), 1.0) if len(p) >= 5 else p for p in pieces]
+    pieces = _refine_centrelines(pieces, sampler, r0)
+    from rodwarp.ct._bridging import drop_duplicates, pair_ends
+
+    polys, bridges = pair_ends(pieces, sampler, r0, BRIDGE_GAP * r0 + 6.0)
+    polys = [p for p in polys if float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+             >= max(P.min_length * r0, 3.0)]
     if progress is not None:
         progress("detect", 2, 3)
-    polys = _refine_centrelines(polys, sampler, r0)
+    polys = _refine_centrelines(polys, sampler, r0, n_iter=2)
     raw_norm = (raw - np.float32(st.bg)) * np.float32(1.0 / (st.fg - st.bg))
     # a filament's axis is as bright as the rods' plateau; noise blobs joined into chains are not
     keep, faint = [], 0
@@ -451,18 +321,10 @@ def trace_filaments(raw: np.ndarray, st, P, progress=None) -> FilamentResult:
             keep.append(p)
         else:
             faint += 1
-    polys = keep
-    # pieces bridged through the junctions the skeleton joins missed, then duplicates dropped
-    from rodwarp.ct._bridging import bridge_pieces, drop_duplicates
-
-    support = _BlockSampler(ndimage.distance_transform_edt(~mask).astype(np.float32), (0, 0, 0))
-    polys, bridges = bridge_pieces(polys, sampler, r0, BRIDGE_GAP * r0 + 6.0, BRIDGE_BEND * r0, support=support,
-                                   tube=r0, trim=r0, reach=3.0 * r0)
-    polys = _refine_centrelines(polys, sampler, r0, n_iter=2)
-    polys, duplicates = drop_duplicates(polys, r0)
+    polys, duplicates = drop_duplicates(keep, r0)
     radii = _radii(polys, raw_norm, r0, P.window_margin) if polys else np.zeros(0)
     if progress is not None:
         progress("detect", 3, 3)
     return FilamentResult(polylines=polys, radii=radii, skeleton_voxels=n_sk, skeleton_junctions=int(len(junc)),
-                          branches=n_branches, bend_fraction=bend, joins=joins, faint=faint, bridges=bridges,
+                          branches=n_branches, bend_fraction=bend, faint=faint, bridges=bridges,
                           duplicates=duplicates, mask=mask)

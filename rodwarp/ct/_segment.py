@@ -342,7 +342,7 @@ def _assemble_result(out: RodSet, contacts, r_glob: float, radius_spread: float,
     if filaments is not None:
         f = filaments
         q.update(skeleton_voxels=f.skeleton_voxels, skeleton_junctions=f.skeleton_junctions, branches=f.branches,
-                 bend_fraction=f.bend_fraction, joins=f.joins, bridges=f.bridges, duplicates=f.duplicates,
+                 bend_fraction=f.bend_fraction, bridges=f.bridges, duplicates=f.duplicates,
                  rods_rejected={"faint": f.faint} if f.faint else {},
                  filaments=f.filaments, radius_spread=radius_spread)
     else:
