@@ -153,7 +153,8 @@ def run_case(name: str, seed: int = 0, before: bool = True, after: bool = True) 
         if "rods" in out:
             rec["after"].update(_doubt_scores(case, out))
         if case.curved and "rods" in out:
-            rec["cv_e"] = {"found": _cv_e(out["rods"]), "truth": _cv_e(case.truth)}
+            rec["cv_e"] = {"found": _cv_e(out["rods"]), "truth": _cv_e(case.truth),
+                           **_cv_e_common(out["rods"], case)}
     return rec
 
 
@@ -174,12 +175,28 @@ def _doubt_scores(case, out) -> dict:
             "unexplained": float(d.unexplained_fraction)}
 
 
-def _cv_e(rods) -> float | None:
-    """cv_e (the paper's sigma_e / mu_e) of a rod set at its own default ball radius sqrt(d l)."""
+def _cv_e(rods, radius=None, box=None) -> float | None:
+    """cv_e (the paper's sigma_e / mu_e) of a rod set, by default at its own default ball radius
+    sqrt(d l) on the grid of its own bounding box."""
     from rodwarp.analysis import compute_fields, field_statistics
 
-    st = field_statistics(compute_fields(rods, device="cpu"))
+    if box is not None:
+        rods = rods.copy()
+        rods.box = np.asarray(box, float)
+    st = field_statistics(compute_fields(rods, radius=radius, device="cpu"))
     return st.get("cv_e")
+
+
+def _cv_e_common(found, case) -> dict:
+    """cv_e of the traced and the true filaments on one grid (the scanned volume, the truth's
+    default ball radius), and how far the truth's own cv_e moves when its bounding box (the
+    default grid) grows by one voxel on every side: the measure's own resolution here."""
+    truth = case.truth
+    box = np.stack([np.full(3, -0.5), np.asarray(case.volume.shape[::-1], float) - 0.5])
+    R = float(np.sqrt(2.0 * np.mean(truth.radii) * np.mean(truth.rod_lengths())))
+    P = truth.points
+    return {"found_common": _cv_e(found, R, box), "truth_common": _cv_e(truth, R, box),
+            "truth_grown_1": _cv_e(truth, None, np.stack([P.min(0) - 1.0, P.max(0) + 1.0]))}
 
 
 def _sweep_volume(radius, blur, seed):
@@ -235,6 +252,12 @@ def run(quick: bool, device: str) -> dict:
                    if r.get("cv_e") and r["cv_e"]["found"] and r["cv_e"]["truth"]]
             agg["cv_e_rel_error"] = {"median": float(np.median(rel)), "max": float(np.max(rel)), "n": len(rel)} \
                 if rel else None
+            for key, (x, y) in (("cv_e_rel_error_common", ("found_common", "truth_common")),
+                                ("truth_cv_e_grid_shift", ("truth_grown_1", "truth"))):
+                rel = [abs(r["cv_e"][x] / r["cv_e"][y] - 1.0) for r in rr
+                       if r.get("cv_e") and r["cv_e"].get(x) and r["cv_e"].get(y)]
+                agg[key] = {"median": float(np.median(rel)), "max": float(np.max(rel)), "n": len(rel)} \
+                    if rel else None
         for k in ("doubtful_matched", "doubtful_unmatched", "unexplained"):
             v = [r["after"].get(k) for r in rr if r["after"].get(k) is not None]
             agg.setdefault("doubt", {})[k] = float(np.mean(v)) if v else None
@@ -351,6 +374,11 @@ def summary(rec: dict) -> list[dict]:
         cell = f"F1 {_med(a, 'rod_f1')}, contact recall {_med(a, 'contact_recall')}"
         if c.get("cv_e_rel_error"):
             cell += f", cv_e off by {100 * c['cv_e_rel_error']['median']:.0f}% (max {100 * c['cv_e_rel_error']['max']:.0f}%)"
+            if c.get("cv_e_rel_error_common") and c.get("truth_cv_e_grid_shift"):
+                cc, g = c["cv_e_rel_error_common"], c["truth_cv_e_grid_shift"]
+                cell += (f"; on one grid {100 * cc['median']:.0f}% (max {100 * cc['max']:.0f}%); the truth's own "
+                         f"cv_e moves {100 * g['median']:.0f}% (max {100 * g['max']:.0f}%) when its grid grows "
+                         f"1 voxel")
         d = c.get("doubt") or {}
         if d.get("doubtful_unmatched") is not None and d.get("doubtful_matched") is not None:
             cell += (f", doubtful: {100 * d['doubtful_unmatched']:.0f}% of unmatched / "
