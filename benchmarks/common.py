@@ -93,6 +93,15 @@ def short_device(rec: dict) -> str:
     return (rec.get("device") or "").split(" (")[0]
 
 
+def command_arg(arg: str) -> str:
+    """A command-line argument as a record shows it: a path inside the current folder relative to
+    it, so the record names no folder of the machine it ran on."""
+    try:
+        return Path(arg).resolve().relative_to(Path.cwd().resolve()).as_posix() if Path(arg).is_absolute() else arg
+    except ValueError:
+        return arg
+
+
 def utc_now() -> str:
     return datetime.now(timezone.utc).replace(microsecond=0).isoformat()
 

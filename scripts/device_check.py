@@ -121,15 +121,6 @@ def log(msg: str) -> None:
     print(f"[device_check {time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
 
 
-def _relative(arg: str) -> str:
-    """An argument as the record shows it: a path inside the current folder relative to it, so
-    the record names no folder of the machine it ran on."""
-    try:
-        return Path(arg).resolve().relative_to(Path.cwd().resolve()).as_posix() if Path(arg).is_absolute() else arg
-    except ValueError:
-        return arg
-
-
 # ----------------------------------------------------------------------------------------------
 # pure helpers
 # ----------------------------------------------------------------------------------------------
@@ -707,14 +698,14 @@ def main(argv=None) -> int:
     out = args.out
     via = os.environ.get("DEVICE_CHECK_WRAPPER")
     rec = {"name": "device_check", "title": "Device check: CUDA tests, CPU/CUDA agreement, GPU throughput",
-           "command": f"{via or 'python scripts/device_check.py'} {' '.join(_relative(a) for a in argv)}".strip(),
+           "command": f"{via or 'python scripts/device_check.py'} {' '.join(common.command_arg(a) for a in argv)}".strip(),
            "date": common.utc_now(), "device": gpu_info(device), "versions": common.versions(),
            "budget_s": args.budget, "steps_run": list(steps), "steps": {},
            "problems": [], "complete": False, "wall_s": 0.0}
-    log(f"{rec['device']['name']} ({device}), budget {args.budget:g} s, steps {', '.join(steps)} -> {_relative(str(out))}")
+    log(f"{rec['device']['name']} ({device}), budget {args.budget:g} s, steps {', '.join(steps)} -> {common.command_arg(str(out))}")
 
     def overrun():
-        log(f"budget of {args.budget:g} s spent: stopping; {_relative(str(out))} holds the steps done")
+        log(f"budget of {args.budget:g} s spent: stopping; {common.command_arg(str(out))} holds the steps done")
         os._exit(124)
 
     watchdog = threading.Timer(max(args.budget - (time.perf_counter() - t_start), 1.0), overrun)

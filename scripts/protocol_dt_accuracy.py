@@ -16,14 +16,11 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))  # benchmarks.common
 
-def _relative(arg: str) -> str:
-    """An argument as the record shows it: a path inside the current folder relative to it, so
-    the record names no folder of the machine it ran on."""
-    try:
-        return Path(arg).resolve().relative_to(Path.cwd().resolve()).as_posix() if Path(arg).is_absolute() else arg
-    except ValueError:
-        return arg
+from benchmarks.common import command_arg  # noqa: E402
 
 
 def default_dt(alpha: float) -> float:
@@ -80,7 +77,7 @@ def main(argv=None):
             rows.append({"alpha": a, "dt": base[a] / k, "divisor": k, "Z": s["contacts_per_rod"],
                          "f": s["largest_cluster_fraction"], "stable": s["stable"], "wall_time_s": s["wall_time_s"],
                          "max_penetration_over_d": s.get("max_penetration_over_d")})
-    meta = {"command": "python scripts/protocol_dt_accuracy.py " + " ".join(_relative(a) for a in (argv or sys.argv[1:])),
+    meta = {"command": "python scripts/protocol_dt_accuracy.py " + " ".join(command_arg(a) for a in (argv or sys.argv[1:])),
             "entangle_duration_s": args.entangle_duration, "duration_s": args.duration,
             "default_dt_s": base, "rows": rows}
     (out / "dt_accuracy.json").write_text(json.dumps(meta, indent=2))
