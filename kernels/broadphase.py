@@ -70,15 +70,19 @@ def within_reach(model: RodModel, sa: int, sb: int, mid: wp.array(dtype=wp.vec3)
 
 
 @wp.kernel
-def stale_segments(seg_vertex: wp.array(dtype=wp.int32), x: wp.array(dtype=wp.vec3d), ref: wp.array(dtype=wp.vec3d),
-                   tau: wp.float64, flag: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32),
-                   stale: wp.array(dtype=wp.int32)):
+def stale_segments(seg_vertex: wp.array(dtype=wp.int32), x: wp.array(dtype=wp.vec3d), sums: wp.array(dtype=wp.vec3d),
+                   inv_count: wp.float64, ref: wp.array(dtype=wp.vec3d), tau: wp.float64,
+                   flag: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32), stale: wp.array(dtype=wp.int32)):
     """flag[s] = 1 for every segment that has moved by more than ``tau`` since its last
     refresh (either end point: no point of the segment has moved further), listed in
-    ``stale`` (in any order: the contacts are sorted by key later)."""
+    ``stale`` (in any order: the contacts are sorted by key later). Positions are measured
+    from the pile's mean position now, sums[0] * inv_count (``ref`` holds them from the mean
+    at the last refresh): a common translation changes no distance between segments, so the
+    list holds in whatever frame it is measured, and a falling or tossed pile stays fresh."""
     s = wp.tid()
     i = seg_vertex[s]
-    d = wp.max(wp.length(x[i] - ref[2 * s]), wp.length(x[i + 1] - ref[2 * s + 1]))
+    o = sums[0] * inv_count
+    d = wp.max(wp.length(x[i] - o - ref[2 * s]), wp.length(x[i + 1] - o - ref[2 * s + 1]))
     if d > tau:
         flag[s] = 1
         k = wp.atomic_add(count, 0, 1)
@@ -100,12 +104,14 @@ def drop_pairs_of_flagged(pairs: wp.array(dtype=wp.vec2i), flag: wp.array(dtype=
 def find_pairs_of_flagged(grid: wp.uint64, stale: wp.array(dtype=wp.int32), flag: wp.array(dtype=wp.int32),
                           mid: wp.array(dtype=wp.vec3), model: RodModel, x: wp.array(dtype=wp.vec3d),
                           query_radius: float, margin: wp.float64, capacity: int, count: wp.array(dtype=wp.int32),
-                          pairs: wp.array(dtype=wp.vec2i), ref: wp.array(dtype=wp.vec3d)):
+                          pairs: wp.array(dtype=wp.vec2i), sums: wp.array(dtype=wp.vec3d), inv_count: wp.float64,
+                          ref: wp.array(dtype=wp.vec3d)):
     """Broadphase (Verlet list): every pair of a flagged segment whose capsule gap is below
     ``margin`` (contact margin + skin) now, found through the hash grid (midpoints within
     ``query_radius`` = h_max + 2 r_max + margin); a pair of two flagged segments once, from
     the lower one, appended as (lower, higher); the flagged segment's reference moves to its
-    present position. A full build flags every segment; a partial refresh those that moved."""
+    present position (from the pile's mean position, :func:`stale_segments`). A full build flags every
+    segment; a partial refresh those that moved."""
     sa = stale[wp.tid()]
     r2 = query_radius * query_radius
     query = wp.hash_grid_query(grid, mid[sa], query_radius)
@@ -118,5 +124,6 @@ def find_pairs_of_flagged(grid: wp.uint64, stale: wp.array(dtype=wp.int32), flag
             if k < capacity:
                 pairs[k] = wp.vec2i(wp.min(sa, sb), wp.max(sa, sb))
     i = model.seg_vertex[sa]
-    ref[2 * sa] = x[i]
-    ref[2 * sa + 1] = x[i + 1]
+    o = sums[0] * inv_count
+    ref[2 * sa] = x[i] - o
+    ref[2 * sa + 1] = x[i + 1] - o

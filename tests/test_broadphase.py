@@ -69,9 +69,12 @@ def test_the_refreshed_list_holds_every_pair_within_its_guaranteed_reach():
         c = solver.collision
         x = state_in.x.numpy()
         # the invariant the reach rests on: no segment has moved by more than tau since its
-        # pairs were last found
+        # pairs were last found, measured from the pile's mean position
         ref = c._ref.numpy().reshape(-1, 2, 3)
-        moved = np.maximum(np.linalg.norm(x[seg] - ref[:, 0], axis=1), np.linalg.norm(x[seg + 1] - ref[:, 1], axis=1))
+        o = c.sums.numpy()[0] / len(x)
+        np.testing.assert_allclose(o, x.mean(axis=0), rtol=0, atol=1e-12)
+        moved = np.maximum(np.linalg.norm(x[seg] - o - ref[:, 0], axis=1),
+                           np.linalg.norm(x[seg + 1] - o - ref[:, 1], axis=1))
         assert moved.max() <= c.tau * (1 + 1e-9)
         if info.step % 10 or c.refreshes == 0:
             return

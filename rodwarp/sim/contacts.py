@@ -207,6 +207,10 @@ class ContactPipeline:
         self.pairs_margin = 0.0
         self._pairs_tmp = wp.zeros(self.pairs_cap, dtype=wp.vec2i, device=d)
         self._ref = wp.zeros(2 * max(S, 1), dtype=wp.vec3d, device=d)
+        # the sum of the vertex positions: the pile's mean position is the frame the pair list
+        # measures displacements in
+        self.sums = wp.zeros(1, dtype=wp.vec3d, device=d)
+        self._inv_v = wp.float64(1.0 / max(model.n_vertices, 1))
         self._flag = wp.zeros(max(S, 1), dtype=wp.int32, device=d)
         self._stale = wp.zeros(max(S, 1), dtype=wp.int32, device=d)
         self._query = 0.0
@@ -257,12 +261,15 @@ class ContactPipeline:
         # segment has moved by at most tau (the flagged ones are refreshed now) and the other by
         # at most 2 tau; so the list holds every pair within M - 3 tau, which must cover the reach.
         need = base + 2.0 * vmax * dt
+        # displacements are measured from the pile's mean position: a falling or tossed pile
+        # moves together, and a common translation changes no gap (kernels/broadphase.py)
+        wp.utils.array_sum(state_in.x, out=self.sums)
         rebuild = self.pairs_n is None or need > self.pairs_margin - 3.0 * self.tau
         if not rebuild:
             self._count.zero_()
             self._launch("broadphase", broadphase.stale_segments, dim=S, device=dev, inputs=[
-                m.arrays.seg_vertex, state_in.x, self._ref, wp.float64(self.tau), self._flag, self._count,
-                self._stale])
+                m.arrays.seg_vertex, state_in.x, self.sums, self._inv_v, self._ref, wp.float64(self.tau), self._flag,
+                self._count, self._stale])
             n_stale = int(self._count.numpy()[0])
             if n_stale > self.PARTIAL_LIMIT * S:
                 rebuild = True
@@ -348,7 +355,8 @@ class ContactPipeline:
             self._count.zero_()
             self._launch("broadphase", broadphase.find_pairs_of_flagged, dim=S, device=dev, inputs=[
                 self._grid.id, self._all, self._flag, self._mid, m.arrays, state.x, float(self._query),
-                wp.float64(margin), self.pairs_cap, self._count, self.pairs, self._ref])
+                wp.float64(margin), self.pairs_cap, self._count, self.pairs, self.sums, self._inv_v,
+                self._ref])
             n = int(self._count.numpy()[0])
             if n <= self.pairs_cap:
                 break
@@ -375,7 +383,8 @@ class ContactPipeline:
                          inputs=[self.pairs, self._flag, self._pairs_tmp, self._count])
         self._launch("broadphase", broadphase.find_pairs_of_flagged, dim=n_stale, device=dev, inputs=[
             self._grid.id, self._stale, self._flag, self._mid, m.arrays, state.x, float(self._query),
-            wp.float64(self.pairs_margin), self.pairs_cap, self._count, self._pairs_tmp, self._ref])
+            wp.float64(self.pairs_margin), self.pairs_cap, self._count, self._pairs_tmp, self.sums,
+            self._inv_v, self._ref])
         n = int(self._count.numpy()[0])
         if n > self.pairs_cap:
             return False
