@@ -179,6 +179,27 @@ def test_the_step_shrinks_while_rods_overlap():
     assert abs(free - d / (v + 1e-3)) < 1e-9 * free  # safety 1: one diameter per step
 
 
+def test_a_safety_above_one_relaxes_only_the_speed_bound():
+    """Safety 2 lets the fastest rod cross two diameters per step, but gravity's bound
+    g dt^2 <= 0.01 d stays: scaled with the safety (g dt^2 = 0.04 d), a rod lying on a floor
+    kept 1.4 um/s forever and a pressed packing rattled at 2-3 cm/s (tests/test_lab.py); the
+    overlap feedback scales the whole step."""
+    model = cabin()
+    solver = RodSolver(model)
+    control = model.control()
+    d = model.min_diameter
+    v = 10.0  # the speed bound (2 ms at safety 1) sets the step
+    assert abs(solver.adaptive_dt(control, v, safety=2.0) - 2.0 * solver.adaptive_dt(control, v)) < 1e-12
+    gravity = math.sqrt(0.01 * d / G)
+    for safety in (1.0, 2.0, 3.0):  # at rest, gravity's bound whatever the safety above 1
+        assert abs(solver.adaptive_dt(control, 0.0, safety=safety) - gravity) < 1e-9 * gravity
+    assert abs(solver.adaptive_dt(control, 0.0, safety=0.5) - 0.5 * gravity) < 1e-9 * gravity
+    target = solver.OVERLAP_TARGET * d
+    for safety in (1.0, 2.0):
+        at_rest = solver.adaptive_dt(control, 0.0, safety=safety)
+        assert abs(solver.adaptive_dt(control, 0.0, safety=safety, overlap=2.0 * target) - 0.5 * at_rest) < 1e-12
+
+
 @pytest.mark.parametrize("sweeps, tolerance, passes", [(1, 0.0, 1), (16, 0.015, 4), (16, 0.0, 16)])
 def test_post_stabilisation_removes_an_overlap_and_stops_at_its_tolerance(sweeps, tolerance, passes):
     """Two free rigid rods crossed at their centres, overlapping by 0.2 d, no gravity: each

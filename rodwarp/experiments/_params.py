@@ -80,8 +80,8 @@ class ProtocolParams:
                                  "it")
     rod_model: str = _param("auto", f"auto (rigid when the rods' self-weight sag is below {RIGID_SAG:g} d), rigid "
                                     "or elastic.")
-    step_safety: float = _param(1.0, "Adaptive step: the fastest rod crosses at most this many diameters per step "
-                                     "(1: the knee of the effort benchmark; the step also shrinks while rods "
+    step_safety: float = _param(2.0, "Adaptive step: the fastest rod crosses at most this many diameters per step "
+                                     "(2: the knee of the effort benchmark; the step also shrinks while rods "
                                      "overlap by more than 0.02 d; ignored with --dt).")
     rolling: bool | None = _param(None, "Rods spin about their axes; --no-rolling locks the spin (friction on the "
                                         "centreline only). Default: on with the exact contact law, off with IMC "
