@@ -102,9 +102,9 @@ def summary(rec: dict) -> list[dict]:
                         "rodwarp": ", ".join(f"{k} {g[k]['mean']:.3f} [{g[k]['min']:.3f}, {g[k]['max']:.3f}]"
                                              for k in KEYS) + f"; wall {g['wall_s']['median']:.0f} s, "
                                                               f"{g['steps']:.0f} steps",
-                        "peer": "reference (safety 0.05, 40 sweeps): " + (
-                            ", ".join(f"{k} {ref[k]:.3f}" for k in KEYS) + f"; {ref['wall_s']:.0f} s"
-                            if ref else "n/a"),
+                        "peer": (f"reference (safety {ref['step_safety']:g}, {ref['iterations']} sweeps, seed "
+                                 f"{ref['seed']}): " + ", ".join(f"{k} {ref[k]:.3f}" for k in KEYS)
+                                 + f"; {ref['wall_s']:.0f} s") if ref else "n/a",
                         "ratio": (ref["wall_s"] / g["wall_s"]["median"]) if ref else None})
     return out
 

@@ -51,7 +51,7 @@ def test_kill_and_resume_is_bit_exact(tmp_path):
     r = run(out)
     assert r.returncode == 2 and "holds an unfinished simulate run" in r.stderr and "--resume" in r.stderr
     r = run(out, ["--resume", "--gravity", "0.6"])
-    assert r.returncode == 2 and "continues only its own run" in r.stderr and "gravity" in r.stderr
+    assert r.returncode == 2 and "continues only its own run" in r.stderr and "gravity 0.5 there, 0.6 here" in r.stderr
     # temporaries a kill leaves behind are removed by the resumed run
     (out / ".metrics.csv.k1ll3d.tmp").write_text("torn")
     (out / "vtk" / ".frame_00002.vtp.k1ll3d.tmp").write_text("torn")

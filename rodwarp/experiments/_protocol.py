@@ -161,8 +161,10 @@ def _resume_point(params: ProtocolParams, ckdir: Path):
     if json.loads(json.dumps(mine)) != theirs:
         m = json.loads(json.dumps(mine))
         diff = sorted(k for k in set(m) | set(theirs) if m.get(k) != theirs.get(k))
-        raise RodwarpError(f"--resume with different parameters than the checkpoint ({', '.join(diff)}); "
-                           f"repeat the original command with --resume")
+        said = ", ".join(f"{k} {theirs.get(k)} in the checkpoint, {m.get(k)} now" for k in diff)
+        raise RodwarpError(f"--resume with different parameters than the checkpoint ({said}); repeat the original "
+                           f"command with --resume, giving these as the checkpoint has them (a default may have "
+                           f"changed since: CHANGELOG.md)")
     return ck
 
 

@@ -345,9 +345,12 @@ def _decide(path: Path, kind: str, parameters: dict, outputs, *, resume: bool, o
                                f"run the same command with --overwrite instead of --resume")
         diff = _param_diff(parameters, old.get("parameters", {}))
         if diff:
+            was, now = old.get("parameters", {}), json.loads(json.dumps(parameters, default=str))
+            shown = "; ".join(f"{k} {_show(was.get(k))} there, {_show(now.get(k))} here" for k in diff[:4])
             raise RodwarpError(f"--resume continues only its own run: the run in {path} has other "
-                               f"parameters ({', '.join(diff)}); repeat its original command with --resume, "
-                               f"or pass --overwrite to replace it")
+                               f"parameters ({shown}); repeat its original command with --resume, giving these "
+                               f"as the run has them (a default may have changed since: CHANGELOG.md), or pass "
+                               f"--overwrite to replace it")
         return old, present, old.get("run_id"), True
     if old is None and not present:
         return None, present, None, False
