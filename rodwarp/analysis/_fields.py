@@ -315,8 +315,12 @@ def _count_points_in_balls(points, w_vox, nx: int, ny: int, origin, h, radius: f
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(points) == 0 or nv == 0:
         return np.zeros(nv, np.int32)
-    grid = wp.HashGrid(128, 128, 128, device=dev)
     cq = float(radius * (1 + 1e-5) + 1e-5 * (float(np.abs(points).max()) + radius))
+    # a grid no finer than the points need (cells of the query radius; the hash wraps beyond):
+    # a 128^3 grid's allocation and clearing cost more than counting a main job's contacts
+    ext = points.max(axis=0) - points.min(axis=0)
+    dims = [int(min(128, max(4, math.ceil(e / cq) + 2))) for e in ext]
+    grid = wp.HashGrid(*dims, device=dev)
     grid.build(wp.array(points.astype(np.float32), dtype=wp.vec3, device=dev), radius=cq)
     out = wp.zeros(nv, dtype=wp.int32, device=dev)
     wp.launch(k.count_contacts_in_ball, dim=nv, device=dev,
