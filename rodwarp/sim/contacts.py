@@ -263,7 +263,7 @@ class ContactPipeline:
         need = base + 2.0 * vmax * dt
         # displacements are measured from the pile's mean position: a falling or tossed pile
         # moves together, and a common translation changes no gap (kernels/broadphase.py)
-        wp.utils.array_sum(state_in.x, out=self.sums)
+        self._time("broadphase", wp.utils.array_sum, state_in.x, self.sums)
         rebuild = self.pairs_n is None or need > self.pairs_margin - 3.0 * self.tau
         if not rebuild:
             self._count.zero_()
