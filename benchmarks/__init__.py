@@ -13,8 +13,9 @@ every JSON file in ``benchmarks/results``.  See ``benchmarks/README.md``.
 """
 
 BENCHMARKS = ("pile", "broadphase", "accuracy", "simulate", "fig4h", "protocol_dt", "acn", "fields", "stability",
-              "scaling", "pyelastica", "acn_peer", "segment", "segment_scans", "vtk", "analyze", "verdict", "rigid", "effort", "peer_pile", "imc")
-# run when no --only is given; fig4h, protocol_dt, verdict, rigid and effort are long protocol sweeps (tens
+              "scaling", "pyelastica", "acn_peer", "segment", "segment_scans", "vtk", "analyze", "verdict", "rigid", "effort", "peer_pile", "imc",
+              "resolution", "lab_cost")
+# run when no --only is given; fig4h, protocol_dt, verdict, rigid, effort, resolution and lab_cost are long protocol sweeps (tens
 # of minutes to hours on two cores) that run only when named
 DEFAULT = ("pile", "broadphase", "accuracy", "simulate", "acn", "fields", "segment", "segment_scans", "stability",
            "scaling", "pyelastica", "acn_peer", "vtk", "analyze")

@@ -5,12 +5,12 @@ random sequential addition in a closed 1 x 1 x 2.5 m box, g = 0.5 m/s^2, mu = 0.
 walls), dt = 1e-3 s fixed, 6000 steps; thread CPU time of each step, median over steps
 4000-6000 (the pile has landed and settled), with the contact residual and sweeps used.
 
-* rodwarp: rigid rods (the rule's choice for this scene), default solver (40 sweeps at most,
+* rodwarp: rigid rods (the rod-model rule's choice for this scene), default solver (40 sweeps at most,
   tolerance 1e-5 m/s, over-relaxed Gauss-Seidel), on four packings (seeds 0-3): how fast a
   settled pile converges depends on the pile (at one code, sweeps per step ranged 11-30 over
   the seeds; a change of the last bits of a kernel moves one seed across that range), so the
   figures are medians over the seeds, each seed's own the median over its steps; and elastic
-  rods (10 vertices, seed 0) for scale;
+  rods (seed 0) for scale, at 10 vertices and at the resolution rule's 3 (docs/physics.md);
 * the peer, rod-dynamics-3d (rigid 6-DOF capsules, projected Gauss-Seidel, 200 sweeps, cfm 0),
   built in a throwaway folder outside the repository and run by the command in
   ``$RODWARP_PEER_PILE`` (it prints one JSON object with ``ms_per_step_median_4000_6000``). Its
@@ -38,11 +38,11 @@ WINDOW = (4000, 6000)
 RIGID_SEEDS = (0, 1, 2, 3)
 
 
-def _rodwarp(rod_model: str, device: str, steps: int, seed: int = 0) -> dict:
+def _rodwarp(rod_model: str, device: str, steps: int, seed: int = 0, n_vertices: int = 10) -> dict:
     from rodwarp.experiments import random_packing
     from rodwarp.sim import STEEL, ModelBuilder, RodSolver, State
 
-    rods = random_packing(N_RODS, LENGTH, DIAMETER, BOX, seed=seed, device=device)
+    rods = random_packing(N_RODS, LENGTH, DIAMETER, BOX, seed=seed, device=device, n_vertices=n_vertices)
     builder = ModelBuilder(rods, STEEL, gravity=(0, 0, -0.5), mu=0.2, rod_model=rod_model, device=device)
     builder.add_box((0, 0, 0), BOX, walls=("floor", "ceiling", "x-", "x+", "y-", "y+"))
     model = builder.finalize()
@@ -103,7 +103,9 @@ def _peer() -> dict | None:
 def run(quick: bool, device: str) -> dict:
     steps = STEPS
     seeds = [_rodwarp("rigid", device, steps, seed) for seed in RIGID_SEEDS]
-    rows = [_over_seeds(seeds), _rodwarp("elastic", device, steps)]
+    # elastic rods at 10 vertices (every elastic run before the resolution rule) and at the rule's
+    # choice for this scene: no drive, a sag of 5e-4 d, so 3 vertices (docs/physics.md)
+    rows = [_over_seeds(seeds), _rodwarp("elastic", device, steps), _rodwarp("elastic", device, steps, n_vertices=3)]
     peer = _peer()
     problems = []
     r = rows[0]
@@ -145,7 +147,8 @@ def summary(rec: dict) -> list[dict]:
         where = (f"{len(seeds)} packings, medians over them; per seed " + ", ".join(
             f"{q['ms_per_step_median']:.2f} ms / {q['sweeps_mean']:.1f} sweeps" for q in seeds)
             + "; ") if seeds else ""
-        out.append({"benchmark": f"settled 270-rod pile, {r['rod_model']} rods (steps 4000-6000)",
+        nv = "" if r["rod_model"] == "rigid" else f", {r['n_vertices'] // N_RODS} vertices a rod"
+        out.append({"benchmark": f"settled 270-rod pile, {r['rod_model']} rods{nv} (steps 4000-6000)",
                     "rodwarp": where + f"{r['ms_per_step_median']:.2f} ms/step (median; mean {_mean(r):.2f}, "
                                f"{_early(r):.0%} of steps stop before the cap), residual median "
                                f"{r['residual_median']:.2g} m/s, {r['sweeps_mean']:.1f} sweeps (cap {r['iterations_cap']}), "
@@ -163,13 +166,14 @@ def plot(rec: dict, outdir) -> list[dict]:
     import matplotlib.pyplot as plt
 
     peer = rec.get("peer")
-    names = [f"rodwarp {r['rod_model']}" for r in rec["rows"]]
+    names = [f"rodwarp {r['rod_model']}" + ("" if r["rod_model"] == "rigid" else f"\n{r['n_vertices'] // N_RODS} vertices")
+             for r in rec["rows"]]
     ms = [r["ms_per_step_median"] for r in rec["rows"]]
     if peer and not peer.get("failure"):
         names.append("rod-dynamics-3d\n(200 sweeps)")
         ms.append(float(peer["ms_per_step_median_4000_6000"]))
     fig, ax = plt.subplots(figsize=(6, 4))
-    ax.bar(names, ms, color=["C0", "C2", "C3"][:len(ms)])
+    ax.bar(names, ms, color=["C0", "C2", "C4", "C3"][:len(ms)])
     for k, v in enumerate(ms):
         ax.annotate(f"{v:.2f} ms", (k, v), ha="center", va="bottom", fontsize=8)
     ax.set_ylabel("CPU time per step (ms, median of steps 4000-6000)")

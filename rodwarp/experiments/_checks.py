@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from rodwarp.experiments._plan import STEPS_PER_PERIOD, frames, plan
+from rodwarp.experiments._plan import frames, plan
 from rodwarp.validation import BASE_BYTES, device_name, fail, integer, memory_fits, number
 
 #: bytes of memory per simulated vertex (model, two states, contact lists, solver scratch and
@@ -122,7 +122,8 @@ def _check_options(p, explicit: frozenset):
     if p.n_rods is not None:
         integer("--n-rods", p.n_rods, ge=1)
     number("--length", p.length, gt=0, unit="m")
-    integer("--vertices", p.vertices, ge=2, le=10_000)
+    if p.vertices is not None:
+        integer("--vertices", p.vertices, ge=2, le=10_000)
     box = tuple(p.box)
     if len(box) != 3:
         fail(f"--box must be three positive numbers 'X,Y,Z' in rod lengths, got {box}")
@@ -136,6 +137,7 @@ def _check_options(p, explicit: frozenset):
         number("--dt", p.dt, gt=0, unit="s", hint="leave it out for the default step")
     integer("--iterations", p.iterations, ge=1, le=100_000)
     number("--step-safety", p.step_safety, gt=0, le=4, hint="the fraction of a diameter the fastest rod may cross per step")
+    number("--steps-per-period", p.steps_per_period, ge=4, le=1000, hint="the fewest steps per drive period")
     if p.rod_model not in ("auto", "rigid", "elastic"):
         fail(f"--rod-model must be auto, rigid or elastic, got '{p.rod_model}'")
     if p.contact_law is not None and p.contact_law not in ("exact", "imc"):
@@ -196,12 +198,12 @@ def _check_options(p, explicit: frozenset):
                 fail(f"--dt {p.dt:g} s is longer than the {s.title} ({s.option} {s.duration:g} s): not a single full "
                      f"step fits; lower --dt below {s.duration:g} s or leave it out for the default step")
         check_step_count(p, p.dt, "--dt")
-    # the step can never exceed 1/40 of a drive period (solver default): a lower bound on the work
+    # the step can never exceed 1/(steps per period) of a drive period: a lower bound on the work
     for s in stages:
-        if s.min_steps() > MAX_STEPS:
+        if s.min_steps(p.drive_steps) > MAX_STEPS:
             fq = s.option.replace("duration", "freq")
-            fail(f"{fq} {s.freq:g} Hz over {s.option} {s.duration:g} s needs at least {s.min_steps():.3g} steps "
-                 f"({STEPS_PER_PERIOD:g} per period), more than {MAX_STEPS:.0e}; lower the frequency or the duration")
+            fail(f"{fq} {s.freq:g} Hz over {s.option} {s.duration:g} s needs at least {s.min_steps(p.drive_steps):.3g} "
+                 f"steps ({p.drive_steps:g} per period), more than {MAX_STEPS:.0e}; lower the frequency or the duration")
     height = box[2] * p.length
     if not lab and (2 * p.entangle_amplitude >= 0.5 * height or 2 * p.amplitude >= 0.5 * height):
         fail(f"vibration amplitude does not fit the box (height {height:g} m); lower --amplitude")
@@ -256,8 +258,8 @@ def _check_packing(p) -> int:
     box = tuple(p.box)
     n = p.rods
     if p.protocol == "lab":  # the pour column is dilute by construction (ProtocolParams.pour_height)
-        n_vertices = n * int(p.vertices)
-        memory_fits(f"{n} rods x {p.vertices} vertices", BASE_BYTES + BYTES_PER_VERTEX * n_vertices,
+        n_vertices = n * p.n_vertices
+        memory_fits(f"{n} rods x {p.n_vertices} vertices", BASE_BYTES + BYTES_PER_VERTEX * n_vertices,
                     "lower --n-rods, --fill-height, --container-radius or --vertices")
         return n_vertices
     d = p.length / p.alpha
@@ -265,8 +267,8 @@ def _check_packing(p) -> int:
     if diag < 1.0 + 1.0 / p.alpha:
         fail(f"--box {','.join(f'{v:g}' for v in box)} (rod lengths) is too small to hold one rod "
              f"(diagonal {diag:.3g} < 1 + d/l); enlarge --box")
-    n_vertices = n * int(p.vertices)
-    memory_fits(f"{n} rods x {p.vertices} vertices", BASE_BYTES + BYTES_PER_VERTEX * n_vertices,
+    n_vertices = n * p.n_vertices
+    memory_fits(f"{n} rods x {p.n_vertices} vertices", BASE_BYTES + BYTES_PER_VERTEX * n_vertices,
                 "lower --n-rods (default round(5.4 alpha)), --alpha or --vertices")
     vol = float(box[0] * box[1] * box[2]) * p.length**3
     phi = n * math.pi * d * d * p.length / 4.0 / vol

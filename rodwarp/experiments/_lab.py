@@ -37,7 +37,7 @@ def lab_packing(params, device):
     rc = params.container_radius * params.length
     height = params.pour_height()
     rods = random_packing(params.rods, params.length, params.diameter, (2 * rc, 2 * rc, height),
-                          n_vertices=params.vertices, seed=params.seed, device=device, cylinder=rc)
+                          n_vertices=params.n_vertices, seed=params.seed, device=device, cylinder=rc)
     shift = np.array([-rc, -rc, params.diameter])
     out = rods.with_points(rods.points + shift)
     out.box = rods.box + shift

@@ -24,6 +24,12 @@ POUR_PHI_ALPHA = 2.0
 #: rigid rods when the self-weight sag of a simply supported rod, 5 q l^4 / (384 E I), is below
 #: this fraction of a diameter (the knee of benchmarks/bench_rigid.py; docs/physics.md)
 RIGID_SAG = 0.01
+#: elastic rods' resolution (:func:`rod_resolution`): the fewest and the most vertices the rule
+#: picks; the most is the resolution every elastic run used before the rule (issue 45)
+MIN_VERTICES, MAX_VERTICES = 3, 10
+#: a drive is quasi-static for the rods' bending when its frequency is below this fraction of
+#: their first free-free bending frequency (the static response is then amplified by under 1%)
+QUASI_STATIC = 0.1
 
 
 def _param(default, help: str, short: str | None = None):
@@ -59,7 +65,10 @@ class ProtocolParams:
     n_rods: int | None = _param(None, f"Number of rods (default round({RODS_PER_ALPHA:g} alpha); lab: the rods "
                                       "that fill the cylinder to --fill-height).", "n")
     length: float = _param(1.0, "Rod length l (m).", "l")
-    vertices: int = _param(10, "Vertices per rod.", "v")
+    vertices: int | None = _param(None, f"Vertices per elastic rod (default: the resolution rule, {MIN_VERTICES}-"
+                                        f"{MAX_VERTICES}: the fewest whose self-weight sag is within {RIGID_SAG:g} d "
+                                        f"of the beam's where every drive is quasi-static, else {MAX_VERTICES}; "
+                                        "docs/physics.md).", "v")
     box: tuple = _param((1.0, 1.0, 2.5), "Container size in rod lengths, 'X,Y,Z'.")
     container_radius: float = _param(1.0, "lab: radius of the cylinder the rods are poured into, in rod lengths.",
                                      "Rc")
@@ -83,6 +92,8 @@ class ProtocolParams:
     step_safety: float = _param(2.0, "Adaptive step: the fastest rod crosses at most this many diameters per step "
                                      "(2: the knee of the effort benchmark; the step also shrinks while rods "
                                      "overlap by more than 0.02 d; ignored with --dt).")
+    steps_per_period: float = _param(20.0, "Adaptive step: the fewest steps per period of a drive (20: the knee "
+                                           "of the effort benchmark; ignored with --dt).", "spp")
     rolling: bool | None = _param(None, "Rods spin about their axes; --no-rolling locks the spin (friction on the "
                                         "centreline only). Default: on with the exact contact law, off with IMC "
                                         "(DisMech's friction acts on the centreline).")
@@ -152,6 +163,22 @@ class ProtocolParams:
                           stiffness=self.imc_stiffness)
 
     @property
+    def drive_steps(self) -> float:
+        """The fewest steps per drive period (``steps_per_period``)."""
+        return float(self.steps_per_period)
+
+    @property
+    def n_vertices(self) -> int:
+        """Vertices per rod of the packing: ``vertices``; else, for elastic rods, the resolution
+        rule's (:func:`rod_resolution`), and for rigid rods ``MAX_VERTICES`` (the packing's
+        polylines, as before the rule; the model holds each as two vertices)."""
+        if self.vertices is not None:
+            return int(self.vertices)
+        if rod_model_rule(self)["rod_model"] == "rigid":
+            return MAX_VERTICES
+        return rod_resolution(self)["vertices"]
+
+    @property
     def diameter(self) -> float:
         """Rod diameter d = l / alpha (m)."""
         return self.length / self.alpha
@@ -217,17 +244,102 @@ def rod_model_rule(params: ProtocolParams) -> dict:
     dict
         ``rod_model`` (the choice), ``requested``, ``sag_over_d``, ``threshold`` and ``rule``.
     """
-    d = params.diameter
-    r = d / 2
-    g_eff = params.effective_gravity
-    q = params.density * math.pi * r**2 * g_eff
-    EI = params.young * math.pi * r**4 / 4
-    sag = 5 * q * params.length**4 / (384 * EI) / d
+    sag = _sag_over_d(params)
     choice = params.rod_model
     if choice == "auto":
         choice = "rigid" if sag < RIGID_SAG else "elastic"
     return {"rod_model": choice, "requested": params.rod_model, "sag_over_d": sag, "threshold": RIGID_SAG,
             "rule": f"rigid when the self-weight sag 5 q l^4 / (384 E I) < {RIGID_SAG:g} d, else elastic"}
+
+
+def discrete_sag(n: int) -> np.ndarray:
+    """Deflection of a simply supported rod under its own weight discretised with ``n`` equal
+    edges' vertices (rodwarp's bending energy E I |kappa_i|^2 / (2 l_i) with its linear
+    curvature, lumped masses, the end vertices on the supports), in units of q l^4 / (E I),
+    at the vertices: the static solution of the discrete model, one small linear solve."""
+    n = int(n)
+    w = np.zeros(n)
+    if n < 3:
+        return w  # a two-vertex rod does not bend
+    h = 1.0 / (n - 1)
+    D = np.zeros((n - 2, n))
+    for i in range(n - 2):
+        D[i, i:i + 3] = (1.0, -2.0, 1.0)  # kappa_i h at interior vertex i
+    K = D.T @ D / h**3  # E I = l = 1
+    f = np.full(n, h)  # lumped weights of a unit load per length
+    f[[0, -1]] = h / 2
+    w[1:-1] = np.linalg.solve(K[1:-1, 1:-1], f[1:-1])
+    return w
+
+
+def beam_sag(s) -> np.ndarray:
+    """Euler-Bernoulli deflection of a simply supported beam under a uniform load at the
+    fractions ``s`` of its length, in units of q l^4 / (E I): (s - 2 s^3 + s^4) / 24."""
+    s = np.asarray(s, dtype=float)
+    return (s - 2 * s**3 + s**4) / 24.0
+
+
+def sag_discretisation_error(n: int) -> float:
+    """Largest error of the discrete self-weight sag (:func:`discrete_sag`) over the vertices,
+    as a fraction of the beam's midspan sag 5 q l^4 / (384 E I): 0.20 at 3 vertices, 0.079 at
+    4, 0.031 at 6, 0.0098 at 10 (second order in the edge length); 1 for a straight two-vertex rod."""
+    if int(n) < 3:
+        return 1.0
+    return float(np.abs(discrete_sag(n) - beam_sag(np.linspace(0.0, 1.0, int(n)))).max() / (5.0 / 384.0))
+
+
+def first_bending_frequency(params: ProtocolParams) -> float:
+    """First free-free bending frequency of a rod (Hz): (4.730^2 / (2 pi l^2)) sqrt(E I / (rho A))."""
+    r = params.diameter / 2
+    return 4.730**2 / (2 * math.pi * params.length**2) * math.sqrt(params.young * r * r / 4 / params.density)
+
+
+def rod_resolution(params: ProtocolParams, sag_over_d: float | None = None) -> dict:
+    """How many vertices an elastic rod needs in this experiment, and why (docs/physics.md,
+    "Resolution of elastic rods").
+
+    Where every drive of the run is quasi-static for the rods' bending (its frequency below
+    ``QUASI_STATIC`` of their first bending frequency), their deflection is the static response
+    to the loads they carry, and the rule takes the fewest vertices (at least ``MIN_VERTICES``)
+    whose discrete self-weight sag is within ``RIGID_SAG`` diameters of the beam's
+    (:func:`sag_discretisation_error` x sag <= ``RIGID_SAG`` d: the tolerance of the rigid rule,
+    which accepts an error of the whole sag), at most ``MAX_VERTICES``. Where a drive reaches the
+    bending modes, ``MAX_VERTICES``. An explicit ``vertices`` wins.
+
+    Returns
+    -------
+    dict
+        ``vertices``, ``requested`` (the option, None for the rule), ``first_bending_hz``,
+        ``drive_hz`` (the fastest drive), ``quasi_static``, ``sag_error_over_d`` (the discrete
+        sag's error at the chosen resolution, in diameters) and ``rule``.
+    """
+    if sag_over_d is None:
+        sag_over_d = _sag_over_d(params)
+    f1 = first_bending_frequency(params)
+    drives = [params.freq] if params.duration > 0 else []
+    if params.protocol != "lab" and params.entangle_duration > 0 and (not params.initial or params.entangle):
+        drives.append(params.entangle_freq)
+    drive = max(drives, default=0.0)
+    quasi = drive <= QUASI_STATIC * f1
+    n = MAX_VERTICES
+    if quasi:
+        n = next((k for k in range(MIN_VERTICES, MAX_VERTICES + 1)
+                  if sag_discretisation_error(k) * sag_over_d <= RIGID_SAG), MAX_VERTICES)
+    chosen = int(params.vertices) if params.vertices is not None else n
+    return {"vertices": chosen, "requested": params.vertices, "first_bending_hz": f1, "drive_hz": drive,
+            "quasi_static": bool(quasi), "sag_error_over_d": sag_discretisation_error(chosen) * sag_over_d,
+            "rule": (f"elastic rods: the fewest vertices ({MIN_VERTICES}-{MAX_VERTICES}) whose self-weight sag is "
+                     f"within {RIGID_SAG:g} d of the beam's when every drive is below {QUASI_STATIC:g} of the first "
+                     f"bending frequency, else {MAX_VERTICES}")}
+
+
+def _sag_over_d(params: ProtocolParams) -> float:
+    """Self-weight sag of a simply supported rod, 5 q l^4 / (384 E I), in diameters."""
+    d = params.diameter
+    r = d / 2
+    q = params.density * math.pi * r**2 * params.effective_gravity
+    EI = params.young * math.pi * r**4 / 4
+    return 5 * q * params.length**4 / (384 * EI) / d
 
 
 def default_run_name(params: ProtocolParams) -> str:

@@ -92,9 +92,9 @@ class Stage:
             control.set_ramp((d1 - d0) / ramp, ramp, direction=(0.0, 0.0, -1.0), start_time=t0, start=d0)
         return control
 
-    def min_steps(self) -> float:
-        """A lower bound on its steps: :data:`STEPS_PER_PERIOD` per drive period."""
-        return STEPS_PER_PERIOD * self.freq * self.duration
+    def min_steps(self, per_period: float = STEPS_PER_PERIOD) -> float:
+        """A lower bound on its steps: ``per_period`` steps per drive period."""
+        return per_period * self.freq * self.duration
 
 
 def plan(params) -> tuple[Stage, ...]:

@@ -38,7 +38,7 @@ from rodwarp.experiments._outputs import SIMULATE_OUTPUTS  # noqa: E402
 from rodwarp.experiments._plan import ENTANGLE, SIDE_WALLS, frames, plan  # noqa: E402
 
 from rodwarp.experiments._params import (RIGID_SAG, RODS_PER_ALPHA, ProtocolParams, _straight,  # noqa: E402,F401
-                                         option_table, rod_model_rule)
+                                         option_table, rod_model_rule, rod_resolution)
 
 
 def _build(params: ProtocolParams, rods, device, rod_model: str):
@@ -54,7 +54,7 @@ def _build(params: ProtocolParams, rods, device, rod_model: str):
 
         box = lab_walls(builder, params, rods)
         model = builder.finalize()
-        return model, RodSolver(model, iterations=params.iterations), box
+        return model, RodSolver(model, iterations=params.iterations, steps_per_period=params.drive_steps), box
     bb = rods.bounding_box()
     if rods.box is not None:
         # the input's container, widened to its rods: rods lying on (or sunk into) the box's
@@ -65,7 +65,7 @@ def _build(params: ProtocolParams, rods, device, rod_model: str):
         lo, hi = bb[0], bb[1]
     builder.add_box(lo, hi + np.array([0, 0, 0.5 * params.length]), walls=("floor", *SIDE_WALLS), moving=True)
     model = builder.finalize()
-    return model, RodSolver(model, iterations=params.iterations), (lo, hi)
+    return model, RodSolver(model, iterations=params.iterations, steps_per_period=params.drive_steps), (lo, hi)
 
 
 #: walls removed for the stability test (the floor stays and vibrates; docs/protocol.md)
@@ -347,7 +347,7 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
         rods = lab_packing(params, device)
     else:
         rods = random_packing(params.rods, params.length, params.diameter, np.asarray(params.box) * params.length,
-                              n_vertices=params.vertices, seed=params.seed, device=device)
+                              n_vertices=params.n_vertices, seed=params.seed, device=device)
     if not resume:
         for old in ckdir.glob("ckpt_*.npz"):
             old.unlink()
@@ -357,6 +357,9 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
     rule = rod_model_rule(params)
     if rule["rod_model"] == "rigid" and params.rod_model == "auto" and not _straight(rods):
         rule.update(rod_model="elastic", rule=rule["rule"] + " (the input has curved rods: elastic)")
+    if rule["rod_model"] == "elastic" and not params.initial:
+        # the vertices per rod the packing was made with, and why (the input's own with --initial)
+        rule["resolution"] = rod_resolution(params)
     model, solver, (box_lo, box_hi) = _build(params, rods, device, rule["rod_model"])
     sim_rods = model.rods  # the simulated rods (two vertices per rod for rigid rods)
     stages = _check_plan(tuple(stages) if stages is not None else plan(params))

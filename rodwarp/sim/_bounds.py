@@ -141,8 +141,8 @@ class StepBounds:
 
     def default_dt(self, control=None, safety: float = 0.5, speed: float | None = None,
                    shrink: float = 1.0) -> float:
-        """Default step: ``safety`` x the step bound, times ``shrink``, and at least 40 steps
-        per drive period.
+        """Default step: ``safety`` x the step bound, times ``shrink``, and at least
+        ``steps_per_period`` steps per drive period (the solver's; 40 unless set).
 
         Above 1 the safety lets the fastest rod cross more diameters per step (speculative
         contacts still see every approach) but leaves the other bounds as they are: gravity's
@@ -153,7 +153,7 @@ class StepBounds:
         dt = shrink * min(safety, 1.0) * self.step_bound(control=control, speed=speed, reach=max(safety, 1.0))
         f = control.drive.frequency
         if f > 0:
-            dt = min(dt, 1.0 / (STEPS_PER_PERIOD * f))
+            dt = min(dt, 1.0 / (getattr(self, "steps_per_period", STEPS_PER_PERIOD) * f))
         return dt
 
     #: overlap (in diameters of the thinnest rod) above which the adaptive step shrinks. At

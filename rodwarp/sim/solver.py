@@ -37,7 +37,7 @@ from rodwarp._warp import LaunchCache
 from rodwarp.errors import RodwarpError
 from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, solve, wall_contacts
 from rodwarp.kernels.structs import ContactFrame, RodFactors, StepParams
-from rodwarp.sim._bounds import StepBounds
+from rodwarp.sim._bounds import STEPS_PER_PERIOD, StepBounds
 from rodwarp.sim._diagnostics import SolverChecks
 from rodwarp.sim._launches import SolveLaunches
 from rodwarp.sim.contact_law import IMC_SHARPNESS
@@ -151,6 +151,8 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         Extra reach of the broadphase pair list (m); a segment's pairs are found again when it
         has moved by a quarter of it, the whole list when 30% of the segments have. Default
         d_min + min(h_max, 20 d_min) / 5 (measured knees, benchmarks).
+    steps_per_period : float
+        The fewest steps the default and adaptive steps take per period of a drive (40).
     """
 
     def __init__(
@@ -172,6 +174,7 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         allow_unstable: bool = False,
         energy_check_every: int = 10,
         skin: float | None = None,
+        steps_per_period: float = STEPS_PER_PERIOD,
     ):
         if iterations < 1:
             raise RodwarpError(f"iterations must be >= 1, got {iterations}")
@@ -182,7 +185,10 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
                                "twist); use bending='implicit' or 'auto'")
         if coloring not in ("auto", "on", "off"):
             raise RodwarpError(f"coloring must be auto, on or off, got '{coloring}'")
+        if not (steps_per_period >= 1 and math.isfinite(steps_per_period)):
+            raise RodwarpError(f"steps_per_period must be a number >= 1, got {steps_per_period}")
         self.model = model
+        self.steps_per_period = float(steps_per_period)
         self.iterations = int(iterations)
         self.tolerance = float(tolerance)
         self.length_tolerance = 1e-6 * float(model.rest_length_np[model.rest_length_np > 0].min())
