@@ -6,7 +6,10 @@ setting:
 * Gauss-Seidel sweeps per step (``--iterations``) 5, 7, 10, 20, 40 at the default step safety;
 * the adaptive step's safety (``--step-safety``: the fraction of a diameter the fastest rod
   may cross per step) 0.25, 0.5, 1, 2, 3 at the default sweeps;
-* a reference 10x finer than the default step (a tenth of the default safety) with 40 sweeps, seed 0.
+* the fewest steps per drive period (``--steps-per-period``) 10, 20, 40 at the default sweeps
+  and safety;
+* a reference 10x finer than the default step (a tenth of the default safety, 40 steps per
+  period) with 40 sweeps, seed 0.
 
 Outcome at the end: contacts per rod Z, the largest cluster f, the height kept h and the
 persistence tau; cost: the run's wall time (one core per run, two runs at a time). The
@@ -28,6 +31,7 @@ RUNS = ROOT / "runs" / "effort"
 SEEDS = (0, 1, 2)
 ITERATIONS = (5, 7, 10, 20, 40)
 SAFETIES = (0.25, 0.5, 1.0, 2.0, 3.0)
+STEPS_PER_PERIOD = (10.0, 20.0, 40.0)
 KEYS = ("Z", "f", "h", "tau")
 
 
@@ -35,27 +39,31 @@ def _defaults():
     from rodwarp.experiments import ProtocolParams
 
     p = ProtocolParams()
-    return p.iterations, p.step_safety
+    return p.iterations, p.step_safety, p.steps_per_period
 
 
 def _settings(quick: bool):
-    it0, sf0 = _defaults()
+    it0, sf0, sp0 = _defaults()
     out = []
     for it in ITERATIONS:
-        out.append({"iterations": it, "step_safety": sf0, "sweep": "iterations"})
+        out.append({"iterations": it, "step_safety": sf0, "steps_per_period": sp0, "sweep": "iterations"})
     for sf in SAFETIES:
         if sf != sf0:
-            out.append({"iterations": it0, "step_safety": sf, "sweep": "safety"})
+            out.append({"iterations": it0, "step_safety": sf, "steps_per_period": sp0, "sweep": "safety"})
+    for sp in STEPS_PER_PERIOD:
+        if sp != sp0:
+            out.append({"iterations": it0, "step_safety": sf0, "steps_per_period": sp, "sweep": "spp"})
     seeds = SEEDS[:2] if quick else SEEDS
     runs = [{**s, "seed": seed} for s in out for seed in seeds]
-    runs.append({"iterations": 40, "step_safety": sf0 / 10, "sweep": "reference", "seed": 0})
+    runs.append({"iterations": 40, "step_safety": sf0 / 10, "steps_per_period": 40.0, "sweep": "reference", "seed": 0})
     return sorted(runs, key=lambda r: (r["sweep"] != "reference", -r["iterations"] / r["step_safety"]))
 
 
 def _run(p: dict) -> dict:
-    out = RUNS / f"it{p['iterations']}_safety{p['step_safety']:g}_seed{p['seed']}"
+    out = RUNS / f"it{p['iterations']}_safety{p['step_safety']:g}_spp{p['steps_per_period']:g}_seed{p['seed']}"
     s, failure = common.simulate_once(out, ["--iterations", str(p["iterations"]), "--step-safety",
-                                            f"{p['step_safety']:g}", "--seed", str(p["seed"])], "effort")
+                                            f"{p['step_safety']:g}", "--steps-per-period", f"{p['steps_per_period']:g}",
+                                            "--seed", str(p["seed"])], "effort")
     if failure:
         return {**p, "failure": failure}
     return {**p, "Z": s["contacts_per_rod"], "f": s["largest_cluster_fraction"], "h": s["height_kept"],
@@ -82,13 +90,15 @@ def run(quick: bool, device: str) -> dict:
     RUNS.mkdir(parents=True, exist_ok=True)
     with ThreadPoolExecutor(max_workers=2) as pool:
         rows = list(pool.map(_run, _settings(quick)))
-    it0, sf0 = _defaults()
+    it0, sf0, sp0 = _defaults()
     ref = next((r for r in rows if r["sweep"] == "reference" and not r["failure"]), None)
     return {"title": "Protocol outcome against Gauss-Seidel sweeps and the adaptive step (main job, 3 seeds)",
             "rows": rows, "by_iterations": _group([r for r in rows if r["sweep"] == "iterations"], "iterations"),
             "by_safety": _group([r for r in rows if r["sweep"] in ("safety",) or
                                  (r["sweep"] == "iterations" and r["iterations"] == it0)], "step_safety"),
-            "reference": ref, "default_iterations": it0, "default_safety": sf0,
+            "by_spp": _group([r for r in rows if r["sweep"] == "spp" or
+                              (r["sweep"] == "iterations" and r["iterations"] == it0)], "steps_per_period"),
+            "reference": ref, "default_iterations": it0, "default_safety": sf0, "default_spp": sp0,
             "problems": [f"{r['iterations']}/{r['step_safety']}/{r['seed']}: {r['failure']}" for r in rows
                          if r["failure"]]}
 
@@ -96,8 +106,9 @@ def run(quick: bool, device: str) -> dict:
 def summary(rec: dict) -> list[dict]:
     out = []
     ref = rec["reference"]
-    for key, label in (("by_iterations", "iterations"), ("by_safety", "step_safety")):
-        for g in rec[key]:
+    for key, label in (("by_iterations", "iterations"), ("by_safety", "step_safety"),
+                       ("by_spp", "steps_per_period")):
+        for g in rec.get(key, []):
             out.append({"benchmark": f"main job, {label} = {g[label]:g} ({g['n']} seeds)",
                         "rodwarp": ", ".join(f"{k} {g[k]['mean']:.3f} [{g[k]['min']:.3f}, {g[k]['max']:.3f}]"
                                              for k in KEYS) + f"; wall {g['wall_s']['median']:.0f} s, "
@@ -115,11 +126,15 @@ def plot(rec: dict, outdir) -> list[dict]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(2, 4, figsize=(17, 7))
+    rows = [("by_iterations", "iterations", rec["default_iterations"]),
+            ("by_safety", "step_safety", rec["default_safety"])]
+    if rec.get("by_spp"):
+        rows.append(("by_spp", "steps_per_period", rec["default_spp"]))
+    fig, ax = plt.subplots(len(rows), 4, figsize=(17, 3.5 * len(rows)))
     ref = rec["reference"]
-    now = dict(zip(("iterations", "step_safety"), _defaults()))  # the defaults chosen from this chart
-    for row, (key, label, dflt) in enumerate((("by_iterations", "iterations", rec["default_iterations"]),
-                                              ("by_safety", "step_safety", rec["default_safety"]))):
+    # the defaults chosen from this chart
+    now = dict(zip(("iterations", "step_safety", "steps_per_period"), _defaults()))
+    for row, (key, label, dflt) in enumerate(rows):
         groups = rec[key]
         xs = [g[label] for g in groups]
         for k, (name, title) in enumerate((("Z", "contacts per rod Z"), ("f", "largest cluster f"),
@@ -152,5 +167,5 @@ def plot(rec: dict, outdir) -> list[dict]:
     fig.savefig(Path(outdir) / "effort.png", dpi=110)
     plt.close(fig)
     return [{"file": "effort.png", "title": "Outcome and cost against sweeps and step safety",
-             "reading": "Top: Gauss-Seidel sweeps per step; bottom: the adaptive step's safety; error bars span "
-                        "the seeds. Command `python -m benchmarks --full --only effort`."}]
+             "reading": "Rows: Gauss-Seidel sweeps per step, the adaptive step's safety, the fewest steps per drive "
+                        "period; error bars span the seeds. Command `python -m benchmarks --full --only effort`."}]

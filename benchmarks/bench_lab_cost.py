@@ -57,15 +57,20 @@ def _args(alpha, length, n, extra):
 
 
 def _prepare(name, alpha, length, n, extra) -> tuple[Path, dict]:
-    """The case's end-of-lift checkpoint (prepared by the real command once) and its summary."""
+    """The case's end-of-lift checkpoint and what it holds (rod model, vertices per rod).
+
+    Prepared once by the real command (``runs/lab_cost/NAME/prep``; a state already in
+    ``NAME/state`` is reused: any run of the same command, whatever its shaking's length, holds
+    the same state when the shaking starts)."""
+    from rodwarp.experiments._params import ProtocolParams, rod_model_rule
     from rodwarp.rodset.trajectory import read_checkpoint_file
 
     prep = RUNS / name / "prep"
     ck = RUNS / name / "state" / "checkpoints" / "lift.npz"
-    s, failure = common.simulate_once(prep, _args(alpha, length, n, extra), "lab_cost")
-    if failure:
-        raise RuntimeError(f"{name}: {failure}")
     if not ck.exists():
+        s, failure = common.simulate_once(prep, _args(alpha, length, n, extra), "lab_cost")
+        if failure:
+            raise RuntimeError(f"{name}: {failure}")
         ck.parent.mkdir(parents=True, exist_ok=True)
         for path in sorted((prep / "checkpoints").glob("ckpt_*.npz")):
             _, meta = read_checkpoint_file(path)
@@ -74,7 +79,13 @@ def _prepare(name, alpha, length, n, extra) -> tuple[Path, dict]:
                 shutil.copy(path, ck)
         if not ck.exists():
             raise RuntimeError(f"{name}: no end-of-lift checkpoint in {prep / 'checkpoints'}")
-    return ck, s
+    arrays, meta = read_checkpoint_file(ck)
+    known = ProtocolParams.__dataclass_fields__
+    params = ProtocolParams(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in meta["parameters"].items()
+                               if k in known})
+    n_rods = int(params.rods)
+    return ck, {"rod_model": rod_model_rule(params)["rod_model"], "n_vertices_per_rod": len(arrays["state_x"]) // n_rods,
+                "state_time_s": float(meta["stage_t0"].get("lift", 0.0)) + params.lift_duration}
 
 
 def _time(python: str, ck: Path, seconds: float) -> dict:
@@ -98,10 +109,8 @@ def run(quick: bool, device: str) -> dict:
     cases = CASES[3:5] if quick else CASES
     states, preps = {}, {}
     for name, alpha, length, n, extra, _ in CASES if base else cases:
-        states[name], s = _prepare(name, alpha, length, n, extra)
-        # the preparation's walls are not timings (other runs share the cores then)
-        preps[name] = {"rod_model": s["rod_model"], "n_vertices_per_rod": (s["rod_model_rule"].get("resolution") or
-                                                                        {}).get("vertices", 2)}
+        # the preparation's walls are not timings (other runs may share the cores then)
+        states[name], preps[name] = _prepare(name, alpha, length, n, extra)
     rows = []
     for name, alpha, length, n, extra, seconds in cases:
         now, before = [], []

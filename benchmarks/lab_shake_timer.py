@@ -22,6 +22,7 @@ def main(path: str, seconds: float) -> dict:
     import warp as wp
 
     wp.config.quiet = True
+    from rodwarp import _warp
     from rodwarp.experiments import _protocol as P
     from rodwarp.experiments._params import ProtocolParams, rod_model_rule
     from rodwarp.experiments._plan import plan
@@ -29,6 +30,7 @@ def main(path: str, seconds: float) -> dict:
     from rodwarp.rodset.trajectory import read_checkpoint_file
     from rodwarp.sim import State
 
+    _warp.load_kernels("cpu", _warp.SIMULATION_MODULES, progress=False)  # compiled (or loaded) before timing
     arrays, meta = read_checkpoint_file(path)
     known = ProtocolParams.__dataclass_fields__
     # parameters an older checkout does not know (added since, at their defaults) are left out
