@@ -101,3 +101,19 @@ def test_rigid_rods_keep_the_packings_ten_vertex_polylines():
     p = ProtocolParams(protocol="lab", alpha=100, length=0.05, gravity=9.81, freq=5, amplitude=0.025)
     assert rod_model_rule(p)["rod_model"] == "rigid"
     assert p.n_vertices == MAX_VERTICES
+
+
+def test_a_checkpoint_from_before_the_rule_resumes_with_what_it_ran_with():
+    from dataclasses import asdict
+
+    from rodwarp.experiments._protocol import _effective
+
+    old = asdict(ProtocolParams())
+    old.pop("steps_per_period")  # written before the option existed: 40 steps a period
+    old["vertices"] = 10
+    assert _effective(old) == _effective(asdict(ProtocolParams(steps_per_period=40)))
+    assert _effective(old) != _effective(asdict(ProtocolParams()))  # today's default is 20
+    lab = {**asdict(LAB_200), "vertices": 10}
+    lab.pop("steps_per_period")
+    assert _effective(lab) != _effective(asdict(dataclasses.replace(LAB_200, steps_per_period=40)))  # 3 vertices now
+    assert _effective(lab) == _effective(asdict(dataclasses.replace(LAB_200, steps_per_period=40, vertices=10)))

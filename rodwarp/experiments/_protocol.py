@@ -195,6 +195,15 @@ def _effective(parameters: dict) -> dict:
         out["rolling"] = not imc
     if out.get("contact_law") == "exact":
         out["contact_law"] = None
+    # before issue 45 every drive took at least 40 steps a period, and every rod 10 vertices
+    # unless given: a checkpoint of then compares by what it ran with, a run of now by the
+    # resolution rule's count
+    if out.get("steps_per_period") is None:
+        out["steps_per_period"] = 40.0
+    if out.get("vertices") is None:
+        known = ProtocolParams.__dataclass_fields__
+        out["vertices"] = ProtocolParams(**{k: tuple(v) if isinstance(v, list) else v for k, v in out.items()
+                                            if k in known}).n_vertices
     return out
 
 
