@@ -1,11 +1,13 @@
 """Time the laboratory protocol's shaking from a run's end-of-lift checkpoint (one JSON line).
 
-``python benchmarks/lab_shake_timer.py CHECKPOINT SECONDS`` rebuilds the run's model and solver
+``python benchmarks/lab_shake_timer.py CHECKPOINT SECONDS [--profile]`` rebuilds the run's model and solver
 from the checkpoint's parameters, restores its state and contact points, and steps the shaking
 stage for SECONDS of simulated time exactly as ``rodwarp simulate`` does (the adaptive step at
 the run's safety, the sample times left out), timing the steps alone. It uses only the API that
 rodwarp had before issue 45, so the same script times an older checkout on the same state (run
 it with that checkout's Python): the same-run ratios of ``benchmarks/bench_lab_cost.py``.
+With ``--profile`` every kernel launch is synchronised and timed (the solver's own profiling,
+keyed by stage and kernel), which slows the run: for the split, not for the total.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 
-def main(path: str, seconds: float) -> dict:
+def main(path: str, seconds: float, profile: bool = False) -> dict:
     import warp as wp
 
     wp.config.quiet = True
@@ -45,6 +47,14 @@ def main(path: str, seconds: float) -> dict:
     points.load_numpy(saved)
     control = stage.control(model, state.time, meta["marks"])
     stepper = dict(meta["stepper"])
+    if profile:
+        solver.reset_timings()
+        launch = solver._launch
+
+        def keyed(stage, kernel, *, dim, device, inputs):
+            return launch(f"{stage}: {getattr(kernel, 'key', kernel)}", kernel, dim=dim, device=device, inputs=inputs)
+
+        solver._launch = solver.collision._launch = keyed
     t_end = state.time + seconds
     steps = refused = 0
     contacts = []
@@ -60,11 +70,15 @@ def main(path: str, seconds: float) -> dict:
         stepper.update(vmax=info.max_speed, dt=dt, overlap=info.max_overlap)
         contacts.append(info.n_contacts)
     cpu, wall = time.process_time() - cpu0, time.perf_counter() - t0
-    return {"stage": stage.name, "seconds": seconds, "n_rods": model.n_rods, "n_vertices": model.n_vertices,
+    out = {"stage": stage.name, "seconds": seconds, "n_rods": model.n_rods, "n_vertices": model.n_vertices,
             "steps": steps, "refused": refused, "cpu_s": cpu, "wall_s": wall, "cpu_s_per_s": cpu / seconds,
             "mean_dt_s": seconds / steps, "contact_points_median": float(np.median(contacts)),
             "max_overlap_over_d": stepper["overlap"] / model.min_diameter}
+    if profile:
+        out["kernel_ms_per_step"] = {k: 1e3 * v / steps for k, v in sorted(solver.timings.items(), key=lambda kv: -kv[1])}
+        out["host_ms_per_step"] = 1e3 * (wall - sum(solver.timings.values())) / steps
+    return out
 
 
 if __name__ == "__main__":
-    print(json.dumps(main(sys.argv[1], float(sys.argv[2]))))
+    print(json.dumps(main(sys.argv[1], float(sys.argv[2]), "--profile" in sys.argv[3:])))
