@@ -99,7 +99,7 @@ def _version(python: str) -> str:
     r = subprocess.run([python, "-c", "import rodwarp, pathlib, subprocess; p = pathlib.Path(rodwarp.__file__)"
                         ".parents[1]; print(subprocess.run(['git', '-C', str(p), 'rev-parse', '--short', 'HEAD'], "
                         "capture_output=True, text=True).stdout.strip() or rodwarp.__version__)"],
-                       capture_output=True, text=True)
+                       capture_output=True, text=True, cwd="/")  # not this checkout's folder: it would import it
     return r.stdout.strip() or "unknown"
 
 
