@@ -14,7 +14,8 @@ from rodwarp.cli import app
 
 xr = pytest.importorskip("xarray")
 
-SHORT = ["simulate", "--rod-model", "elastic", "--alpha", "20", "--n-rods", "12", "--entangle-duration", "0.02", "--duration", "0.02",
+SHORT = ["simulate", "--rod-model", "elastic", "--vertices", "10", "--alpha", "20", "--n-rods", "12",
+         "--entangle-duration", "0.02", "--duration", "0.02",
          "--save-every", "0.01", "--device", "cpu", "--quiet"]
 
 
