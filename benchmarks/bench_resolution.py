@@ -88,10 +88,7 @@ def summary(rec: dict) -> list[dict]:
 
 
 def plot(rec: dict, outdir) -> list[dict]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = common.pyplot()
 
     groups = rec["groups"]
     xs = [g["vertices"] for g in groups]
@@ -122,8 +119,7 @@ def plot(rec: dict, outdir) -> list[dict]:
     fig.suptitle("lab protocol, alpha 200 (l 50 mm, d 0.25 mm, g 9.81), 700 elastic rods, 5 Hz / 25 mm: outcome and "
                  "cost against vertices per rod", fontsize=10)
     fig.tight_layout()
-    fig.savefig(Path(outdir) / "resolution.png", dpi=110)
-    plt.close(fig)
+    common.save_figure(fig, Path(outdir) / "resolution.png")  # atomic
     return [{"file": "resolution.png", "title": "Outcome and cost against vertices per elastic rod",
              "reading": "Error bars span three seeds, grey dots are the seeds. Command `python -m benchmarks --full "
                         "--only resolution`."}]
