@@ -118,31 +118,3 @@ def test_a_checkpoint_from_before_the_rule_resumes_with_what_it_ran_with():
     assert _effective(lab) != _effective(asdict(dataclasses.replace(LAB_200, steps_per_period=40)))  # 3 vertices now
     assert _effective(lab) == _effective(asdict(dataclasses.replace(LAB_200, steps_per_period=40, vertices=10)))
 
-
-def ladder_creep(n_vertices: int, iterations: int) -> float:
-    """Slip (m) in 1 s of an elastic steel rod of ``n_vertices`` leaning at 60 degrees against
-    a wall, mu 0.5 on both (it stands: the smallest angle is 36.9 degrees): any slip is
-    Gauss-Seidel's unconverged creep."""
-    from rodwarp.sim.builder import ModelBuilder
-    from rodwarp.sim.model import STEEL
-    from rodwarp.testing.scenes import leaning_rod
-
-    builder = ModelBuilder(leaning_rod(60.0, n_vertices=n_vertices), STEEL, gravity=(0, 0, -9.81), mu=0.5,
-                           rod_contacts=False, rod_model="elastic")
-    builder.add_plane((0, 0, 1), 0.0, name="floor")
-    builder.add_plane((1, 0, 0), 0.0, name="wall")
-    model = builder.finalize()
-    solver = RodSolver(model, iterations=iterations)
-    x0 = model.rods.points.copy()
-    x = run(solver, model.state(), 1.0, solver.default_dt()).positions()
-    return max(abs(x[0, 0] - x0[0, 0]), abs(x[-1, 2] - x0[-1, 2]))
-
-
-def test_fewer_vertices_creep_less_under_the_same_sweeps():
-    # the engine's known gap (docs/engine.md): an axial load on an inextensible elastic rod
-    # reaches a vertex-local contact solve only through many sweeps, so a ten-vertex ladder
-    # creeps at the protocol's 10 sweeps and even at 40; three vertices hold it 20-100x better.
-    # The laboratory pile's slump after the lift follows (benchmarks/bench_resolution.py).
-    c3, c10 = ladder_creep(3, 40), ladder_creep(10, 40)
-    assert c3 < 1e-5 < 1e-4 < c10
-    assert ladder_creep(10, 10) > 10 * ladder_creep(3, 10)

@@ -200,10 +200,10 @@ def _check_options(p, explicit: frozenset):
         check_step_count(p, p.dt, "--dt")
     # the step can never exceed 1/(steps per period) of a drive period: a lower bound on the work
     for s in stages:
-        if s.min_steps(p.drive_steps) > MAX_STEPS:
+        if s.min_steps(p.steps_per_period) > MAX_STEPS:
             fq = s.option.replace("duration", "freq")
-            fail(f"{fq} {s.freq:g} Hz over {s.option} {s.duration:g} s needs at least {s.min_steps(p.drive_steps):.3g} "
-                 f"steps ({p.drive_steps:g} per period), more than {MAX_STEPS:.0e}; lower the frequency or the duration")
+            fail(f"{fq} {s.freq:g} Hz over {s.option} {s.duration:g} s needs at least {s.min_steps(p.steps_per_period):.3g} "
+                 f"steps ({p.steps_per_period:g} per period), more than {MAX_STEPS:.0e}; lower the frequency or the duration")
     height = box[2] * p.length
     if not lab and (2 * p.entangle_amplitude >= 0.5 * height or 2 * p.amplitude >= 0.5 * height):
         fail(f"vibration amplitude does not fit the box (height {height:g} m); lower --amplitude")

@@ -163,11 +163,6 @@ class ProtocolParams:
                           stiffness=self.imc_stiffness)
 
     @property
-    def drive_steps(self) -> float:
-        """The fewest steps per drive period (``steps_per_period``)."""
-        return float(self.steps_per_period)
-
-    @property
     def n_vertices(self) -> int:
         """Vertices per rod of the packing: ``vertices``; else, for elastic rods, the resolution
         rule's (:func:`rod_resolution`), and for rigid rods ``MAX_VERTICES`` (the packing's

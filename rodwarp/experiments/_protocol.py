@@ -54,7 +54,7 @@ def _build(params: ProtocolParams, rods, device, rod_model: str):
 
         box = lab_walls(builder, params, rods)
         model = builder.finalize()
-        return model, RodSolver(model, iterations=params.iterations, steps_per_period=params.drive_steps), box
+        return model, RodSolver(model, iterations=params.iterations, steps_per_period=params.steps_per_period), box
     bb = rods.bounding_box()
     if rods.box is not None:
         # the input's container, widened to its rods: rods lying on (or sunk into) the box's
@@ -65,7 +65,7 @@ def _build(params: ProtocolParams, rods, device, rod_model: str):
         lo, hi = bb[0], bb[1]
     builder.add_box(lo, hi + np.array([0, 0, 0.5 * params.length]), walls=("floor", *SIDE_WALLS), moving=True)
     model = builder.finalize()
-    return model, RodSolver(model, iterations=params.iterations, steps_per_period=params.drive_steps), (lo, hi)
+    return model, RodSolver(model, iterations=params.iterations, steps_per_period=params.steps_per_period), (lo, hi)
 
 
 #: walls removed for the stability test (the floor stays and vibrates; docs/protocol.md)

@@ -34,7 +34,7 @@ class StepBounds:
     """The step bounds, default and adaptive steps and the step guard of :class:`RodSolver`.
 
     A mixin: the solver provides ``model``, ``bending``, ``guard_factor``, ``allow_unstable``,
-    ``_eb_dt`` (the cached explicit-bending bound), ``_char_speed`` (a dict: the cached
+    ``steps_per_period``, ``_eb_dt`` (the cached explicit-bending bound), ``_char_speed`` (a dict: the cached
     characteristic speed per drive) and ``_control(control)``.
     """
 
@@ -153,7 +153,7 @@ class StepBounds:
         dt = shrink * min(safety, 1.0) * self.step_bound(control=control, speed=speed, reach=max(safety, 1.0))
         f = control.drive.frequency
         if f > 0:
-            dt = min(dt, 1.0 / (getattr(self, "steps_per_period", STEPS_PER_PERIOD) * f))
+            dt = min(dt, 1.0 / (self.steps_per_period * f))
         return dt
 
     #: overlap (in diameters of the thinnest rod) above which the adaptive step shrinks. At
