@@ -9,6 +9,7 @@ finished with failed points; 1 an internal error or an abort. No raw tracebacks.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import inspect
 import sys
@@ -114,7 +115,8 @@ def _field_options(cls, table: dict, order: tuple[str, ...], renamed: dict | Non
 #: `rodwarp simulate`'s options in --help order: ProtocolParams fields, and the command's own
 _SIMULATE_OPTIONS = ("protocol", "alpha", "freq", "amplitude", "gravity", "duration", "entangle_duration",
                      "entangle_freq", "entangle_amplitude", "static_load", "n_rods", "length", "vertices", "box",
-                     "container_radius", "fill_height", "pour_duration", "strains", "press_duration",
+                     "container_radius", "fill_height", "container_diameter", "container_height", "tube_diameter",
+                     "pour_duration", "strains", "press_duration",
                      "lift_duration", "mu", "young",
                      "density", "dt", "iterations", "step_safety", "steps_per_period", "rod_model", "rolling", "contact_law",
                      "imc_delta", "imc_nu", "imc_stiffness", "save_every",
@@ -241,25 +243,30 @@ def simulate(
     checked = ProtocolParams(**fields, box=_parse_box(box), strains=_parse_strains(strains),
                              initial=str(initial) if initial else None,
                              initial_diameter=initial_diameter).validate(
-        explicit=_given(ctx, "alpha", "length", "n_rods", "vertices", "box", "seed"))
+        explicit=_given(ctx, *(f.name for f in dataclasses.fields(ProtocolParams)), "box", "strains", "initial",
+                        "initial_diameter"))
     params = checked.params  # with --initial: the input's alpha and length
     if params.law == "imc" and params.rolling:
         typer.echo("note: --rolling with --contact-law imc: DisMech's IMC friction acts on the centreline (no "
                    "rolling); this run lets the rods spin, which the paper's model did not", err=True)
-    if params.protocol == "lab":
-        from rodwarp.experiments._lab import landed_sampling_warning
+    from rodwarp.experiments._protocols import plugin
 
-        if (why := landed_sampling_warning(params)) is not None:
-            typer.echo(f"note: {why}", err=True)
+    for why in (plugin(params.protocol).notes(params) if plugin(params.protocol) else []):
+        typer.echo(f"note: {why}", err=True)
     outdir = out or Path("runs") / default_run_name(params)
     with _failure_recorded(outdir):
         summary = run_protocol(checked, outdir, progress=not quiet, resume=resume, overwrite=overwrite,
                                entangled_from=entangled_from)
+    tau = ((summary.get("excitation") or {}).get("shake") or {}).get("tau")
     typer.echo(
         f"alpha={summary['alpha']:g} n_rods={summary['n_rods']} a/g={summary['a_over_g']:.3g} "
         f"Z={summary['contacts_per_rod']:.2f} f={summary['largest_cluster_fraction']:.3f} "
-        f"stable={summary['stable']} wall={summary['wall_time_s']:.1f}s -> {outdir}"
+        + (f"tau={tau['tau']:.2f} " if tau and tau.get("tau") is not None else "")
+        + f"stable={summary['stable']} wall={summary['wall_time_s']:.1f}s -> {outdir}"
     )
+    for block in ("lab", "excitation"):
+        for w in (summary.get(block) or {}).get("warnings", []):
+            typer.echo(f"warning: {w}", err=True)
 
 
 @app.command(epilog="Example: rodwarp analyze runs/alpha100_freq10_g0.5_seed0   (writes its analysis/ folder; "

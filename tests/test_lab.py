@@ -196,13 +196,13 @@ def test_too_few_samples_per_cycle_for_the_landed_height_are_flagged():
 
 
 @pytest.mark.parametrize("kw, message", [
-    (dict(strains=(0.1,)), "only applies with --protocol lab"),
+    (dict(strains=(0.1,)), r"--strains does not apply with --protocol paper \(only with --protocol lab\)"),
     (dict(protocol="lab", box=(2.0, 2.0, 2.0)), "--box does not apply with --protocol lab"),
     (dict(protocol="lab", strains=(0.1, 0.05)), "must not decrease"),
     (dict(protocol="lab", strains=(0.6,)), "--strains"),
     (dict(protocol="lab", container_radius=0.3), "--container-radius"),
     (dict(protocol="lab", duration=0.0, lift_duration=0.0), "without a test"),
-    (dict(protocol="bench"), "--protocol must be paper or lab"),
+    (dict(protocol="bench"), "--protocol must be one of paper, lab, excitation"),
 ])
 def test_lab_options_are_refused_where_they_do_not_apply(kw, message):
     with pytest.raises(RodwarpError, match=message):

@@ -70,7 +70,7 @@ class CheckedProtocol:
     frames: int
 
 
-def check_protocol(p, explicit=()) -> CheckedProtocol:
+def check_protocol(p, explicit=None) -> CheckedProtocol:
     """Every check of :class:`rodwarp.experiments.ProtocolParams`, in the order the options are
     listed by ``rodwarp simulate --help``; the input rod set (``initial``) is loaded and
     checked too (see :func:`check_input_rods`), and the options are checked again with its
@@ -80,16 +80,26 @@ def check_protocol(p, explicit=()) -> CheckedProtocol:
     ----------
     p : rodwarp.experiments.ProtocolParams
         The parameters (not changed: they are frozen).
-    explicit : iterable of str
+    explicit : iterable of str or None
         Field names of the options the user typed, so that options --initial decides can be
-        refused when given, and an --alpha or --length that contradicts the input too.
+        refused when given, and an --alpha or --length that contradicts the input too; a
+        protocol with defaults of its own (excitation) takes them for every option not in it.
+        None: the fields that differ from ProtocolParams' defaults.
 
     Returns
     -------
     CheckedProtocol
         The parameters the run uses and what the check loaded and counted.
     """
-    explicit = frozenset(explicit)
+    from rodwarp.experiments._protocols import PROTOCOLS, plugin
+
+    if p.protocol not in PROTOCOLS:
+        fail(f"--protocol must be one of {', '.join(PROTOCOLS)}, got '{p.protocol}'")
+    if (proto := plugin(p.protocol)) is not None:
+        # the protocol's own defaults for what was not given (an API caller: what differs from
+        # ProtocolParams' defaults)
+        p = proto.resolve(p, None if explicit is None else explicit)
+    explicit = frozenset(explicit or ())
     stages = _check_options(p, explicit)
     rods = None
     if p.initial:
@@ -104,15 +114,15 @@ def check_protocol(p, explicit=()) -> CheckedProtocol:
 
 def _check_options(p, explicit: frozenset):
     """The checks of every option and of their consistency; returns the plan's stages."""
+    from rodwarp.experiments._protocols import plugin
+
     number("--alpha", p.alpha, gt=1, hint="alpha is rod length over diameter")
     for name in ("freq", "entangle_freq"):
         number(f"--{name.replace('_', '-')}", getattr(p, name), ge=0, unit="Hz")
     for name in ("amplitude", "entangle_amplitude"):
         number(f"--{name.replace('_', '-')}", getattr(p, name), ge=0, unit="m")
     number("--gravity", p.gravity, gt=0, unit="m/s^2")
-    if p.protocol not in ("paper", "lab"):
-        fail(f"--protocol must be paper or lab, got '{p.protocol}'")
-    lab = p.protocol == "lab"
+    lab = p.protocol != "paper"  # a poured protocol: lab or excitation
     if lab:
         number("--duration", p.duration, ge=0, unit="s", hint="the shaking; 0 leaves it out")
     else:
@@ -184,7 +194,9 @@ def _check_options(p, explicit: frozenset):
             fail(f"{opts} do{'es' if len(given) == 1 else ''} not apply with --initial (the input rod set "
                  f"decides {'it' if len(given) == 1 else 'them'}); drop {opts}")
 
-    _check_lab_options(p) if lab else _check_not_lab(p)
+    _check_protocol_fields(p)
+    if (proto := plugin(p.protocol)) is not None:
+        proto.check(p)
 
     # consistency of durations, intervals and the step
     stages = plan(p)
@@ -213,6 +225,25 @@ def _check_options(p, explicit: frozenset):
 #: the laboratory protocol's own options, and the paper protocol's that it does not use
 LAB_FIELDS = ("container_radius", "fill_height", "pour_duration", "strains", "press_duration", "lift_duration")
 PAPER_ONLY_FIELDS = ("box", "entangle_duration", "entangle_freq", "entangle_amplitude", "initial", "entangle")
+#: the options each protocol takes beyond the shared ones (the rest are refused when given)
+PROTOCOL_FIELDS = {
+    "paper": PAPER_ONLY_FIELDS,
+    "lab": LAB_FIELDS,
+    "excitation": ("container_diameter", "container_height", "tube_diameter", "pour_duration", "lift_duration"),
+}
+
+
+def _check_protocol_fields(p) -> None:
+    """Refuse, in one line, options of another protocol than ``p.protocol``."""
+    mine = set(PROTOCOL_FIELDS[p.protocol])
+    others = [k for proto, ks in PROTOCOL_FIELDS.items() if proto != p.protocol for k in ks if k not in mine]
+    given = _changed(p, dict.fromkeys(others))
+    if not given:
+        return
+    opts = ", ".join(f"--{k.replace('_', '-')}" for k in given)
+    owners = sorted({proto for proto, ks in PROTOCOL_FIELDS.items() for k in given if k in ks})
+    fail(f"{opts} do{'es' if len(given) == 1 else ''} not apply with --protocol {p.protocol} (only with "
+         f"--protocol {' or '.join(owners)}); drop {opts}")
 
 
 def _changed(p, names) -> list[str]:
@@ -222,19 +253,8 @@ def _changed(p, names) -> list[str]:
     return [n for n in names if getattr(p, n) != defaults[n] and not (n == "box" and list(p.box) == list(defaults[n]))]
 
 
-def _check_not_lab(p) -> None:
-    given = _changed(p, LAB_FIELDS)
-    if given:
-        opts = ", ".join(f"--{k.replace('_', '-')}" for k in given)
-        fail(f"{opts} only appl{'ies' if len(given) == 1 else 'y'} with --protocol lab; add it or drop {opts}")
-
-
 def _check_lab_options(p) -> None:
-    given = _changed(p, PAPER_ONLY_FIELDS)
-    if given:
-        opts = ", ".join(f"--{k.replace('_', '-')}" for k in given)
-        fail(f"{opts} do{'es' if len(given) == 1 else ''} not apply with --protocol lab (it pours its own rods "
-             f"into a cylinder of --container-radius); drop {opts}")
+    """The lab protocol's own checks (one line each)."""
     number("--container-radius", p.container_radius, ge=0.6, le=100, hint="in rod lengths: a rod must fit across "
            "the cylinder in any direction")
     number("--fill-height", p.fill_height, gt=0, le=100, hint="in rod lengths")
@@ -257,7 +277,7 @@ def _check_packing(p) -> int:
     """The random packing's checks (the box holds a rod, memory, density); its vertex count."""
     box = tuple(p.box)
     n = p.rods
-    if p.protocol == "lab":  # the pour column is dilute by construction (ProtocolParams.pour_height)
+    if p.protocol != "paper":  # the pour column is dilute by construction (ProtocolParams.pour_height)
         n_vertices = n * p.n_vertices
         memory_fits(f"{n} rods x {p.n_vertices} vertices", BASE_BYTES + BYTES_PER_VERTEX * n_vertices,
                     "lower --n-rods, --fill-height, --container-radius or --vertices")

@@ -234,3 +234,52 @@ def shake_result(params, rows, t0: float, thresholds) -> dict:
                          "rule": f"cohesive = f >= {thresholds.cluster:g} at the end and f >= "
                                  f"{thresholds.cluster:g} for at least {thresholds.persistence:g} of "
                                  "the shaking (height is not judged: the plate throws the packing)"}}
+
+
+def lab_columns(model, x, control, t) -> dict:
+    """metrics.csv's columns of the lab protocol: the piston's face height (m; empty when it is
+    out) and the spread radius (m)."""
+    top = piston_height(model, control, t)
+    return {"piston_height": "" if top is None else top, "spread_radius": spread_radius(model, x)}
+
+
+class LabProtocol:
+    """The laboratory protocol as a plug-in of :func:`rodwarp.experiments.run_protocol`."""
+
+    name = "lab"
+
+    @staticmethod
+    def resolve(params, explicit=None):
+        return params  # its defaults are ProtocolParams' own
+
+    @staticmethod
+    def plan(params):
+        from rodwarp.experiments._plan import lab_plan
+
+        return lab_plan(params)
+
+    packing = staticmethod(lab_packing)
+    walls = staticmethod(lab_walls)
+    columns = staticmethod(lab_columns)
+
+    @staticmethod
+    def check(p) -> None:
+        from rodwarp.experiments._checks import _check_lab_options
+
+        _check_lab_options(p)
+
+    @staticmethod
+    def rods(params) -> int:
+        return params.lab_fill_rods()
+
+    @staticmethod
+    def summary(params, model, rows, loop, stages, thresholds):
+        return "lab", lab_summary(params, model, rows, loop, stages, thresholds)
+
+    @staticmethod
+    def notes(params) -> list[str]:
+        why = landed_sampling_warning(params)
+        return [] if why is None else [why]
+
+
+LAB = LabProtocol()

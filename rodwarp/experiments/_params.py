@@ -51,7 +51,8 @@ class ProtocolParams:
     protocol: str = _param("paper", "paper (random packing in a box, entangling, the vibration test; "
                                     "docs/protocol.md) or lab (rods poured into a cylinder, pressed by a piston to "
                                     "--strains, the cylinder lifted away, the plate shaken at --freq, --amplitude "
-                                    "for --duration; docs/experiments.md).", "proto")
+                                    "for --duration; docs/experiments.md) or excitation (the paper's excitation experiment, Fig. 1C-F: its "
+                                    "rods, N, container and drive by default; docs/experiments.md).", "proto")
     alpha: float = _param(100.0, "Rod aspect ratio l / d (> 1).")
     freq: float = _param(10.0, "Floor vibration frequency of the stability test (Hz).")
     amplitude: float = _param(0.001, "Floor vibration amplitude of the stability test (m).", "amp")
@@ -63,7 +64,8 @@ class ProtocolParams:
     entangle_amplitude: float = _param(0.05, "Entangling vibration amplitude (m).", "eamp")
     static_load: float = _param(0.0, "Extra downward body load F~ in units of a rod's weight rho g d^2 l.", "F")
     n_rods: int | None = _param(None, f"Number of rods (default round({RODS_PER_ALPHA:g} alpha); lab: the rods "
-                                      "that fill the cylinder to --fill-height).", "n")
+                                      "that fill the cylinder to --fill-height; excitation: the paper's 1.25e6 / (d l^2), "
+                                      "d and l in mm).", "n")
     length: float = _param(1.0, "Rod length l (m).", "l")
     vertices: int | None = _param(None, f"Vertices per elastic rod (default: the resolution rule, {MIN_VERTICES}-"
                                         f"{MAX_VERTICES}: the fewest whose self-weight sag is within {RIGID_SAG:g} d "
@@ -74,6 +76,12 @@ class ProtocolParams:
                                      "Rc")
     fill_height: float = _param(1.0, f"lab: without --n-rods, as many rods as fill the cylinder to this height (rod "
                                      f"lengths) at a random packing's phi = {PHI_ALPHA:g} / alpha.", "H")
+    container_diameter: float | None = _param(None, "excitation: diameter of the shaken container (m; default the "
+                                                    "paper's 0.15; 0: an open plate).", "Dc")
+    container_height: float | None = _param(None, "excitation: height of the container (m; default the paper's "
+                                                  "0.15): no rod may rise above its rim.", "Hc")
+    tube_diameter: float | None = _param(None, "excitation: diameter of the inner tube the rods are poured into "
+                                               "(m; default 0.06, the paper gives none: docs/experiments.md).", "Dt")
     pour_duration: float = _param(1.0, "lab: time the poured rods fall and settle in the cylinder (s).", "pdur")
     strains: tuple = _param((), "lab: compressive strains the piston presses the poured packing to in turn, "
                                 "'E1,E2,...' (e.g. 0,0.05,0.1,0.15); the fields at each in summary.json.", "eps")
@@ -121,15 +129,16 @@ class ProtocolParams:
                                                   "radius column.", "d")
     entangle: bool = _param(False, "With --initial: run the entangling stage too.")
 
-    def validate(self, explicit=()):
+    def validate(self, explicit=None):
         """Raise :class:`RodwarpError` (one line) for any impossible, inconsistent or oversized
         parameter, before any work (:func:`rodwarp.experiments.check_protocol`).
 
         Parameters
         ----------
-        explicit : iterable of str
+        explicit : iterable of str or None
             Field names of the options the user gave (an --alpha that contradicts an
-            ``initial`` rod set is refused only when given).
+            ``initial`` rod set is refused only when given; the excitation protocol takes the
+            paper's values for the others). None: those that differ from the defaults here.
 
         Returns
         -------
@@ -180,11 +189,14 @@ class ProtocolParams:
 
     @property
     def rods(self) -> int:
-        """Number of rods: ``n_rods``, else round(5.4 alpha) (lab: :meth:`lab_fill_rods`)."""
+        """Number of rods: ``n_rods``, else round(5.4 alpha) (lab: :meth:`lab_fill_rods`;
+        excitation: the paper's N = 1.25e6 / (d l^2), d and l in mm)."""
         if self.n_rods is not None:
             return self.n_rods
-        if self.protocol == "lab":
-            return self.lab_fill_rods()
+        from rodwarp.experiments._protocols import plugin
+
+        if (proto := plugin(self.protocol)) is not None:
+            return proto.rods(self)
         return int(round(RODS_PER_ALPHA * self.alpha))
 
     def lab_fill_rods(self) -> int:
@@ -192,10 +204,18 @@ class ProtocolParams:
         at phi = 5.4 / alpha: pi Rc^2 H phi / (pi d^2 l / 4) = 4 (Rc/l)^2 (H/l) 5.4 alpha."""
         return max(1, int(round(4.0 * self.container_radius**2 * self.fill_height * PHI_ALPHA * self.alpha)))
 
+    @property
+    def pour_radius(self) -> float:
+        """Radius (m) of the cylinder the rods are poured into: the lab's container
+        (``container_radius`` rod lengths), the excitation experiment's tube."""
+        if self.protocol == "excitation":
+            return 0.5 * self.tube_diameter
+        return self.container_radius * self.length
+
     def pour_height(self) -> float:
-        """Height (m) of the column the lab's rods are released in: they take it at phi alpha =
+        """Height (m) of the column the poured rods are released in: they take it at phi alpha =
         2 (dilute, so they fall freely), and at least 1.2 rod lengths."""
-        rc = self.container_radius * self.length
+        rc = self.pour_radius
         v_rod = math.pi / 4 * self.diameter**2 * self.length
         return max(1.2 * self.length, self.rods * v_rod / (POUR_PHI_ALPHA / self.alpha * math.pi * rc**2))
 
@@ -312,7 +332,7 @@ def rod_resolution(params: ProtocolParams, sag_over_d: float | None = None) -> d
         sag_over_d = _sag_over_d(params)
     f1 = first_bending_frequency(params)
     drives = [params.freq] if params.duration > 0 else []
-    if params.protocol != "lab" and params.entangle_duration > 0 and (not params.initial or params.entangle):
+    if params.protocol == "paper" and params.entangle_duration > 0 and (not params.initial or params.entangle):
         drives.append(params.entangle_freq)
     drive = max(drives, default=0.0)
     quasi = drive <= QUASI_STATIC * f1

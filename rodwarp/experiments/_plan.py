@@ -101,9 +101,12 @@ def plan(params) -> tuple[Stage, ...]:
     """The stages of the paper's protocol for ``params``
     (:class:`~rodwarp.experiments.ProtocolParams`): entangling in the closed container, unless
     skipped (``entangle_duration`` 0, or an ``initial`` rod set without ``entangle``), then the
-    stability test on the floor alone; ``protocol`` lab: :func:`lab_plan`."""
-    if params.protocol == "lab":
-        return lab_plan(params)
+    stability test on the floor alone; another ``protocol``: its plug-in's plan
+    (:func:`lab_plan`, :func:`rodwarp.experiments._excitation.excitation_plan`)."""
+    from rodwarp.experiments._protocols import plugin
+
+    if (proto := plugin(params.protocol)) is not None:
+        return proto.plan(params)
     stages = []
     if params.entangle_duration > 0 and (not params.initial or params.entangle):
         stages.append(Stage(ENTANGLE, params.entangle_duration, params.entangle_amplitude, params.entangle_freq,

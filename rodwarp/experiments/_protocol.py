@@ -49,10 +49,10 @@ def _build(params: ProtocolParams, rods, device, rod_model: str):
     builder = ModelBuilder(rods, Material(params.young, params.density), gravity=(0.0, 0.0, -g_eff), mu=params.mu,
                            rod_model=rod_model, rolling=params.spin, contact_law=params.contact_law_object(),
                            device=device)
-    if params.protocol == "lab":
-        from rodwarp.experiments._lab import lab_walls
+    from rodwarp.experiments._protocols import plugin
 
-        box = lab_walls(builder, params, rods)
+    if (proto := plugin(params.protocol)) is not None:
+        box = proto.walls(builder, params, rods)
         model = builder.finalize()
         return model, RodSolver(model, iterations=params.iterations, steps_per_period=params.steps_per_period), box
     bb = rods.bounding_box()
@@ -320,6 +320,9 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
 
     checked = params if isinstance(params, CheckedProtocol) else params.validate()
     params = checked.params  # with --initial: the input's alpha and length
+    from rodwarp.experiments._protocols import plugin
+
+    proto = plugin(params.protocol)  # None: the paper's protocol, this loop's own
     thresholds = thresholds or vd.DEFAULT_THRESHOLDS
     outdir = Path(outdir)
     donor = Path(entangled_from) if entangled_from is not None and not resume else None
@@ -350,10 +353,8 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
         rods = load(outdir / "initial.npz")
     elif params.initial:
         rods = checked.input_rods  # loaded, in metres, and checked by validate()
-    elif params.protocol == "lab":
-        from rodwarp.experiments._lab import lab_packing
-
-        rods = lab_packing(params, device)
+    elif proto is not None:
+        rods = proto.packing(params, device)
     else:
         rods = random_packing(params.rods, params.length, params.diameter, np.asarray(params.box) * params.length,
                               n_vertices=params.n_vertices, seed=params.seed, device=device)
@@ -399,7 +400,7 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
         _take_entangling(donor, outdir, ck[1], n_frames, sim_rods)
     rec = Recorder(outdir, model, solver, sim_rods, n_frames, checkpoint=ck,
                    done=[s.name for s in stages[:loop.start_stage]], fields_every=params.fields_every,
-                   lab=params.protocol == "lab")
+                   columns=proto.columns if proto is not None else None)
 
     # the verdict's pile reference measures the input rods (a rigid rod's two-vertex chord may
     # differ from its polyline's length in the last bits)
@@ -423,10 +424,9 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
                        {"device": device, "wall_time_s": wall, "resumed": bool(resume), "initial_orientation": orient,
                         "fields_wall_s": rec.fields_wall_s,
                         "entangled_from": donor_rec})
-    if params.protocol == "lab":
-        from rodwarp.experiments._lab import lab_summary
-
-        summary["lab"] = lab_summary(params, model, rec.rows, loop, stages, thresholds)
+    if proto is not None:
+        key, block = proto.summary(params, model, rec.rows, loop, stages, thresholds)
+        summary[key] = block
     rec.write_metrics()
     write_json(outdir / "summary.json", summary)
     plot_metrics(outdir / "metrics.png", rec.rows, summary)

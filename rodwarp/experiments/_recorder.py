@@ -49,13 +49,13 @@ class Recorder:
         Warp field kernels of :func:`rodwarp.analysis.compute_fields` run on the sample's rods
         (default grid, the sample's contacts) and its row gets ``cv_e``, ``mean_e`` and
         ``mean_phi``, the same numbers ``rodwarp analyze`` gives for that frame; 0: never.
-    lab : bool
-        The laboratory protocol's columns too: the piston's face height and the packing's
-        spread radius (docs/experiments.md).
+    columns : callable or None
+        A protocol's own columns: ``columns(model, x, control, t)`` returns a dict added to
+        each row (the lab's piston height and spread radius, docs/experiments.md).
     """
 
     def __init__(self, outdir: Path, model, solver, rods, n_frames: int, checkpoint=None, done=(),
-                 fields_every: float = 0.0, lab: bool = False):
+                 fields_every: float = 0.0, columns=None):
         from rodwarp.rodset.trajectory import Trajectory
 
         self.outdir = Path(outdir)
@@ -66,7 +66,7 @@ class Recorder:
         self.frame = 0
         self.fields_every = float(fields_every)
         self.fields_wall_s = 0.0
-        self.lab = bool(lab)
+        self.columns = columns
         if checkpoint is not None:
             arrays, meta = checkpoint
             self.rows = meta["rows"]
@@ -126,7 +126,7 @@ class Recorder:
             # contact points the step solved (speculative ones included), not touching rod pairs
             "n_contact_pairs": info.n_contacts if info else 0,
             **self._fields(state.time, x, c),
-            **(self._lab_columns(x, control, state.time) if self.lab else {}),
+            **(self.columns(self.model, x, control, state.time) if self.columns is not None else {}),
         })
         self.trajectory.write(self.frame, state.time, x)
         fname = f"vtk/frame_{self.frame:05d}.vtp"
@@ -161,14 +161,6 @@ class Recorder:
         self.fields_wall_s += _time.perf_counter() - t0
         num = lambda v: "" if v is None else float(v)  # noqa: E731
         return {"cv_e": num(st.get("cv_e")), "mean_e": num(st.get("mean_e")), "mean_phi": num(st.get("mean_phi"))}
-
-    def _lab_columns(self, x: np.ndarray, control, t: float) -> dict:
-        """The lab protocol's columns: piston face height (m; empty when it is out) and spread
-        radius (m)."""
-        from rodwarp.experiments._lab import piston_height, spread_radius
-
-        top = piston_height(self.model, control, t)
-        return {"piston_height": "" if top is None else top, "spread_radius": spread_radius(self.model, x)}
 
     def strain_result(self, stage, state, points, control, params, height0: float) -> dict:
         """At the end of a piston stage: the strain reached, the rest it came to, and the fields
