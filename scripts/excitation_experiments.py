@@ -44,6 +44,8 @@ CONTROLS = {
     "mu0.4": ((100, 200), (0, 1), ["--mu", "0.4"]),
     "tube100": ((100, 200), (0, 1), ["--tube-diameter", "0.1"]),
     "rigid": ((200,), (0, 1), ["--rod-model", "rigid"]),
+    # N: the lab protocol's 2160 rods at alpha 100 (a cylinder of radius l filled to 1 l) in the same tube
+    "n2160": ((100,), (0, 1), ["--n-rods", "2160"]),
 }
 CONTROL_S = 20.0
 
@@ -69,6 +71,7 @@ def plan() -> list[dict]:
     for name in ("open", "mu0.4", "tube100"):  # the controls at alpha 100 (the cheap ones) first
         add(name, 100, CONTROLS[name][1][0], CONTROLS[name][2], CONTROL_S)
     add("rigid", 200, 0, CONTROLS["rigid"][2], CONTROL_S)
+    add("n2160", 100, 0, CONTROLS["n2160"][2], CONTROL_S)
     for a in order[4:]:
         add("main", a, SEEDS[1], [], 100.0)
     for name in ("open", "mu0.4", "tube100"):
@@ -407,7 +410,7 @@ def main(argv=None) -> int:
     r.add_argument("--runs", required=True, help="folder of the run folders")
     r.add_argument("--until", type=float, default=20.0, help="stop each main run once this many seconds are shaken")
     r.add_argument("--workers", type=int, default=2, help="runs at a time (one thread each)")
-    r.add_argument("--only", default=None, help="comma-separated kinds: still, main, open, mu0.4, tube100, rigid")
+    r.add_argument("--only", default=None, help="comma-separated kinds: still, main, open, mu0.4, tube100, rigid, n2160")
     r.add_argument("--poll", type=float, default=10.0, help="seconds between looks at the runs")
     q = sub.add_parser("report", help="collect the runs into benchmarks/results/excitation.*")
     q.add_argument("--runs", required=True)

@@ -87,16 +87,23 @@ def test_the_plan_removes_the_tube_and_shakes_floor_and_container_together():
     assert [s.name for s in still] == ["pour", RELEASE] and still[-1].test
 
 
-def test_a_short_run_keeps_every_rod_inside_the_shaken_container(tmp_path):
-    """Rods poured into a 60 mm tube in a 70 mm container: the tube is gone when the shaking
-    starts (rods pass its radius), and no rod leaves the container while it is shaken."""
-    import zarr
-
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory):
+    """Rods poured into a 60 mm tube in a 70 mm container, released, shaken 0.4 s (2 cycles)."""
     from rodwarp.experiments import run_protocol
 
+    out = tmp_path_factory.mktemp("excitation") / "main_alpha100_seed0"
     p = ProtocolParams(protocol="excitation", alpha=100, n_rods=60, container_diameter=0.07, pour_duration=0.3,
                        lift_duration=0.1, duration=0.4, save_every=0.025, checkpoint_every=0.2, device="cpu")
-    s = run_protocol(p, tmp_path, progress=False)
+    return out, run_protocol(p, out, progress=False)
+
+
+def test_a_short_run_keeps_every_rod_inside_the_shaken_container(short_run):
+    """The tube is gone when the shaking starts (rods pass its radius), and no rod leaves the
+    container while it is shaken."""
+    import zarr
+
+    tmp_path, s = short_run
     ex = s["excitation"]
     assert ex["n_rods"] == 60 and ex["stages"] == ["pour", RELEASE, SHAKE]
     assert ex["parameters"]["container_diameter"] == {"value": 0.07, "source": "option", "why": "given"}
@@ -183,3 +190,31 @@ def test_the_cli_runs_the_experiment_by_its_name(tmp_path):
     res = CliRunner().invoke(app, ["simulate", "--protocol", "excitation", "--alpha", "100", "--tube-diameter", "0.2",
                                    "--out", str(tmp_path / "r")])
     assert res.exit_code == 2 and res.output.count("\n") == 1 and "--tube-diameter 200 mm" in res.output
+
+
+def test_the_report_reads_a_run_as_it_reports_itself(short_run):
+    """scripts/excitation_experiments.py: a run's record from its metrics.csv (as for a run
+    still going) gives the tau and landed heights its summary.json gives."""
+    import shutil
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    import excitation_experiments as ee
+
+    out, s = short_run
+    going = out.parent / "main_alpha100_seed1"
+    if not going.exists():
+        shutil.copytree(out, going)
+        (going / "summary.json").unlink()
+    for folder, complete in ((out, True), (going, False)):
+        rec = ee.collect(folder)
+        assert rec["complete"] is complete and rec["n_rods"] == 60 and rec["rod_model"] == "rigid"
+        assert rec["shake"]["tau"]["tau"] == s["excitation"]["shake"]["tau"]["tau"]
+        assert rec["shake"]["landed"]["centroid_height_ratio"] == \
+            pytest.approx(s["excitation"]["shake"]["landed"]["centroid_height_ratio"])
+        assert rec["cpu_s_per_sim_s"] > 0 and ee.outcome(rec) in ("kept", "lost", "mixed", "enhanced")
+    star = ee.alpha_star([{"alpha": 50, "shake": {"tau": {"tau": 0.1}}}, {"alpha": 100, "shake": {"tau": {"tau": 0.2}}},
+                          {"alpha": 100, "shake": {"tau": {"tau": 0.7}}}, {"alpha": 200, "shake": {"tau": {"tau": 0.9}}}])
+    assert (star["below"], star["above"]) == (50, 200)  # alpha 100's seeds disagree: the bracket spans it
+    assert ee.shaken(going) == pytest.approx(0.4)
