@@ -48,6 +48,12 @@ CONTROLS = {
     "n2160": ((100,), (0, 1), ["--n-rods", "2160"]),
 }
 CONTROL_S = 20.0
+#: ``rodwarp simulate``'s exit code for a run the engine stopped (rods overlapping beyond a quarter
+#: diameter); such a run is made again from the start with RETRY_ARGS, in a folder named with
+#: RETRY_SUFFIX (the protocol's default is 20 sweeps, since 10 blew up at alpha 66 and 100)
+BLEW_UP = 3
+RETRY_ARGS = ["--iterations", "40"]
+RETRY_SUFFIX = "_it40"
 
 
 def plan() -> list[dict]:
@@ -66,12 +72,12 @@ def plan() -> list[dict]:
     order = (100, 200, 66, 76, 125, 38)  # the cheapest informative first; alpha 38's 3040 rods cost most
     for a in order:
         add("main", a, SEEDS[0], [], 100.0)
-    for a in order[:4]:
-        add("main", a, SEEDS[1], [], 100.0)
-    for name in ("open", "mu0.4", "tube100"):  # the controls at alpha 100 (the cheap ones) first
+    add("main", 100, SEEDS[1], [], 100.0)
+    for name in ("open", "mu0.4", "tube100", "n2160"):  # the controls at alpha 100 (the cheap ones) first
         add(name, 100, CONTROLS[name][1][0], CONTROLS[name][2], CONTROL_S)
+    for a in (66, 76, 200):
+        add("main", a, SEEDS[1], [], 100.0)
     add("rigid", 200, 0, CONTROLS["rigid"][2], CONTROL_S)
-    add("n2160", 100, 0, CONTROLS["n2160"][2], CONTROL_S)
     for a in order[4:]:
         add("main", a, SEEDS[1], [], 100.0)
     for name in ("open", "mu0.4", "tube100"):
@@ -147,6 +153,13 @@ def run(args) -> int:
             if rc is not None:
                 active.remove(item)
                 print(f"  {job['name']}: exit {rc} after {time.perf_counter() - t0:.0f} s", flush=True)
+                if rc == BLEW_UP and "--iterations" not in job["args"]:
+                    # the engine stopped the run at an overlap it cannot resolve (exit 3, the cause in its
+                    # log): the same run from the start with more Gauss-Seidel sweeps, next in line
+                    retry = {**job, "name": job["name"] + RETRY_SUFFIX, "args": [*job["args"], *RETRY_ARGS]}
+                    if not _done(runs / retry["name"], retry, args.until):
+                        todo.insert(0, retry)
+                    continue
                 failed += rc != 0
     return 1 if failed else 0
 
@@ -170,6 +183,7 @@ def collect(folder: Path) -> dict | None:
     p = _params(folder)
     if p is None or not (folder / "metrics.csv").exists():
         return None
+    manifest = json.loads((folder / "rodwarp-run.json").read_text())
     params = ProtocolParams(**{k: tuple(v) if isinstance(v, list) else v for k, v in p.items()})
     rows = _rows(folder)
     t_shake = p["pour_duration"] + p["lift_duration"]
@@ -180,6 +194,9 @@ def collect(folder: Path) -> dict | None:
            "contact_law": p["contact_law"] or "exact", "container_diameter_m": p["container_diameter"],
            "tube_diameter_m": p["tube_diameter"], "freq_hz": p["freq"], "amplitude_m": p["amplitude"],
            "a_over_g": params.a_over_g, "duration_s": p["duration"], "complete": summary is not None,
+           "iterations": p["iterations"], "status": manifest.get("status"),
+           "error": (manifest.get("error") or {}).get("message") if isinstance(manifest.get("error"), dict)
+           else manifest.get("error"),
            "sources": sources(params)}
     pour = [r for r in rows if r["stage"] == "pour"]
     rel = [r for r in rows if r["stage"] == "release"]
@@ -214,6 +231,11 @@ def _wall_by_stage(folder: Path, summary: dict | None) -> dict:
         ck = latest_checkpoint(folder / "checkpoints")
         dts = ck[1]["dts"] if ck else {}
     return {k: v.get("wall_s") for k, v in dts.items()}
+
+
+def blew_up(rec: dict) -> bool:
+    """The engine stopped the run (rods overlapping beyond its limit; ``simulate`` exit 3)."""
+    return rec.get("status") == "failed" and "blew up" in (rec.get("error") or "")
 
 
 def _fmt(v, nd=3):
@@ -266,9 +288,11 @@ def report(args) -> int:
 
     runs = Path(args.runs)
     recs = [r for d in sorted(runs.iterdir()) if d.is_dir() and (r := collect(d)) is not None]
-    main = [r for r in recs if r["run"].startswith("main_")]
-    ctrl = [r for r in recs if not r["run"].startswith(("main_", "still_"))]
-    still = [r for r in recs if r["run"].startswith("still_")]
+    blown = [r for r in recs if blew_up(r)]
+    ok = [r for r in recs if not blew_up(r)]
+    main = [r for r in ok if r["run"].startswith("main_")]
+    ctrl = [r for r in ok if not r["run"].startswith(("main_", "still_"))]
+    still = [r for r in ok if r["run"].startswith("still_")]
     for r in recs:
         r["outcome"] = outcome(r)
     record = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "machine": _machine(),
@@ -279,7 +303,7 @@ def report(args) -> int:
 
     write_json(OUT / "excitation.json", record)
     figs = [_fig1e(main), _fig1f(main, ctrl)]
-    _write_md(OUT / "excitation.md", record, main, ctrl, still, figs)
+    _write_md(OUT / "excitation.md", record, main, ctrl, still, blown, figs)
     print(f"{len(recs)} runs -> {OUT / 'excitation.md'}")
     return 0
 
@@ -358,7 +382,7 @@ def _row(r: dict) -> str:
     tau = sh.get("tau", {})
     box = "open" if not r["container_diameter_m"] else f"{r['container_diameter_m'] * 1e3:g} mm"
     model = r["rod_model"] if r["rod_model"] == "rigid" else f"{r['rod_model']} ({r['vertices']} v)"
-    return (f"| {r['alpha']:g} | {r['seed']} | {r['n_rods']} | {model} | {r['mu']:g} | "
+    return (f"| {r['alpha']:g} | {r['seed']} | {r['n_rods']} | {model} | {r['iterations']} | {r['mu']:g} | "
             f"{box} | "
             f"{r['tube_diameter_m'] * 1e3:g} mm | {_fmt(sh.get('shaken_s'))} | {_fmt(tau.get('tau'), 2)} | "
             f"{_fmt(tau.get('tau_first'), 2)} | {_fmt(at.get('10'), 2)} | {_fmt(at.get('50'), 2)} | "
@@ -366,12 +390,12 @@ def _row(r: dict) -> str:
             f"{len(sh.get('formed', []))} | {_fmt(r.get('cpu_s_per_sim_s'))} | {'yes' if r['complete'] else 'no'} |")
 
 
-HEAD = ("| alpha | seed | N | rods | mu | container | tube | shaken (s) | tau | tau_first | y/y0 @10 | @50 | @100 | "
+HEAD = ("| alpha | seed | N | rods | sweeps | mu | container | tube | shaken (s) | tau | tau_first | y/y0 @10 | @50 | @100 | "
         "@500 | cohesion | units formed | CPU-s per sim-s | complete |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
-def _write_md(path: Path, record: dict, main, ctrl, still, figs) -> None:
+def _write_md(path: Path, record: dict, main, ctrl, still, blown, figs) -> None:
     from rodwarp.rodset.files import atomic_path
 
     st = record["alpha_star"]
@@ -391,10 +415,16 @@ def _write_md(path: Path, record: dict, main, ctrl, still, figs) -> None:
         f"alpha* by tau: above {_fmt(st['below'])} and at most {_fmt(st['above'])} (seeds per alpha: "
         f"{st['seeds']}; {st['rule']}).", "",
         "## Controls", "", HEAD, *[_row(r) for r in ctrl], "",
+        "## Runs the engine stopped", "",
+        "The protocol's default is 20 Gauss-Seidel sweeps because the first two runs at the generic 10 were "
+        "stopped so (the `sweeps10_` rows); a run stopped at 20 is made again with 40 (its `_it40` row).", "",
+        "| run | shaken (s) | sweeps | the engine's message |", "|---|---|---|---|",
+        *[f"| {r['run']} | {_fmt((r.get('shake') or {}).get('shaken_s'))} | {r['iterations']} | {r['error']} |"
+          for r in blown], "",
         "## Fig. 1A-B: the tube removed, no shaking", "",
-        "| alpha | seed | N | rods | height kept after release | spread / tube radius | f |",
-        "|---|---|---|---|---|---|---|",
-        *[f"| {r['alpha']:g} | {r['seed']} | {r['n_rods']} | {r['rod_model']} | "
+        "| alpha | seed | N | rods | sweeps | height kept after release | spread / tube radius | f |",
+        "|---|---|---|---|---|---|---|---|",
+        *[f"| {r['alpha']:g} | {r['seed']} | {r['n_rods']} | {r['rod_model']} | {r['iterations']} | "
           f"{_fmt((r.get('release') or {}).get('height_kept'))} | {_fmt((r.get('release') or {}).get('spread_over_tube'))} | "
           f"{_fmt((r.get('release') or {}).get('largest_cluster_fraction'))} |" for r in still], "",
         *[f"![{f}]({f})" for f in figs], "",
