@@ -75,9 +75,12 @@ PAPER_DEFAULTS = {
 }
 #: the fields of :class:`~rodwarp.experiments.ProtocolParams` that only the excitation protocol uses
 EXCITATION_FIELDS = ("container_diameter", "container_height", "tube_diameter")
-#: a packing is judged "entangled" at a cycle's landing when its landed centroid height is at
-#: least this share of y_c(0) and its largest contact cluster holds at least this share of the rods
-#: (the stability verdict's measured thresholds, docs/verdict.md; :func:`tau_rule`)
+#: a packing is "entangled" at a cycle's landing when it keeps at least this share of its height,
+#: y_c / y_c(0) (:func:`tau_rule`): halfway between a standing clump (1) and the floor-covering
+#: layer the collapsed packings of the container settle into (0.24-0.30 measured at alpha 66 and
+#: 100, docs/experiments.md); TAU_HEIGHT_RANGE are the thresholds tau is also given at
+TAU_HEIGHT = 0.5
+TAU_HEIGHT_RANGE = (0.4, 0.6)
 #: a unit "forms" (Fig. 1E (i)) when the landed cluster share rises by at least this much above
 #: its lowest value so far and holds for FORM_CYCLES cycles, or when the packing, having been
 #: judged not entangled for FORM_CYCLES cycles, is judged entangled for FORM_CYCLES again
@@ -290,15 +293,16 @@ class TauRule:
                 f"(t_entangled / T), tau_first = cycles before the first one not entangled / cycles shaken")
 
 
-def tau_rule(thresholds) -> TauRule:
+def tau_rule(thresholds, height: float = TAU_HEIGHT) -> TauRule:
     """The paper's tau = t_entangled / T made a rule: a packing is entangled at a cycle's landing
-    when it keeps its height (landed y_c / y_c(0) >= the verdict's ``height_kept``, 0.26) and holds
+    when it keeps its height (landed y_c / y_c(0) >= ``height``, :data:`TAU_HEIGHT`) and holds
     together (largest contact cluster share f >= the verdict's ``cluster``, 0.8). The paper shows
     the clump's centroid height (Fig. 1E, Fig. S1's raw data) and calls it entangled while it
-    stands as one clump; the height alone would count a packing lying flat but whole as collapsed
-    only by its height, and the cluster alone a whole packing spread flat as entangled, so both
-    are asked (docs/experiments.md, "tau")."""
-    return TauRule(height=thresholds.height_kept, cluster=thresholds.cluster)
+    stands as one clump. In the closed container the rods of a collapsed packing still touch
+    one another (f stayed 0.92-1.0 while the height fell from 1 to 0.25), so the height decides
+    there; on an open plate the cluster does too, since a rod thrown off is lost to it
+    (docs/experiments.md, "tau")."""
+    return TauRule(height=height, cluster=thresholds.cluster)
 
 
 def landed_samples(t, y, freq: float) -> tuple[np.ndarray, np.ndarray]:
@@ -377,7 +381,10 @@ def excitation_shake(params, rows, t0: float, thresholds) -> dict:
     top = np.array([float(r["highest_rod_bottom"]) for r in shake if r.get("highest_rod_bottom") not in ("", None)])
     sh["landed"].update({"largest_cluster_fraction": f[idx].tolist(), "entangled": ent.tolist()})
     sh["tau"] = {**tau_series(ent), "cycles": int(len(cyc)), "rule": rule.describe(),
-                 "height": rule.height, "cluster": rule.cluster}
+                 "height": rule.height, "cluster": rule.cluster,
+                 # how much the threshold matters: tau at the ends of TAU_HEIGHT_RANGE
+                 "at_height": {f"{h:g}": tau_series((y[idx] >= h) & (f[idx] >= rule.cluster))["tau"]
+                               for h in TAU_HEIGHT_RANGE}}
     sh["landed_height_after_cycles"] = at
     sh["formed"] = formation_events(cyc, f[idx], ent)
     sh["highest_rod_bottom_max_m"] = float(top.max()) if top.size else None
