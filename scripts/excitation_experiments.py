@@ -139,7 +139,11 @@ def run(args) -> int:
             print(f"{datetime.now(timezone.utc):%H:%M:%S} start {' '.join(shlex.quote(c) for c in cmd[1:])}",
                   flush=True)
             log = open(runs / f"{job['name']}.log", "a")
-            active.append((job, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT), time.perf_counter()))
+            # a runner started in the background inherits SIGINT ignored, and Python then keeps
+            # it ignored: restore it so that the stop below is the run's own clean interruption
+            active.append((job, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
+                                                 preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL)),
+                           time.perf_counter()))
         time.sleep(args.poll)
         for item in list(active):
             job, proc, t0 = item
@@ -147,7 +151,11 @@ def run(args) -> int:
             rc = proc.poll()
             if rc is None and job["duration"] > args.until and shaken(folder) >= args.until - 1e-6:
                 proc.send_signal(signal.SIGINT)  # stopped after a checkpoint; `run` resumes it later
-                rc = proc.wait()
+                try:
+                    rc = proc.wait(timeout=120)
+                except subprocess.TimeoutExpired:  # checkpoints are atomic: a kill loses nothing saved
+                    proc.kill()
+                    rc = proc.wait()
                 print(f"  {job['name']}: stopped at {shaken(folder):.1f} s shaken (--until {args.until:g})", flush=True)
                 rc = 0
             if rc is not None:
