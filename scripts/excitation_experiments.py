@@ -274,21 +274,69 @@ def outcome(rec: dict) -> str:
     return "mixed"
 
 
-def alpha_star(records: list[dict]) -> dict:
+#: the fewest cycles a run must have shaken to enter alpha*'s bracket (10 s at 5 Hz)
+STAR_CYCLES = 50
+
+
+def alpha_star(records: list[dict], min_cycles: int = STAR_CYCLES) -> dict:
     """alpha* by tau as a bracket: the largest alpha whose every seed has tau < 0.5 and the
-    smallest alpha above it whose every seed has tau >= 0.5, with the seed counts; no point value."""
+    smallest alpha above it whose every seed has tau >= 0.5, with the seed counts; no point value.
+    tau is taken over each run's first ``min_cycles`` cycles, so that runs shaken for different
+    times compare alike; shorter runs are left out."""
     by = {}
     for r in records:
-        if r.get("shake"):
-            by.setdefault(r["alpha"], []).append(r["shake"]["tau"]["tau"])
+        e = (r.get("shake") or {}).get("landed", {}).get("entangled", [])
+        if len(e) >= min_cycles:
+            by.setdefault(r["alpha"], []).append(float(np.mean(e[:min_cycles])))
     alphas = sorted(by)
     below = [a for a in alphas if all(t < 0.5 for t in by[a])]
     above = [a for a in alphas if all(t >= 0.5 for t in by[a])]
     lo = max(below, default=None)
     hi = min((a for a in above if lo is None or a > lo), default=None)
-    return {"below": lo, "above": hi, "seeds": {str(a): len(by[a]) for a in alphas},
-            "rule": "alpha* lies between the largest alpha whose every seed has tau < 0.5 and the next alpha "
-                    "whose every seed has tau >= 0.5 (tau over the cycles shaken so far)"}
+    return {"below": lo, "above": hi, "seeds": {f"{a:g}": len(by[a]) for a in alphas},
+            "tau": {f"{a:g}": by[a] for a in alphas}, "cycles": min_cycles,
+            "rule": f"alpha* lies between the largest alpha whose every seed has tau < 0.5 and the next alpha "
+                    f"whose every seed has tau >= 0.5, tau over each run's first {min_cycles} cycles (runs shaken "
+                    f"for fewer are left out)"}
+
+
+def control_effects(main: list[dict], ctrl: list[dict]) -> list[dict]:
+    """Each control against the paper's scene at its alpha: tau and the landed y_c / y_c(0)
+    after 10 and 50 cycles, the control's seeds against the main runs' range over seeds (the
+    seed spread), over the cycles both have shaken; ``moves`` when the control lies outside
+    that range."""
+    def measures(r, cycles):
+        L = r["shake"]["landed"]
+        k = min(cycles, len(L["entangled"]))
+        e = L["entangled"][:k]
+        y = L["centroid_height_ratio"]
+        return {"tau": float(np.mean(e)) if e else None, "y10": y[9] if len(y) >= 10 else None,
+                "y50": y[49] if len(y) >= 50 else None}
+
+    out = []
+    kinds = sorted({r["run"].split("_alpha")[0] for r in ctrl})
+    for kind in kinds:
+        for a in sorted({r["alpha"] for r in ctrl if r["run"].startswith(kind + "_")}):
+            cs = [r for r in ctrl if r["run"].startswith(kind + "_") and r["alpha"] == a and r.get("shake")]
+            ms = [r for r in main if r["alpha"] == a and r.get("shake")]
+            if not cs or not ms:
+                continue
+            n = min(len(r["shake"]["landed"]["entangled"]) for r in cs + ms)
+            cm = [measures(r, n) for r in cs]
+            mm = [measures(r, n) for r in ms]
+            row = {"control": kind, "alpha": a, "cycles": n, "control_seeds": len(cs), "main_seeds": len(ms)}
+            moves = False
+            for key in ("tau", "y10", "y50"):
+                cv = [m[key] for m in cm if m[key] is not None]
+                mv = [m[key] for m in mm if m[key] is not None]
+                row[key] = {"control": cv, "main": [min(mv), max(mv)] if mv else None}
+                if cv and mv:
+                    lo, hi = min(mv), max(mv)
+                    pad = 0.02  # below this the landed heights of one run wander from cycle to cycle
+                    moves |= any(v < lo - pad or v > hi + pad for v in cv)
+            row["moves"] = moves
+            out.append(row)
+    return out
 
 
 def report(args) -> int:
@@ -305,7 +353,7 @@ def report(args) -> int:
         r["outcome"] = outcome(r)
     record = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "machine": _machine(),
               "versions": versions(), "command": "python scripts/excitation_experiments.py report --runs " + str(runs),
-              "plan": plan(), "alpha_star": alpha_star(main), "runs": recs}
+              "plan": plan(), "alpha_star": alpha_star(main), "controls": control_effects(main, ctrl), "runs": recs}
     OUT.mkdir(parents=True, exist_ok=True)
     from rodwarp.rodset.files import write_json
 
@@ -425,6 +473,16 @@ def _write_md(path: Path, record: dict, main, ctrl, still, blown, figs) -> None:
         f"alpha* by tau: above {_fmt(st['below'])} and at most {_fmt(st['above'])} (seeds per alpha: "
         f"{st['seeds']}; {st['rule']}).", "",
         "## Controls", "", HEAD, *[_row(r) for r in ctrl], "",
+        "Each control against the paper's scene at the same alpha, over the cycles both have shaken: the "
+        "control's values against the range of the main runs' seeds (the seed spread). 'moves' when a control "
+        "lies outside that range by more than 0.02.", "",
+        "| control | alpha | cycles | seeds (control, main) | tau: control / main range | y/y0 @10 | y/y0 @50 | moves |",
+        "|---|---|---|---|---|---|---|---|",
+        *[f"| {c['control']} | {c['alpha']:g} | {c['cycles']} | {c['control_seeds']}, {c['main_seeds']} | "
+          + " | ".join(f"{', '.join(_fmt(v, 2) for v in c[k]['control'])} / "
+                       f"{'-' if not c[k]['main'] else '-'.join(_fmt(v, 2) for v in c[k]['main'])}"
+                       for k in ("tau", "y10", "y50"))
+          + f" | {'yes' if c['moves'] else 'no'} |" for c in record["controls"]], "",
         "## Runs the engine stopped", "",
         "The protocol's default is 20 Gauss-Seidel sweeps because the first two runs at the generic 10 were "
         "stopped so (the `sweeps10_` rows); a run stopped at 20 is made again with 40 (its `_it40` row).", "",

@@ -220,7 +220,11 @@ def test_the_report_reads_a_run_as_it_reports_itself(short_run):
         assert rec["shake"]["landed"]["centroid_height_ratio"] == \
             pytest.approx(s["excitation"]["shake"]["landed"]["centroid_height_ratio"])
         assert rec["cpu_s_per_sim_s"] > 0 and ee.outcome(rec) in ("kept", "lost", "mixed", "enhanced")
-    star = ee.alpha_star([{"alpha": 50, "shake": {"tau": {"tau": 0.1}}}, {"alpha": 100, "shake": {"tau": {"tau": 0.2}}},
-                          {"alpha": 100, "shake": {"tau": {"tau": 0.7}}}, {"alpha": 200, "shake": {"tau": {"tau": 0.9}}}])
+    def run(alpha, tau, cycles=50):
+        k = int(round(tau * cycles))
+        return {"alpha": alpha, "shake": {"landed": {"entangled": [True] * k + [False] * (cycles - k)}}}
+
+    star = ee.alpha_star([run(50, 0.1), run(100, 0.2), run(100, 0.7), run(200, 0.9), run(25, 0.9, cycles=10)])
     assert (star["below"], star["above"]) == (50, 200)  # alpha 100's seeds disagree: the bracket spans it
+    assert "25" not in star["seeds"]  # shaken for fewer cycles than the bracket asks
     assert ee.shaken(going) == pytest.approx(0.4)
