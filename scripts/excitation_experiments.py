@@ -345,10 +345,13 @@ def report(args) -> int:
     runs = Path(args.runs)
     recs = [r for d in sorted(runs.iterdir()) if d.is_dir() and (r := collect(d)) is not None]
     blown = [r for r in recs if blew_up(r)]
-    ok = [r for r in recs if not blew_up(r)]
-    main = [r for r in ok if r["run"].startswith("main_")]
-    ctrl = [r for r in ok if not r["run"].startswith(("main_", "still_"))]
-    still = [r for r in ok if r["run"].startswith("still_")]
+    # a run the engine stopped keeps its place in its table up to the stop (its "complete" column
+    # says so); the runs at the generic 10 sweeps are listed apart, since the protocol's default is 20
+    kept = [r for r in recs if not r["run"].startswith("sweeps10_")]
+    order = lambda r: (r["alpha"], r["seed"], r["iterations"])  # noqa: E731
+    main = sorted((r for r in kept if r["run"].startswith("main_") and r.get("shake")), key=order)
+    ctrl = sorted((r for r in kept if not r["run"].startswith(("main_", "still_")) and r.get("shake")), key=order)
+    still = [r for r in kept if r["run"].startswith("still_")]
     for r in recs:
         r["outcome"] = outcome(r)
     record = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "machine": _machine(),
@@ -444,7 +447,8 @@ def _row(r: dict) -> str:
             f"({_fmt((tau.get('at_height') or {}).get('0.4'), 2)}, {_fmt((tau.get('at_height') or {}).get('0.6'), 2)}) | "
             f"{_fmt(tau.get('tau_first'), 2)} | {_fmt(at.get('10'), 2)} | {_fmt(at.get('50'), 2)} | "
             f"{_fmt(at.get('100'), 2)} | {_fmt(at.get('500'), 2)} | {r['outcome']} | "
-            f"{len(sh.get('formed', []))} | {_fmt(r.get('cpu_s_per_sim_s'))} | {'yes' if r['complete'] else 'no'} |")
+            f"{len(sh.get('formed', []))} | {_fmt(r.get('cpu_s_per_sim_s'))} | "
+            f"{'yes' if r['complete'] else 'stopped by the engine' if blew_up(r) else 'no'} |")
 
 
 HEAD = ("| alpha | seed | N | rods | sweeps | mu | container | tube | shaken (s) | tau (at 0.4, 0.6) | tau_first | y/y0 @10 | @50 | @100 | "
@@ -485,7 +489,8 @@ def _write_md(path: Path, record: dict, main, ctrl, still, blown, figs) -> None:
           + f" | {'yes' if c['moves'] else 'no'} |" for c in record["controls"]], "",
         "## Runs the engine stopped", "",
         "The protocol's default is 20 Gauss-Seidel sweeps because the first two runs at the generic 10 were "
-        "stopped so (the `sweeps10_` rows); a run stopped at 20 is made again with 40 (its `_it40` row).", "",
+        "stopped so (the `sweeps10_` rows); a run stopped at 20 keeps its row above up to the stop and is made "
+        "again with 40 (its `_it40` row).", "",
         "| run | shaken (s) | sweeps | the engine's message |", "|---|---|---|---|",
         *[f"| {r['run']} | {_fmt((r.get('shake') or {}).get('shaken_s'))} | {r['iterations']} | {r['error']} |"
           for r in blown], "",
