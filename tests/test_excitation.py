@@ -85,6 +85,15 @@ def test_the_plan_removes_the_tube_and_shakes_floor_and_container_together():
     moving = {w.name for k, w in enumerate(model.walls) if shake.moving[k]}
     assert moving == {FLOOR, CONTAINER}
     assert not any(release.moving)
+    # an open plate (container diameter 0): no container wall, only the floor is shaken
+    open_plate = ProtocolParams(protocol="excitation", alpha=100, container_diameter=0.0).validate().params
+    b = ModelBuilder(rods, Material(p.young, p.density), gravity=(0, 0, -9.81), mu=p.mu, rod_model="rigid",
+                     device="cpu")
+    excitation_walls(b, open_plate, rods)
+    open_model = b.finalize()
+    assert [w.name for w in open_model.walls] == [FLOOR, TUBE]
+    shake = excitation_plan(open_plate)[-1].control(open_model, 0.0)
+    assert {w.name for k, w in enumerate(open_model.walls) if shake.moving[k]} == {FLOOR}
     # without shaking the release is the test (Fig. 1A-B)
     still = excitation_plan(_checked(alpha=100, duration=0.0))
     assert [s.name for s in still] == ["pour", RELEASE] and still[-1].test

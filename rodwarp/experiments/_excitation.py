@@ -179,8 +179,9 @@ def excitation_plan(params) -> tuple:
         out.append(Stage(RELEASE, params.lift_duration, walls_out=(TUBE,), moving=(), test=not shake, snapshot=True,
                          title="tube removed", option="--lift-duration"))
     if shake:
+        moving = (FLOOR, CONTAINER) if params.container_diameter > 0 else (FLOOR,)  # 0: an open plate
         out.append(Stage(SHAKE, params.duration, params.amplitude, params.freq, walls_out=(TUBE,),
-                         moving=(FLOOR, CONTAINER), test=True, from_rest=True, title="shaking", option="--duration"))
+                         moving=moving, test=True, from_rest=True, title="shaking", option="--duration"))
     return tuple(out)
 
 
