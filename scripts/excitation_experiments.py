@@ -322,6 +322,8 @@ def control_effects(main: list[dict], ctrl: list[dict]) -> list[dict]:
             if not cs or not ms:
                 continue
             n = min(len(r["shake"]["landed"]["entangled"]) for r in cs + ms)
+            if n < 10:  # fewer cycles than tell a collapse from a standing clump here (half height after 4-11)
+                continue
             cm = [measures(r, n) for r in cs]
             mm = [measures(r, n) for r in ms]
             row = {"control": kind, "alpha": a, "cycles": n, "control_seeds": len(cs), "main_seeds": len(ms)}
