@@ -12,8 +12,9 @@ import pytest
 from rodwarp.errors import RodwarpError
 from rodwarp.experiments import ProtocolParams
 from rodwarp.experiments._excitation import (CONTAINER, PAPER_RODS, RELEASE, SHAKE, excitation_plan,
-                                             formation_events, landed_samples, paper_rod_count, sources,
-                                             tau_rule, tau_series)
+                                             formation_events, paper_rod_count, sources, tau_rule,
+                                             tau_series)
+from rodwarp.experiments._lab import landed_samples
 from rodwarp.experiments._verdict import DEFAULT_THRESHOLDS
 from rodwarp.experiments._plan import FLOOR, TUBE
 

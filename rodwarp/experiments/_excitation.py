@@ -157,7 +157,8 @@ def sources(params) -> dict:
 
 
 def rod_count(params) -> int:
-    """Rods of the experiment: ``n_rods``, else the paper's N for d = l / alpha."""
+    """Rods of the experiment: ``n_rods``, else the paper's N for d = l / alpha (the plug-in's
+    count behind :meth:`~rodwarp.experiments.ProtocolParams.rods`)."""
     return params.n_rods if params.n_rods is not None else paper_rod_count(params.diameter, params.length)
 
 
@@ -186,23 +187,13 @@ def excitation_plan(params) -> tuple:
 
 
 def excitation_packing(params, device):
-    """The rods released for the pour: :func:`rod_count` straight rods at uniform random
-    positions and isotropic directions (random sequential addition, ``seed``), each wholly
-    inside the tube, in a column from one diameter above the floor up to where they take
-    phi alpha = 2 (:meth:`~rodwarp.experiments.ProtocolParams.pour_height`): dilute, so they
-    fall as through the experiment's sieve."""
-    from rodwarp.experiments._packing import random_packing
+    """The rods released for the pour: the paper's N (:meth:`~rodwarp.experiments.
+    ProtocolParams.rods`) at random positions and isotropic directions, each wholly inside the
+    tube, in a column dilute enough (phi alpha = 2) that they fall as through the experiment's
+    sieve (:func:`~rodwarp.experiments._lab.lab_packing`, the lab protocol's pour)."""
+    from rodwarp.experiments._lab import lab_packing
 
-    rt = params.pour_radius
-    height = params.pour_height()
-    rods = random_packing(rod_count(params), params.length, params.diameter, (2 * rt, 2 * rt, height),
-                          n_vertices=params.n_vertices, seed=params.seed, device=device, cylinder=rt)
-    shift = np.array([-rt, -rt, params.diameter])
-    out = rods.with_points(rods.points + shift)
-    out.box = rods.box + shift
-    out.attrs.update(rods.attrs)
-    out.attrs.update({"pour": "tube", "tube_radius_m": rt, "pour_height_m": height})
-    return out
+    return lab_packing(params, device, label="tube")
 
 
 def excitation_walls(builder, params, rods):
@@ -306,17 +297,6 @@ def tau_rule(thresholds, height: float = TAU_HEIGHT) -> TauRule:
     return TauRule(height=height, cluster=thresholds.cluster)
 
 
-def landed_samples(t, y, freq: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per whole drive cycle N = 1, 2, ... (samples with N - 1 < t f <= N), the index of the
-    sample with the lowest height ``y``: the packing landed on the floor. ``t`` is the time
-    since the shaking began (s). Returns (cycles, indices); cycles without a sample are left out."""
-    t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
-    k = np.ceil(t * freq - 1e-9).astype(int)
-    cyc = np.unique(k[k >= 1])
-    idx = np.array([np.flatnonzero(k == c)[np.argmin(y[k == c])] for c in cyc], dtype=int)
-    return cyc, idx
-
-
 def tau_series(entangled) -> dict:
     """tau (share of cycles entangled) and tau_first (share before the first cycle not
     entangled) of a per-cycle record."""
@@ -365,7 +345,7 @@ def excitation_shake(params, rows, t0: float, thresholds) -> dict:
         (:func:`formation_events`), ``landed_height_after_cycles`` (10, 50, 100, 500; None
         before), ``highest_rod_bottom_max_m`` and ``warnings``.
     """
-    from rodwarp.experiments._lab import shake_result
+    from rodwarp.experiments._lab import landed_samples, shake_result
 
     sh = shake_result(params, rows, t0, thresholds)
     shake = [r for r in _rows(rows, SHAKE) if float(r["time"]) > t0]

@@ -21,20 +21,23 @@ STRAIN_STATS = ("mean_phi", "mean_S", "mean_c", "mean_e", "mean_n", "std_e", "cv
                 "iqr_e", "e_lb", "outlier_fraction", "n_valid_voxels", "radius", "spacing")
 
 
-def lab_packing(params, device):
-    """The rods released for the pour: ``params.rods`` straight rods at uniform random
-    positions and isotropic directions (random sequential addition, seed ``params.seed``)
-    inside the cylinder of radius ``container_radius`` l about the z axis, in a column from
-    one diameter above the floor to :meth:`~rodwarp.experiments.ProtocolParams.pour_height`.
+def lab_packing(params, device, label: str = "cylinder"):
+    """The rods released for a pour: ``params.rods`` straight rods at uniform random positions
+    and isotropic directions (random sequential addition, seed ``params.seed``), each wholly
+    inside the cylinder the rods are poured into (radius
+    :attr:`~rodwarp.experiments.ProtocolParams.pour_radius` about the z axis: the lab's
+    container, the excitation experiment's tube), in a column from one diameter above the floor
+    to :meth:`~rodwarp.experiments.ProtocolParams.pour_height`.
 
     Returns
     -------
     RodSet
-        The rods (m), ``box`` the column's bounding box.
+        The rods (m), ``box`` the column's bounding box; ``attrs`` name the pour (``label``),
+        its radius and height.
     """
     from rodwarp.experiments._packing import random_packing
 
-    rc = params.container_radius * params.length
+    rc = params.pour_radius
     height = params.pour_height()
     rods = random_packing(params.rods, params.length, params.diameter, (2 * rc, 2 * rc, height),
                           n_vertices=params.n_vertices, seed=params.seed, device=device, cylinder=rc)
@@ -42,7 +45,7 @@ def lab_packing(params, device):
     out = rods.with_points(rods.points + shift)
     out.box = rods.box + shift
     out.attrs.update(rods.attrs)
-    out.attrs.update({"pour": "cylinder", "container_radius_m": rc, "pour_height_m": height})
+    out.attrs.update({"pour": label, "pour_radius_m": rc, "pour_height_m": height})
     return out
 
 
@@ -132,10 +135,20 @@ def landed_heights(t: np.ndarray, y: np.ndarray, freq: float) -> tuple[np.ndarra
     (cycles, heights)
         The cycle numbers N and their lowest heights; cycles without a sample are left out.
     """
+    cyc, idx = landed_samples(t, y, freq)
+    return cyc, np.asarray(y, dtype=float)[idx]
+
+
+def landed_samples(t, y, freq: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per whole drive cycle N = 1, 2, ... (samples with N - 1 < t f <= N), the index of the
+    sample with the lowest height ``y``: the packing landed (:func:`landed_heights`). ``t`` is
+    the time since the shaking began (s). Returns (cycles, indices); cycles without a sample
+    are left out."""
     t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
     k = np.ceil(t * freq - 1e-9).astype(int)
     cyc = np.unique(k[k >= 1])
-    return cyc, np.array([y[k == c].min() for c in cyc])
+    idx = np.array([np.flatnonzero(k == c)[np.argmin(y[k == c])] for c in cyc], dtype=int)
+    return cyc, idx
 
 
 #: samples per drive period below which a cycle's lowest sample may miss the landed packing
