@@ -16,11 +16,12 @@ from __future__ import annotations
 import math
 import os
 import shutil
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 from rodwarp._util import one_line_error
 
-__all__ = ["BASE_BYTES", "fail", "number", "integer", "device_name", "human_bytes", "available_memory",
+__all__ = ["BASE_BYTES", "Range", "check_ranges", "field_range", "fail", "number", "integer", "device_name", "human_bytes", "available_memory",
            "memory_fits", "existing_ancestor", "disk_fits", "probe_write", "output_location"]
 
 #: fixed memory of a run (Python, Warp, NumPy, matplotlib), bytes
@@ -89,6 +90,98 @@ def integer(name: str, v, *, ge=None, le=None, hint: str = "") -> int:
     if le is not None and i > le:
         fail(f"{name} must be <= {le}, got {i}{tail}")
     return i
+
+
+@dataclass(frozen=True)
+class Range:
+    """The values an option may take, stated once beside it.
+
+    A parameters dataclass gives a field its range as ``option(default, help,
+    range=Range(...))`` (:func:`rodwarp._util.option`); :func:`check_ranges` checks every field
+    against it, so the command line and the public constructors refuse the same values with
+    the same one-line message, and the option-range test reads the same bounds.
+
+    Parameters
+    ----------
+    gt, ge, lt, le : float, optional
+        Strict / inclusive lower and upper bounds, in ``unit``.
+    unit : str
+        The option's unit (``m``, ``s``, ``Hz``; empty for a pure number).
+    hint : str
+        Why the bounds are where they are, appended to the refusal.
+    whole : bool
+        The value is a whole number (a count, a seed).
+    each : bool
+        The value is a sequence whose every item must lie in the range (``--box``, ``--strains``).
+    """
+
+    gt: float | None = None
+    ge: float | None = None
+    lt: float | None = None
+    le: float | None = None
+    unit: str = ""
+    hint: str = ""
+    whole: bool = False
+    each: bool = False
+
+    def check(self, name: str, value):
+        """``value`` if it lies in the range, else a one-line error naming ``name``."""
+        if self.each:
+            try:
+                items = list(value)
+            except TypeError:
+                fail(f"{name} must be a list of numbers, got {value!r}")
+            return tuple(self._check_one(name, v) for v in items)
+        return self._check_one(name, value)
+
+    def _check_one(self, name: str, v):
+        if self.whole:
+            i = integer(name, v, hint=self.hint)
+            number(name, i, gt=self.gt, ge=self.ge, lt=self.lt, le=self.le, unit=self.unit, hint=self.hint)
+            return i
+        return number(name, v, gt=self.gt, ge=self.ge, lt=self.lt, le=self.le, unit=self.unit, hint=self.hint)
+
+    def contains(self, v) -> bool:
+        """Whether the single value ``v`` lies in the range (for tests and help texts)."""
+        try:
+            self._check_one("value", v)
+        except ValueError:
+            return False
+        return True
+
+    def text(self) -> str:
+        """The range as help text, e.g. ``> 0 and <= 100 m``."""
+        u = f" {self.unit}" if self.unit else ""
+        parts = [f"{op} {_fmt(b)}" for op, b in ((">", self.gt), (">=", self.ge), ("<", self.lt), ("<=", self.le))
+                 if b is not None]
+        return (" and ".join(parts) + u) if parts else "any finite value"
+
+
+def check_ranges(obj, flag=None, skip=()) -> None:
+    """Check every field of the dataclass instance ``obj`` that states a :class:`Range`.
+
+    Parameters
+    ----------
+    obj : dataclass instance
+        Parameters whose fields carry ``range`` metadata; a field whose value is None (an
+        option left at "decide for me") is not checked.
+    flag : callable, optional
+        Field name -> the name shown in messages; default the option ``--field-name``.
+    skip : iterable of str
+        Fields checked elsewhere (in another form).
+    """
+    flag = flag or (lambda n: "--" + n.replace("_", "-"))
+    for f in fields(obj):
+        rng = f.metadata.get("range")
+        value = getattr(obj, f.name)
+        if rng is None or value is None or f.name in skip:
+            continue
+        rng.check(flag(f.name), value)
+
+
+def field_range(cls, name: str) -> Range | None:
+    """The :class:`Range` the dataclass ``cls`` states for its field ``name`` (None if none)."""
+    return next((f.metadata.get("range") for f in fields(cls) if f.name == name), None)
 
 
 def device_name(name: str, device: str) -> str:

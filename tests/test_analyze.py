@@ -133,7 +133,7 @@ def test_connectivity_and_outlier_options(tmp_path):
 
 @pytest.mark.parametrize("args, fragment", [
     (["/nonexistent/rods.npz"], "does not exist"),
-    (["{tmp}/rods.npz", "--radius", "-1"], "positive"),
+    (["{tmp}/rods.npz", "--radius", "-1"], "--radius must be > 0"),
     (["{tmp}/rods.npz", "--connectivity", "8"], "connectivity"),
     (["{tmp}/rods.npz", "--outlier", "median"], "--outlier"),
     (["{tmp}/rods.npz", "--radius", "50"], "no ball"),

@@ -211,8 +211,12 @@ def test_bad_parameters_one_line():
         compute_fields(rods, radius=-1)
     with pytest.raises(RodwarpError, match="no ball"):
         compute_fields(rods, radius=100.0)
-    with pytest.raises(RodwarpError, match="voxels"):
-        compute_fields(rods, radius=0.5, spacing=1e-5)
+    with pytest.raises(RodwarpError, match="0.01 to 2 R"):
+        compute_fields(rods, radius=0.5, spacing=1e-5)  # a grid far finer than the balls
+    with pytest.raises(RodwarpError, match="voxels"):  # a fine (but in-range) grid over a huge domain
+        compute_fields(rods, radius=0.5, spacing=0.005, domain=[[0, 0, 0], [1e3, 1e3, 1e3]])
+    with pytest.raises(RodwarpError, match="below half the rods' diameter"):
+        compute_fields(rods, radius=1e-9)
 
 
 @pytest.mark.cuda

@@ -70,11 +70,12 @@ def test_simulate_out_of_range_or_inconsistent(args, fragment, tmp_path):
 # ------------------------------------------------------------------------------ zero-step runs
 
 @pytest.mark.parametrize("args, fragment", [
-    (["--dt", "10"], "not a single full step fits"),  # the issue's case: dt above every duration
+    (["--dt", "0.5"], "not a single full step fits"),  # dt above every (0.02 s) duration
+    (["--dt", "10"], "--dt must be > 0 s and <= 1 s"),  # beyond the option's range
     (["--dt", "0.03"], "--dt 0.03 s is longer than the"),  # above the 0.02 s stages
     (["--duration", "0"], "--duration must be"),
     (["--save-every", "0.5"], "longer than the stability test"),
-    (["--freq", "1e9", "--duration", "5"], "steps"),
+    (["--freq", "1000", "--amplitude", "1e-6", "--duration", "1e5"], "steps"),
 ])
 def test_zero_step_and_inconsistent_durations_are_refused(args, fragment, tmp_path):
     out = tmp_path / "o"
@@ -86,7 +87,7 @@ def test_zero_step_and_inconsistent_durations_are_refused(args, fragment, tmp_pa
 
 @pytest.mark.parametrize("args, fragment", [
     (["--n-rods", "10000000"], "of memory"),
-    (["--alpha", "1e9", "--n-rods", "5400000000"], "of memory"),
+    (["--alpha", "1e4", "--n-rods", "100000000"], "of memory"),
     (["--n-rods", "5000"], "phi * alpha"),  # 5000 rods of alpha 20 cannot be packed into the box
     (["--box", "0.3,0.3,0.3"], "too small to hold one rod"),
 ])
@@ -96,9 +97,12 @@ def test_simulate_oversized_requests_give_the_estimate(args, fragment, tmp_path)
         assert "needs about" in line and "is available" in line
 
 
-def test_default_alpha_1e9_is_refused_by_its_memory_estimate(tmp_path):
-    line = refused(["simulate", "--alpha", "1e9", "--out", str(tmp_path / "o")], "needs about")
-    assert "5400000000 rods" in line
+def test_default_alpha_1e4_is_refused_by_its_memory_estimate(tmp_path):
+    # alpha at the top of its range: round(5.4 alpha) = 54000 rods of the default 10 vertices fit;
+    # with 10000 vertices each they need about 2 TB
+    line = refused(["simulate", "--alpha", "1e4", "--vertices", "10000", "--out", str(tmp_path / "o")],
+                   "needs about")
+    assert "54000 rods x 10000 vertices" in line
 
 
 def test_phantom_volume_too_large_is_refused_with_its_estimate(tmp_path):
@@ -138,7 +142,9 @@ def test_analyze_non_finite_option_is_named(option, value, rods_file, tmp_path):
 def test_analyze_bins_and_huge_grid(rods_file, tmp_path):
     refused(["analyze", str(rods_file), "--bins", "1", "--out", str(tmp_path / "a")], "--bins")
     refused(["analyze", str(rods_file), "--radius", "0.01", "--spacing", "1e-5", "--out", str(tmp_path / "a")],
-            "voxels; raise --spacing")
+            "it must be 0.01 to 2 R")
+    refused(["analyze", str(rods_file), "--radius", "1e-9", "--out", str(tmp_path / "a")],
+            "--radius 1e-09 m is below half the rods' diameter")
     assert not (tmp_path / "a").exists()
 
 

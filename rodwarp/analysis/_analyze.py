@@ -29,6 +29,7 @@ from rodwarp.errors import RodwarpError
 from rodwarp.rodset import RodSet
 from rodwarp.rodset import load as load_rods
 from rodwarp.rodset.files import write_json
+from rodwarp.validation import Range
 
 ROD_FILES = ("final.npz", "rods.npz", "rods.zarr", "final.zarr")
 
@@ -38,17 +39,22 @@ class AnalyzeOptions:
     """Options of :func:`analyze` (lengths in the input's units), frozen; each field's default
     and help are those of ``rodwarp analyze``."""
 
-    radius: float | None = option(None, "Ball radius R (input units; default sqrt(d l)).")
-    spacing: float | None = option(None, "Grid spacing (input units; default R / 2).")
-    diameter: float | None = option(None, "Rod diameter d for the default R (required for a CSV without radius).")
-    length: float | None = option(None, "Rod length l for the default R (default the mean rod length).")
+    radius: float | None = option(None, "Ball radius R (input units; default sqrt(d l)).",
+                                  range=Range(gt=0, le=1e12, hint="lengths are in the input's units"))
+    spacing: float | None = option(None, "Grid spacing (input units; default R / 2).",
+                                   range=Range(gt=0, le=1e12, hint="lengths are in the input's units"))
+    diameter: float | None = option(None, "Rod diameter d for the default R (required for a CSV without radius).",
+                                    range=Range(gt=0, le=1e12, hint="lengths are in the input's units"))
+    length: float | None = option(None, "Rod length l for the default R (default the mean rod length).",
+                                  range=Range(gt=0, le=1e12, hint="lengths are in the input's units"))
     units: str | None = option(None, "Length unit of a CSV (m, mm, um, voxel); converts npz/zarr rod sets.")
     keep_outside: bool = option(False, "Keep voxels whose ball leaves the domain (masked as NaN by default).")
     contact_tolerance: float | None = option(None, "Surface gap counted as contact when contacts are detected "
-                                                   "(default d / 10).")
+                                                   "(default d / 10).",
+                                                   range=Range(ge=0, le=1e12, hint="a surface gap in the input's units"))
     outlier: str = option("q3", "Outlier bound: q3 = Q3 + 1.5 IQR (the paper's) or q1 = Q1 + 1.5 IQR.")
     connectivity: int = option(26, "Tangle connectivity: 26 (default) or 6.")
-    bins: int = option(40, "Histogram bins.")
+    bins: int = option(40, "Histogram bins.", range=Range(ge=2, le=100_000, whole=True))
     device: str = option("cpu", "cpu, cuda or auto.")
     figures: bool = option(True, "Write the PNG figures.")
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from rodwarp.validation import BASE_BYTES, device_name, fail, integer, memory_fits, number
+from rodwarp.validation import BASE_BYTES, check_ranges, device_name, fail, memory_fits
 
 #: bytes per voxel of `rodwarp analyze` (seven float64 fields, the valid mask, labels and the
 #: batch scratch of the kernels), rounded up
@@ -13,19 +13,13 @@ def check_analyze(o) -> None:
     """Checks of :class:`rodwarp.analysis.AnalyzeOptions` (lengths in the input's units)."""
     from rodwarp.rodset import UNITS
 
-    for name in ("radius", "spacing", "diameter", "length"):
-        val = getattr(o, name)
-        if val is not None:
-            number(f"--{name}", val, gt=0, hint="lengths are in the input's units")
-    if o.contact_tolerance is not None:
-        number("--contact-tolerance", o.contact_tolerance, ge=0, hint="a surface gap in the input's units")
+    check_ranges(o)  # every field within the range stated beside it (AnalyzeOptions)
     if o.units is not None and o.units not in UNITS:
         fail(f"--units must be one of {', '.join(UNITS)}, got '{o.units}'")
     if o.outlier not in ("q3", "q1"):
         fail(f"--outlier must be q3 (Q3 + 1.5 IQR, the paper's) or q1, got '{o.outlier}'")
     if o.connectivity not in (6, 26):
         fail(f"--connectivity must be 6 or 26, got {o.connectivity}")
-    integer("--bins", o.bins, ge=2, le=100_000)
     device_name("--device", o.device)
 
 

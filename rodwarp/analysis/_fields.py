@@ -53,6 +53,30 @@ def _parts(k, start, count, a, b, seg, rod, length):
     return p
 
 
+#: the ball radius accepted, in rod diameters: below half a diameter a ball sees at most one rod's
+#: cross-section (phi is 0 or 1, e and c vanish); the paper's R = sqrt(d l) is 5 to 18 d
+MIN_RADIUS_DIAMETERS = 0.5
+#: the grid spacing accepted, as fractions of the ball radius: finer than R / 100 resamples the
+#: same balls (the fields vary over R) at 1e6 times the cost of the default R / 2; coarser than 2 R
+#: leaves gaps between the balls
+SPACING_RADII = (0.01, 2.0)
+
+
+def _check_ball_and_grid(R: float, h: float, d: float, l: float, given_h: bool, units: str) -> None:
+    """The ball radius against the rods' diameter and the spacing against the radius (one line
+    naming the option that is off)."""
+    if R < MIN_RADIUS_DIAMETERS * d:
+        raise RodwarpError(f"--radius {R:g} {units} is below half the rods' diameter d = {d:.3g} {units}: a ball "
+                           f"that small sees one rod's cross-section at most; use --radius {MIN_RADIUS_DIAMETERS * d:.3g} "
+                           f"or more (default sqrt(d l) = {math.sqrt(d * l):.3g} {units})")
+    lo, hi = SPACING_RADII
+    if given_h and not lo * R <= h <= hi * R:
+        raise RodwarpError(f"--spacing {h:g} {units} is {h / R:.3g} ball radii (R = {R:g} {units}); it must be "
+                           f"{lo:g} to {hi:g} R: " + ("finer resamples the same balls at a far higher cost"
+                                                      if h < lo * R else "coarser leaves gaps between the balls")
+                           + f"; use --spacing {0.5 * R:.3g} (R / 2, the default) or leave it out")
+
+
 def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float | None = None,
                    diameter: float | None = None, length: float | None = None, domain=None,
                    keep_outside: bool = False, contact_tolerance: float | None = None) -> FieldParams:
@@ -91,6 +115,7 @@ def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float 
         raise RodwarpError("rods have zero diameter or length; give --diameter and --length")
     R = pos(radius, "--radius") or math.sqrt(d * l)
     h = pos(spacing, "--spacing") or 0.5 * R
+    _check_ball_and_grid(R, h, d, l, spacing is not None, rods.units)
     tol = pos(contact_tolerance, "contact tolerance") or 0.1 * d
     if domain is None:
         domain = rods.box if rods.box is not None else rods.bounding_box()

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from rodwarp.experiments._plan import frames, plan
-from rodwarp.validation import BASE_BYTES, device_name, fail, integer, memory_fits, number
+from rodwarp.validation import BASE_BYTES, check_ranges, device_name, fail, memory_fits, number
 
 #: bytes of memory per simulated vertex (model, two states, contact lists, solver scratch and
 #: the per-frame host copies): peak RSS of ``simulate`` went from 304 MB at 1k vertices to
@@ -30,9 +30,6 @@ MAX_PHI_ALPHA = 5.4
 #: deepest overlap of two input rods that the contact solver pushes apart without a blow-up
 #: (the engine stops a run at a quarter diameter; the main job's own packings stay below 0.1 d)
 MAX_INPUT_OVERLAP = 0.1
-#: largest friction coefficient accepted: real materials stay below about 2 (rubber); above 10
-#: the contact solver's friction cone is a typo's, not a material's
-MAX_MU = 10.0
 #: shortest checkpoint interval (s of simulated time) unless --save-every is shorter still: a
 #: checkpoint is taken at most once per step, so a shorter interval checkpoints every step (2.6x
 #: slower, measured) while sparing a resume less than a hundredth of a second of simulation,
@@ -116,38 +113,14 @@ def _check_options(p, explicit: frozenset):
     """The checks of every option and of their consistency; returns the plan's stages."""
     from rodwarp.experiments._protocols import plugin
 
-    number("--alpha", p.alpha, gt=1, hint="alpha is rod length over diameter")
-    for name in ("freq", "entangle_freq"):
-        number(f"--{name.replace('_', '-')}", getattr(p, name), ge=0, unit="Hz")
-    for name in ("amplitude", "entangle_amplitude"):
-        number(f"--{name.replace('_', '-')}", getattr(p, name), ge=0, unit="m")
-    number("--gravity", p.gravity, gt=0, unit="m/s^2")
+    # every field within the range stated beside it (ProtocolParams); then what ties them together
+    check_ranges(p)
     lab = p.protocol != "paper"  # a poured protocol: lab or excitation
-    if lab:
-        number("--duration", p.duration, ge=0, unit="s", hint="the shaking; 0 leaves it out")
-    else:
-        number("--duration", p.duration, gt=0, unit="s", hint="the stability test needs at least one step")
-    number("--entangle-duration", p.entangle_duration, ge=0, unit="s", hint="0 skips entangling")
-    number("--static-load", p.static_load, ge=0, hint="in units of a rod's weight")
-    if p.n_rods is not None:
-        integer("--n-rods", p.n_rods, ge=1)
-    number("--length", p.length, gt=0, unit="m")
-    if p.vertices is not None:
-        integer("--vertices", p.vertices, ge=2, le=10_000)
+    if not lab and p.duration == 0:
+        fail("--duration must be > 0 s, got 0; the stability test needs at least one step")
+    if len(tuple(p.box)) != 3:
+        fail(f"--box must be three positive numbers 'X,Y,Z' in rod lengths, got {tuple(p.box)}")
     box = tuple(p.box)
-    if len(box) != 3:
-        fail(f"--box must be three positive numbers 'X,Y,Z' in rod lengths, got {box}")
-    for axis, v in zip("XYZ", box):
-        number(f"--box {axis}", v, gt=0, hint="the box is 'X,Y,Z' in rod lengths")
-    number("--mu", p.mu, ge=0, le=MAX_MU, hint="friction coefficients of real materials are below about 2 "
-           "(steel on steel 0.2 to 0.8, rubber up to about 2)")
-    number("--young", p.young, gt=0, unit="Pa")
-    number("--density", p.density, gt=0, unit="kg/m^3")
-    if p.dt is not None:
-        number("--dt", p.dt, gt=0, unit="s", hint="leave it out for the default step")
-    integer("--iterations", p.iterations, ge=1, le=100_000)
-    number("--step-safety", p.step_safety, gt=0, le=4, hint="the fraction of a diameter the fastest rod may cross per step")
-    number("--steps-per-period", p.steps_per_period, ge=4, le=1000, hint="the fewest steps per drive period")
     if p.rod_model not in ("auto", "rigid", "elastic"):
         fail(f"--rod-model must be auto, rigid or elastic, got '{p.rod_model}'")
     if p.contact_law is not None and p.contact_law not in ("exact", "imc"):
@@ -156,27 +129,19 @@ def _check_options(p, explicit: frozenset):
         for name in ("imc_delta", "imc_nu", "imc_stiffness"):
             if getattr(p, name) is not None:
                 fail(f"--{name.replace('_', '-')} only applies with --contact-law imc; add it or drop the option")
-    if p.imc_delta is not None:
-        number("--imc-delta", p.imc_delta, gt=0, le=1, hint="delta is in rod diameters (the paper's d/10 is 0.1)")
-    if p.imc_nu is not None:
-        number("--imc-nu", p.imc_nu, gt=0, le=10, unit="m/s", hint="the slip tolerance is a speed (DisMech's "
-               "examples use 1e-3 m/s)")
+    _check_drives(p)
     if p.imc_stiffness is not None:
-        number("--imc-stiffness", p.imc_stiffness, gt=0, unit="N/m", hint="leave it out for 1000 rod weights per delta")
-    number("--save-every", p.save_every, gt=0, unit="s")
-    number("--checkpoint-every", p.checkpoint_every, gt=0, unit="s")
+        _check_imc_stiffness(p)
     floor = min(CHECKPOINT_FLOOR, p.save_every)
     if p.checkpoint_every < floor:
         fail(f"--checkpoint-every {p.checkpoint_every:g} s is below {floor:g} s of simulated time: it writes a "
              f"checkpoint after nearly every step (a run checkpointing every step is about 2.6 times slower) "
              f"while a resume would save under {floor:g} s; use --checkpoint-every {floor:g} or more (default 1)")
-    number("--fields-every", p.fields_every, ge=0, unit="s", hint="0 turns the fields series off")
     if p.fields_every > 0:
         k = p.fields_every / p.save_every
         if k < 1 - 1e-9 or abs(k - round(k)) > 1e-6 * max(k, 1.0):
             fail(f"--fields-every {p.fields_every:g} s must be a whole multiple of --save-every {p.save_every:g} s "
                  f"(the fields are taken at sample times); e.g. --fields-every {max(1, round(k)) * p.save_every:g}")
-    integer("--seed", p.seed, ge=0, le=2**63 - 1)
     device_name("--device", p.device)
     if p.entangle and not p.initial:
         fail("--entangle only applies with --initial (a random packing is always entangled first); drop it")
@@ -217,9 +182,50 @@ def _check_options(p, explicit: frozenset):
             fail(f"{fq} {s.freq:g} Hz over {s.option} {s.duration:g} s needs at least {s.min_steps(p.steps_per_period):.3g} "
                  f"steps ({p.steps_per_period:g} per period), more than {MAX_STEPS:.0e}; lower the frequency or the duration")
     height = box[2] * p.length
-    if not lab and (2 * p.entangle_amplitude >= 0.5 * height or 2 * p.amplitude >= 0.5 * height):
-        fail(f"vibration amplitude does not fit the box (height {height:g} m); lower --amplitude")
+    for opt, a in (("--amplitude", p.amplitude), ("--entangle-amplitude", p.entangle_amplitude)):
+        if not lab and 2 * a >= 0.5 * height:
+            fail(f"{opt} {a:g} m (a stroke of {2 * a:g} m) does not fit the box: its height is {height:g} m ({box[2]:g} "
+                 f"rod lengths of --length {p.length:g} m) and a stroke may take at most half of it; lower {opt}, "
+                 f"or raise --length or the box's Z")
     return stages
+
+
+def _check_drives(p) -> None:
+    """Each drive's strength (a/g) and stroke against what the scene can take."""
+    from rodwarp.experiments._params import MAX_A_OVER_G, MAX_PLATE_AMPLITUDE_LENGTHS
+
+    drives = [("--freq", "--amplitude", p.freq, p.amplitude)]
+    if p.protocol == "paper" and p.entangle_duration > 0:
+        drives.append(("--entangle-freq", "--entangle-amplitude", p.entangle_freq, p.entangle_amplitude))
+    for fopt, aopt, f, a in drives:
+        a_g = 4 * math.pi**2 * f * f * a / p.gravity
+        if a_g > MAX_A_OVER_G:
+            fail(f"{fopt} {f:g} Hz and {aopt} {a:g} m make a/g = {a_g:.3g} at --gravity {p.gravity:g} m/s^2, above "
+                 f"{MAX_A_OVER_G:g}: a drive that tears any packing apart (the paper's entangling drive is a/g ~ 400, "
+                 f"its tests 0.3 to 7.9); lower {aopt} or {fopt}")
+    if p.protocol != "paper" and p.amplitude > MAX_PLATE_AMPLITUDE_LENGTHS * p.length:
+        fail(f"--amplitude {p.amplitude:g} m is more than {MAX_PLATE_AMPLITUDE_LENGTHS:g} rod lengths (l = "
+             f"{p.length:g} m): the plate would throw the rods out of any container (the paper's strokes are 1 to "
+             f"25 mm); lower --amplitude")
+
+
+def _check_imc_stiffness(p) -> None:
+    """The IMC stiffness in the unit that makes sense of it: heaviest-rod weights per delta."""
+    from rodwarp.experiments._params import IMC_STIFFNESS_WEIGHTS_RANGE
+    from rodwarp.sim.contact_law import IMC_DELTA_DIAMETERS
+
+    d = p.diameter
+    weight = p.density * p.effective_gravity * math.pi / 4 * d * d * p.length
+    delta = (p.imc_delta if p.imc_delta is not None else IMC_DELTA_DIAMETERS) * d
+    ratio = p.imc_stiffness * delta / weight
+    lo, hi = IMC_STIFFNESS_WEIGHTS_RANGE
+    if not lo <= ratio <= hi:
+        fail(f"--imc-stiffness {p.imc_stiffness:g} N/m is {ratio:.3g} rod weights per delta ({weight:.3g} N per "
+             f"{delta:.3g} m), outside {lo:g} to {hi:g}: " + ("a rod's own weight would push it through delta"
+                                                            if ratio < lo else "the penalty is then a rigid wall, "
+                                                            "outside the range its implicit solve was checked in; "
+                                                            "--contact-law exact is the rigid law") +
+             f"; use {1000 * weight / delta:.3g} N/m (1000 rod weights per delta, the default) or leave it out")
 
 
 #: the laboratory protocol's own options, and the paper protocol's that it does not use
@@ -255,22 +261,12 @@ def _changed(p, names) -> list[str]:
 
 def _check_lab_options(p) -> None:
     """The lab protocol's own checks (one line each)."""
-    number("--container-radius", p.container_radius, ge=0.6, le=100, hint="in rod lengths: a rod must fit across "
-           "the cylinder in any direction")
-    number("--fill-height", p.fill_height, gt=0, le=100, hint="in rod lengths")
-    number("--pour-duration", p.pour_duration, gt=0, unit="s", hint="the rods need time to fall and settle")
-    number("--lift-duration", p.lift_duration, ge=0, unit="s", hint="0 shakes right after the lift")
     if p.duration == 0 and p.lift_duration == 0:
         fail("--duration 0 and --lift-duration 0 leave the lab protocol without a test; give the shaking a "
              "--duration or the lifted packing a --lift-duration")
     strains = tuple(p.strains)
-    for e in strains:
-        number("--strains", e, ge=0, lt=0.5, hint="compressive strains are fractions of the packing's height "
-               "(the paper's 0 to 0.15)")
     if any(b < a for a, b in zip(strains, strains[1:])):
         fail(f"--strains must not decrease (the piston presses further at each), got {','.join(f'{e:g}' for e in strains)}")
-    if strains:
-        number("--press-duration", p.press_duration, gt=0, unit="s")
 
 
 def _check_packing(p) -> int:

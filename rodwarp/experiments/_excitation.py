@@ -233,15 +233,8 @@ def excitation_columns(model, x, control, t) -> dict:
 
 def check_excitation(p) -> None:
     """The experiment's own checks (one line each, before any work)."""
-    from rodwarp.validation import fail, number
+    from rodwarp.validation import fail
 
-    number("--container-diameter", p.container_diameter, ge=0, le=10, unit="m",
-           hint="0 shakes the packing on an open plate")
-    number("--container-height", p.container_height, gt=0, le=10, unit="m")
-    number("--tube-diameter", p.tube_diameter, gt=0, le=10, unit="m")
-    number("--pour-duration", p.pour_duration, gt=0, le=100, unit="s", hint="the rods need time to fall and settle")
-    number("--lift-duration", p.lift_duration, ge=0, le=1000, unit="s", hint="0 shakes right after the tube is removed")
-    number("--duration", p.duration, ge=0, le=1e4, unit="s", hint="the shaking; 0 leaves it out")
     if p.duration == 0 and p.lift_duration == 0:
         fail("--duration 0 and --lift-duration 0 leave the excitation experiment without a test; give the shaking "
              "a --duration or the released packing a --lift-duration")

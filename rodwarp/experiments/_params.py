@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 from rodwarp._util import option, option_table  # noqa: F401 (option_table re-exported)
+from rodwarp.validation import Range
 
 import numpy as np
 
@@ -32,10 +33,29 @@ MIN_VERTICES, MAX_VERTICES = 3, 10
 QUASI_STATIC = 0.1
 
 
-def _param(default, help: str, short: str | None = None):
-    """A :class:`ProtocolParams` field: its default, its ``rodwarp simulate --help`` line, and
-    its abbreviation in default folder names (:func:`default_run_name`; the name when None)."""
-    return option(default, help, short=short)
+#: largest friction coefficient accepted: real materials stay below about 2 (rubber); above 10
+#: the contact solver's friction cone is a typo's, not a material's
+MAX_MU = 10.0
+#: the strongest drive accepted, peak acceleration over gravity: the paper's entangling drive is
+#: a/g ~ 400 at its rescaled gravity (5 cm at 10 Hz, g 0.5), its tests 0.3 to 7.9; beyond 1000 a
+#: drive is a typo or a shock, and it tears any packing apart
+MAX_A_OVER_G = 1000.0
+#: the widest plate stroke of a poured packing, in rod lengths: the alpha* study's largest drive
+#: is l / 2; a plate swinging more than two rod lengths throws rods out of any container
+MAX_PLATE_AMPLITUDE_LENGTHS = 2.0
+#: the IMC stiffness accepted, in heaviest-rod weights per delta: the default is 1000 and DisMech's
+#: floor about 100; below 1 a rod's own weight pushes it through delta, above 1e6 the penalty is a
+#: rigid wall (a 20-weight contact overlaps 2e-5 delta), outside the range docs/physics.md checks
+#: its implicit solve in; the exact law is the rigid one
+IMC_STIFFNESS_WEIGHTS_RANGE = (1.0, 1e6)
+
+
+def _param(default, help: str, short: str | None = None, range: Range | None = None):
+    """A :class:`ProtocolParams` field: its default, its ``rodwarp simulate --help`` line, its
+    abbreviation in default folder names (:func:`default_run_name`; the name when None) and the
+    :class:`~rodwarp.validation.Range` of values it takes (checked by :meth:`ProtocolParams.validate`
+    and the CLI alike)."""
+    return option(default, help, short=short, range=range)
 
 
 @dataclass(frozen=True)
@@ -53,55 +73,84 @@ class ProtocolParams:
                                     "--strains, the cylinder lifted away, the plate shaken at --freq, --amplitude "
                                     "for --duration; docs/experiments.md) or excitation (the paper's excitation experiment, Fig. 1C-F: its "
                                     "rods, N, container and drive by default; docs/experiments.md).", "proto")
-    alpha: float = _param(100.0, "Rod aspect ratio l / d (> 1).")
-    freq: float = _param(10.0, "Floor vibration frequency of the stability test (Hz).")
-    amplitude: float = _param(0.001, "Floor vibration amplitude of the stability test (m).", "amp")
+    alpha: float = _param(100.0, "Rod aspect ratio l / d (> 1).",
+          range=Range(gt=1, le=1e4, hint="alpha is rod length over diameter; the paper spans 5 to 333, felts reach 1e3"))
+    freq: float = _param(10.0, "Floor vibration frequency of the stability test (Hz).",
+          range=Range(ge=0, le=1000, unit="Hz", hint="a vibration, not an acoustic wave: the paper drives at 1 to 100 Hz"))
+    amplitude: float = _param(0.001, "Floor vibration amplitude of the stability test (m).", "amp",
+          range=Range(ge=0, le=100, unit="m", hint="the stroke is also checked against the box and the rods"))
     # the paper's rescaled gravity (docs/protocol.md, "Parameters and their rodwarp simulate options")
-    gravity: float = _param(0.5, "Gravitational acceleration (m/s^2), rescaled as in the paper.")
-    duration: float = _param(5.0, "Stability-test duration (s).", "dur")
-    entangle_duration: float = _param(5.0, "Entangling duration (s); 0 skips entangling.", "edur")
-    entangle_freq: float = _param(10.0, "Entangling vibration frequency (Hz).", "efreq")
-    entangle_amplitude: float = _param(0.05, "Entangling vibration amplitude (m).", "eamp")
-    static_load: float = _param(0.0, "Extra downward body load F~ in units of a rod's weight rho g d^2 l.", "F")
+    gravity: float = _param(0.5, "Gravitational acceleration (m/s^2), rescaled as in the paper.",
+          range=Range(ge=1e-3, le=1000, unit="m/s^2", hint="the paper rescales g to 0.5; 1000 is 100 Earth g"))
+    duration: float = _param(5.0, "Stability-test duration (s).", "dur",
+          range=Range(ge=0, le=1e5, unit="s", hint="the run's step count is checked as well"))
+    entangle_duration: float = _param(5.0, "Entangling duration (s); 0 skips entangling.", "edur",
+          range=Range(ge=0, le=1e5, unit="s", hint="0 skips entangling"))
+    entangle_freq: float = _param(10.0, "Entangling vibration frequency (Hz).", "efreq",
+          range=Range(ge=0, le=1000, unit="Hz", hint="the paper entangles at 10 Hz"))
+    entangle_amplitude: float = _param(0.05, "Entangling vibration amplitude (m).", "eamp",
+          range=Range(ge=0, le=100, unit="m", hint="the stroke is also checked against the box"))
+    static_load: float = _param(0.0, "Extra downward body load F~ in units of a rod's weight rho g d^2 l.", "F",
+          range=Range(ge=0, le=1e4, hint="in units of a rod's weight rho g d^2 l (the paper's F~ is 0 to 12)"))
     n_rods: int | None = _param(None, f"Number of rods (default round({RODS_PER_ALPHA:g} alpha); lab: the rods "
                                       "that fill the cylinder to --fill-height; excitation: the paper's 1.25e6 / (d l^2), "
-                                      "d and l in mm).", "n")
-    length: float = _param(1.0, "Rod length l (m).", "l")
+                                      "d and l in mm).", "n",
+          range=Range(ge=1, le=1e8, whole=True, hint="memory and time are checked as well"))
+    length: float = _param(1.0, "Rod length l (m).", "l",
+          range=Range(ge=1e-5, le=100, unit="m", hint="rods shorter than 10 um feel forces rodwarp does not model (adhesion, Brownian motion); the paper's are 25 to 50 mm, its simulations 1 m"))
     vertices: int | None = _param(None, f"Vertices per elastic rod (default: the resolution rule, {MIN_VERTICES}-"
                                         f"{MAX_VERTICES}: the fewest whose self-weight sag is within {RIGID_SAG:g} d "
                                         f"of the beam's where every drive is quasi-static, else {MAX_VERTICES}; "
-                                        "docs/physics.md).", "v")
-    box: tuple = _param((1.0, 1.0, 2.5), "Container size in rod lengths, 'X,Y,Z'.")
+                                        "docs/physics.md).", "v",
+          range=Range(ge=2, le=10_000, whole=True))
+    box: tuple = _param((1.0, 1.0, 2.5), "Container size in rod lengths, 'X,Y,Z'.",
+          range=Range(gt=0, le=1000, each=True, hint="the box is 'X,Y,Z' in rod lengths"))
     container_radius: float = _param(1.0, "lab: radius of the cylinder the rods are poured into, in rod lengths.",
-                                     "Rc")
+                                     "Rc",
+          range=Range(ge=0.6, le=100, hint="in rod lengths: a rod must fit across the cylinder in any direction"))
     fill_height: float = _param(1.0, f"lab: without --n-rods, as many rods as fill the cylinder to this height (rod "
-                                     f"lengths) at a random packing's phi = {PHI_ALPHA:g} / alpha.", "H")
+                                     f"lengths) at a random packing's phi = {PHI_ALPHA:g} / alpha.", "H",
+          range=Range(gt=0, le=100, hint="in rod lengths"))
     container_diameter: float | None = _param(None, "excitation: diameter of the shaken container (m; default the "
-                                                    "paper's 0.15; 0: an open plate).", "Dc")
+                                                    "paper's 0.15; 0: an open plate).", "Dc",
+          range=Range(ge=0, le=10, unit="m", hint="0 shakes the packing on an open plate"))
     container_height: float | None = _param(None, "excitation: height of the container (m; default the paper's "
-                                                  "0.15): no rod may rise above its rim.", "Hc")
+                                                  "0.15): no rod may rise above its rim.", "Hc",
+          range=Range(gt=0, le=10, unit="m"))
     tube_diameter: float | None = _param(None, "excitation: diameter of the inner tube the rods are poured into "
-                                               "(m; default 0.06, the paper gives none: docs/experiments.md).", "Dt")
-    pour_duration: float = _param(1.0, "lab: time the poured rods fall and settle in the cylinder (s).", "pdur")
+                                               "(m; default 0.06, the paper gives none: docs/experiments.md).", "Dt",
+          range=Range(gt=0, le=10, unit="m"))
+    pour_duration: float = _param(1.0, "lab: time the poured rods fall and settle in the cylinder (s).", "pdur",
+          range=Range(gt=0, le=100, unit="s", hint="the rods need time to fall and settle"))
     strains: tuple = _param((), "lab: compressive strains the piston presses the poured packing to in turn, "
-                                "'E1,E2,...' (e.g. 0,0.05,0.1,0.15); the fields at each in summary.json.", "eps")
+                                "'E1,E2,...' (e.g. 0,0.05,0.1,0.15); the fields at each in summary.json.", "eps",
+          range=Range(ge=0, lt=0.5, each=True, hint="compressive strains are fractions of the packing's height (the paper's 0 to 0.15)"))
     press_duration: float = _param(0.5, "lab: time of each strain (s): pressed over its first half, held over "
-                                        "the second.", "prdur")
+                                        "the second.", "prdur",
+          range=Range(gt=0, le=1000, unit="s"))
     lift_duration: float = _param(1.0, "lab: time the packing stands (or spreads) after the cylinder is lifted "
-                                       "away, before the shaking (s); the test when --duration is 0.", "ldur")
-    mu: float = _param(0.2, "Friction coefficient (rod-rod and walls).")
-    young: float = _param(200e9, "Young's modulus (Pa).", "E")
-    density: float = _param(7850.0, "Density (kg/m^3).", "rho")
-    dt: float | None = _param(None, "Time step (s); default from the scene's step bound.")
+                                       "away, before the shaking (s); the test when --duration is 0.", "ldur",
+          range=Range(ge=0, le=1000, unit="s", hint="0 shakes right after the lift"))
+    mu: float = _param(0.2, "Friction coefficient (rod-rod and walls).",
+          range=Range(ge=0, le=MAX_MU, hint="friction coefficients of real materials are below about 2 (steel on steel 0.2 to 0.8, rubber up to about 2)"))
+    young: float = _param(200e9, "Young's modulus (Pa).", "E",
+          range=Range(ge=1e3, le=1e13, unit="Pa", hint="from soft gels (1 kPa) to diamond (1.2e12 Pa)"))
+    density: float = _param(7850.0, "Density (kg/m^3).", "rho",
+          range=Range(ge=1, le=1e5, unit="kg/m^3", hint="from aerogels to osmium (22600 kg/m^3)"))
+    dt: float | None = _param(None, "Time step (s); default from the scene's step bound.",
+          range=Range(gt=0, le=1, unit="s", hint="leave it out for the default step"))
     iterations: int = _param(10, "Most Gauss-Seidel sweeps per step (10: the knee of the effort benchmark).",
-                                 "it")
+                                 "it",
+          range=Range(ge=1, le=100_000, whole=True))
     rod_model: str = _param("auto", f"auto (rigid when the rods' self-weight sag is below {RIGID_SAG:g} d), rigid "
                                     "or elastic.")
     step_safety: float = _param(2.0, "Adaptive step: the fastest rod crosses at most this many diameters per step "
                                      "(2: the knee of the effort benchmark; the step also shrinks while rods "
-                                     "overlap by more than 0.02 d; ignored with --dt).")
+                                     "overlap by more than 0.02 d; ignored with --dt).",
+          range=Range(gt=0, le=4, hint="the fraction of a diameter the fastest rod may cross per step"))
     steps_per_period: float = _param(20.0, "Adaptive step: the fewest steps per period of a drive (20: the knee "
-                                           "of the effort benchmark; ignored with --dt).", "spp")
+                                           "of the effort benchmark; ignored with --dt).", "spp",
+          range=Range(ge=4, le=1000, hint="the fewest steps per drive period"))
     rolling: bool | None = _param(None, "Rods spin about their axes; --no-rolling locks the spin (friction on the "
                                         "centreline only). Default: on with the exact contact law, off with IMC "
                                         "(DisMech's friction acts on the centreline).")
@@ -109,24 +158,32 @@ class ProtocolParams:
                                            "(DisMech's smooth penalty and smoothed friction, the paper's; "
                                            "docs/physics.md).", "law")
     imc_delta: float | None = _param(None, "IMC distance tolerance delta, in rod diameters (default 0.1: the "
-                                           "paper's d/10).", "delta")
+                                           "paper's d/10).", "delta",
+          range=Range(ge=0.01, le=1, hint="delta is in rod diameters (the paper's d/10 is 0.1); below 0.01 d the penalty is sharper than the solver resolves (it lets rods overlap by 0.02 d)"))
     imc_nu: float | None = _param(None, "IMC slip tolerance nu (m/s; default 1e-3, DisMech's examples): friction "
-                                        "is smoothed below it, so a load below mu F_n creeps.", "nu")
+                                        "is smoothed below it, so a load below mu F_n creeps.", "nu",
+          range=Range(ge=1e-6, le=10, unit="m/s", hint="the slip tolerance is a speed (DisMech's examples use 1e-3 m/s)"))
     imc_stiffness: float | None = _param(None, "IMC contact stiffness k_c (N/m; default 1000 rod weights per "
-                                               "delta).", "kc")
-    save_every: float = _param(0.1, "Metrics and frame interval (s of simulated time).", "save")
-    checkpoint_every: float = _param(1.0, "Checkpoint interval (s of simulated time).", "ckpt")
+                                               "delta).", "kc",
+          range=Range(gt=0, le=1e15, unit="N/m", hint="also checked in rod weights per delta; leave it out for 1000 rod weights per delta"))
+    save_every: float = _param(0.1, "Metrics and frame interval (s of simulated time).", "save",
+          range=Range(gt=0, le=1e5, unit="s"))
+    checkpoint_every: float = _param(1.0, "Checkpoint interval (s of simulated time).", "ckpt",
+          range=Range(gt=0, le=1e5, unit="s"))
     fields_every: float = _param(0.5, "Interval (s of simulated time, a multiple of --save-every) of the "
                                       "entanglement fields during the run: cv_e(t), mean e and phi in "
-                                      "metrics.csv; 0 turns them off.", "fev")
-    seed: int = _param(0, "Random seed of the packing.")
+                                      "metrics.csv; 0 turns them off.", "fev",
+          range=Range(ge=0, le=1e5, unit="s", hint="0 turns the fields series off"))
+    seed: int = _param(0, "Random seed of the packing.",
+          range=Range(ge=0, le=2**63 - 1, whole=True))
     device: str = _param("auto", "auto, cpu or cuda.")
     initial: str | None = _param(None, "Start from this rod set (npz, zarr or CSV) instead of a random packing.")
     # a CSV does not record its unit: without this it is read as metres (the simulation runs in SI)
     units: str | None = _param(None, "Length unit of a CSV --initial rod set: m (the default), mm or um; "
                                      "converted to metres. An npz/zarr records its own.")
     initial_diameter: float | None = _param(None, "Rod diameter (in --units) for a CSV --initial rod set without a "
-                                                  "radius column.", "d")
+                                                  "radius column.", "d",
+          range=Range(gt=0, le=1e6, hint="in --units of the CSV"))
     entangle: bool = _param(False, "With --initial: run the entangling stage too.")
 
     def validate(self, explicit=None):
