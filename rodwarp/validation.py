@@ -166,17 +166,18 @@ def check_ranges(obj, flag=None, skip=()) -> None:
         Parameters whose fields carry ``range`` metadata; a field whose value is None (an
         option left at "decide for me") is not checked.
     flag : callable, optional
-        Field name -> the name shown in messages; default the option ``--field-name``.
+        Field name -> the name shown in messages; default the field's ``flag`` metadata, else
+        the option ``--field-name``.
     skip : iterable of str
         Fields checked elsewhere (in another form).
     """
-    flag = flag or (lambda n: "--" + n.replace("_", "-"))
     for f in fields(obj):
         rng = f.metadata.get("range")
         value = getattr(obj, f.name)
         if rng is None or value is None or f.name in skip:
             continue
-        rng.check(flag(f.name), value)
+        name = flag(f.name) if flag else f.metadata.get("flag") or "--" + f.name.replace("_", "-")
+        rng.check(name, value)
 
 
 def field_range(cls, name: str) -> Range | None:

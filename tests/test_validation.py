@@ -73,7 +73,7 @@ def test_simulate_out_of_range_or_inconsistent(args, fragment, tmp_path):
     (["--dt", "0.5"], "not a single full step fits"),  # dt above every (0.02 s) duration
     (["--dt", "10"], "--dt must be > 0 s and <= 1 s"),  # beyond the option's range
     (["--dt", "0.03"], "--dt 0.03 s is longer than the"),  # above the 0.02 s stages
-    (["--duration", "0"], "--duration must be"),
+    (["--duration", "0"], "--duration 0 leaves the stability test without a step"),
     (["--save-every", "0.5"], "longer than the stability test"),
     (["--freq", "1000", "--amplitude", "1e-6", "--duration", "1e5"], "steps"),
 ])

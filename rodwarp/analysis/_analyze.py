@@ -203,7 +203,7 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
     # the folder is taken only once the input is known to be good: a bad input leaves an
     # earlier analysis alone
     run = rundir.claim(out, "analyze", {"input": str(Path(src).resolve()), **asdict(opts)}, ANALYZE_OUTPUTS,
-                       overwrite=overwrite, replace_same_kind=True)
+                       overwrite=overwrite, replace_same_kind=True, inputs=[src])
     cluster = None
     if kind == "rods":
         rods: RodSet = obj

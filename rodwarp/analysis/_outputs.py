@@ -8,4 +8,4 @@ ANALYZE_OUTPUTS = ("fields.zarr", "summary.json", "rods.npz", "histograms.png", 
                    "tangles.png", "distributions.png")
 
 # an analysis from before manifests is known by its fields
-register_command("analyze", ANALYZE_OUTPUTS, legacy_marker="fields.zarr")
+register_command("analyze", ANALYZE_OUTPUTS, legacy_marker="fields.zarr", inside_input=True)

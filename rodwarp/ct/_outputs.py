@@ -8,4 +8,4 @@ SEGMENT_OUTPUTS = ("rods.npz", "rods.csv", "contacts.csv", "filaments.csv", "sum
                    "qa_projection.png", "qa_confidence.png",
                    "analysis")
 
-register_command("segment", SEGMENT_OUTPUTS)
+register_command("segment", SEGMENT_OUTPUTS, hosts={"analysis": ("analyze",)})

@@ -117,7 +117,8 @@ def _check_options(p, explicit: frozenset):
     check_ranges(p)
     lab = p.protocol != "paper"  # a poured protocol: lab or excitation
     if not lab and p.duration == 0:
-        fail("--duration must be > 0 s, got 0; the stability test needs at least one step")
+        fail("--duration 0 leaves the stability test without a step (0 leaves out the shaking of --protocol lab or "
+             "excitation only); give --duration > 0 s")
     if len(tuple(p.box)) != 3:
         fail(f"--box must be three positive numbers 'X,Y,Z' in rod lengths, got {tuple(p.box)}")
     box = tuple(p.box)
@@ -129,6 +130,9 @@ def _check_options(p, explicit: frozenset):
         for name in ("imc_delta", "imc_nu", "imc_stiffness"):
             if getattr(p, name) is not None:
                 fail(f"--{name.replace('_', '-')} only applies with --contact-law imc; add it or drop the option")
+    if p.protocol == "lab" and p.n_rods is not None and ("fill_height" in explicit or _changed(p, ["fill_height"])):
+        fail(f"--fill-height and --n-rods both set the lab protocol's rod count (--fill-height {p.fill_height:g} "
+             f"rod lengths is {p.lab_fill_rods()} rods, --n-rods {p.n_rods}); give one of them")
     _check_drives(p)
     if p.imc_stiffness is not None:
         _check_imc_stiffness(p)

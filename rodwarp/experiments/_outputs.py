@@ -13,5 +13,6 @@ SWEEP_OUTPUTS = ("sweep.json", "results.csv", "points", "alpha_star.csv", "power
 
 # outputs only a simulation writes: an analysis never takes a folder holding them for its own
 register_command("simulate", SIMULATE_OUTPUTS, exclusive=("final.npz", "trajectory.zarr", "metrics.csv",
-                                                          "checkpoints"), resumable=True)
-register_command("sweep", SWEEP_OUTPUTS)
+                                                          "checkpoints"), resumable=True,
+                 hosts={"analysis": ("analyze",)})
+register_command("sweep", SWEEP_OUTPUTS, hosts={"points": ("simulate", "analyze")})

@@ -50,12 +50,12 @@ MAX_PLATE_AMPLITUDE_LENGTHS = 2.0
 IMC_STIFFNESS_WEIGHTS_RANGE = (1.0, 1e6)
 
 
-def _param(default, help: str, short: str | None = None, range: Range | None = None):
+def _param(default, help: str, short: str | None = None, range: Range | None = None, **metadata):
     """A :class:`ProtocolParams` field: its default, its ``rodwarp simulate --help`` line, its
     abbreviation in default folder names (:func:`default_run_name`; the name when None) and the
     :class:`~rodwarp.validation.Range` of values it takes (checked by :meth:`ProtocolParams.validate`
     and the CLI alike)."""
-    return option(default, help, short=short, range=range)
+    return option(default, help, short=short, range=range, **metadata)
 
 
 @dataclass(frozen=True)
@@ -183,7 +183,7 @@ class ProtocolParams:
                                      "converted to metres. An npz/zarr records its own.")
     initial_diameter: float | None = _param(None, "Rod diameter (in --units) for a CSV --initial rod set without a "
                                                   "radius column.", "d",
-          range=Range(gt=0, le=1e6, hint="in --units of the CSV"))
+          range=Range(gt=0, le=1e6, hint="in --units of the CSV"), flag="--diameter")
     entangle: bool = _param(False, "With --initial: run the entangling stage too.")
 
     def validate(self, explicit=None):

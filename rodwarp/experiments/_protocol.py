@@ -212,6 +212,10 @@ def _entangled_point(params: ProtocolParams, donor: Path, outdir: Path):
     it is missing, unreadable, or of another packing or entangling than ``params``."""
     from rodwarp.rodset.trajectory import read_checkpoint_file
 
+    if params.protocol != "paper":
+        raise RodwarpError(f"--entangled-from applies only with --protocol paper (it starts the stability test "
+                           f"from another run's entangled packing); --protocol {params.protocol} pours its packing "
+                           f"and has no entangling stage: drop --entangled-from")
     if plan(params)[0].name != ENTANGLE:
         raise RodwarpError("--entangled-from: this run has no entangling stage (entangle duration 0, or --initial "
                            "without --entangle); drop --entangled-from")
@@ -330,7 +334,8 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
     branch = _entangled_point(params, donor, outdir) if donor is not None else None
     run = rundir.claim(outdir, "simulate", asdict(params), SIMULATE_OUTPUTS, resume=resume,
                        overwrite=overwrite, resumable=any((outdir / "checkpoints").glob("ckpt_*.npz")),
-                       need_bytes=output_bytes(checked))
+                       need_bytes=output_bytes(checked),
+                       inputs=[x for x in (params.initial, donor) if x is not None])
     device = _warp.resolve_device(params.device)
     # compiled now, with a word on stderr when the cache is cold, rather than at the first
     # launch under a progress bar that would sit at t = 0 for a minute

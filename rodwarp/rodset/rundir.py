@@ -56,7 +56,7 @@ _TRAITS: dict[str, dict] = {}
 
 
 def register_command(kind: str, outputs, *, legacy_marker: str | None = None, exclusive=(),
-                     resumable: bool = False) -> None:
+                     resumable: bool = False, hosts: dict | None = None, inside_input: bool = False) -> None:
     """Declare a command's folder contract; each command registers its own (rodwarp's package
     import registers them all).
 
@@ -74,9 +74,16 @@ def register_command(kind: str, outputs, *, legacy_marker: str | None = None, ex
         command's legacy run.
     resumable : bool
         Its runs continue with ``--resume`` (suggested when a folder holds an unfinished one).
+    hosts : dict, optional
+        Output subfolder -> the kinds of runs it holds (a sweep's ``points``); runs of other
+        kinds are never written inside this command's folder.
+    inside_input : bool
+        Its runs may be written inside the run folder they read (an analysis beside its run),
+        though not inside that run's own outputs.
     """
     OUTPUTS[kind] = tuple(outputs)
-    _TRAITS[kind] = {"legacy_marker": legacy_marker, "exclusive": tuple(exclusive), "resumable": bool(resumable)}
+    _TRAITS[kind] = {"legacy_marker": legacy_marker, "exclusive": tuple(exclusive), "resumable": bool(resumable),
+                     "hosts": dict(hosts or {}), "inside_input": bool(inside_input)}
 #: subfolders whose hidden temporary files are cleaned too
 _TEMP_DIRS = ("", "vtk", "checkpoints")
 
@@ -170,6 +177,17 @@ def _param_diff(a: dict, b: dict) -> list[str]:
     a = json.loads(json.dumps(a, default=str))
     b = json.loads(json.dumps(b, default=str))
     return sorted(k for k in set(a) | set(b) if k != "device" and a.get(k) != b.get(k))
+
+
+def _differences(was: dict, now: dict, diff: list[str]) -> str:
+    """The first differences between two runs' parameters, ``k X there, Y here``; a different
+    protocol first and by name, since the other differences follow from it."""
+    first = [k for k in ("protocol", "kind") if k in diff]
+    if first:
+        k = first[0]
+        return (f"it holds a --{k} {_show(was.get(k)).strip(chr(34))} run, this command asks for --{k} "
+                f"{_show(now.get(k)).strip(chr(34))}")
+    return "; ".join(f"{k} {_show(was.get(k))} there, {_show(now.get(k))} here" for k in diff[:4])
 
 
 def _show(v) -> str:
@@ -303,13 +321,60 @@ class RunDir:
         _CLAIMED.pop(str(self.path.resolve()), None)
 
 
+def _inside(child: Path, parent: Path) -> bool:
+    """``child`` is ``parent`` or lies under it (both resolved)."""
+    return child == parent or parent in child.parents
+
+
+def _refuse_nested(path: Path, kind: str, inputs, name: str) -> None:
+    """Refuse an output folder inside another run's folder: there that run's ``--overwrite``
+    would delete it, or its outputs would mix with the run's. Allowed: a subfolder that the
+    run's command hosts such runs in (``register_command``'s ``hosts``: a sweep's points, a
+    run's analysis), and a command that may write inside the run it reads (``inside_input``),
+    outside that run's own outputs (never in its ``checkpoints``)."""
+    here = path.resolve()
+    srcs = [Path(i).resolve() for i in inputs]
+    for parent in here.parents:
+        m = _read_manifest(parent) if (parent / MANIFEST).is_file() else None
+        if m is None or m.get("unreadable"):
+            continue
+        first = here.relative_to(parent).parts[0]
+        owner = m.get("kind")
+        traits = _TRAITS.get(owner, {})
+        if kind in traits.get("hosts", {}).get(first, ()):
+            continue
+        reads_it = _TRAITS.get(kind, {}).get("inside_input") and any(_inside(s, parent) for s in srcs)
+        if reads_it and not allowed_output(owner, first):
+            continue
+        where = f"in {parent / first}, an output of" if allowed_output(owner, first) else "in the folder of"
+        raise RodwarpError(f"{name} {path} lies {where} another run: {parent} holds {_describe(m)}, whose "
+                           f"--overwrite would delete this {kind} run or mix with it; choose an {name} outside "
+                           f"{parent}")
+
+
+def _refuse_inputs_removed(path: Path, kind: str, old, present, keep: bool, inputs, name: str) -> None:
+    """Refuse a run whose input lies among the outputs it would delete before it starts (an
+    ``--initial R/final.npz`` with ``--overwrite --out R``)."""
+    if keep or not inputs:
+        return
+    stale = set(present) | set(present_outputs(path, (old or {}).get("outputs", [])))
+    here = path.resolve()
+    for i in inputs:
+        src = Path(i).resolve()
+        for o in stale:
+            if o != MANIFEST and _inside(src, here / o):
+                raise RodwarpError(f"the input {i} lies in {path}, whose outputs this {kind} run deletes first "
+                                   f"({o}); copy the input out of {path} first, or choose another {name}")
+
+
 def _decide(path: Path, kind: str, parameters: dict, outputs, *, resume: bool, overwrite: bool, resumable: bool,
-            replace_same_kind: bool, append: bool, legacy: dict | None, name: str):
+            replace_same_kind: bool, append: bool, legacy: dict | None, name: str, inputs=()):
     """What a run of ``kind`` may do with ``path``: raise the refusal, or return
     ``(old manifest or None, present outputs, run id to keep or None, keep outputs)``."""
     if kind not in OUTPUTS or any(not allowed_output(kind, o) for o in outputs):
         raise ValueError(f"outputs of a {kind} run must be bare names of OUTPUTS[{kind!r}]")  # a bug, not input
     output_location(path, name)
+    _refuse_nested(path, kind, inputs, name)
     if resume and overwrite:
         raise RodwarpError(f"--resume and --overwrite contradict each other: --resume continues the run in "
                            f"{path}, --overwrite replaces it; pass one")
@@ -346,7 +411,7 @@ def _decide(path: Path, kind: str, parameters: dict, outputs, *, resume: bool, o
         diff = _param_diff(parameters, old.get("parameters", {}))
         if diff:
             was, now = old.get("parameters", {}), json.loads(json.dumps(parameters, default=str))
-            shown = "; ".join(f"{k} {_show(was.get(k))} there, {_show(now.get(k))} here" for k in diff[:4])
+            shown = _differences(was, now, diff)
             raise RodwarpError(f"--resume continues only its own run: the run in {path} has other "
                                f"parameters ({shown}); repeat its original command with --resume, giving these "
                                f"as the run has them (a default may have changed since: CHANGELOG.md), or pass "
@@ -366,7 +431,7 @@ def _decide(path: Path, kind: str, parameters: dict, outputs, *, resume: bool, o
         diff = _param_diff(parameters, old.get("parameters", {}))
         if diff:
             was, now = old.get("parameters", {}), json.loads(json.dumps(parameters, default=str))
-            shown = "; ".join(f"{k} {_show(was.get(k))} there, {_show(now.get(k))} here" for k in diff[:4])
+            shown = _differences(was, now, diff)
             raise RodwarpError(f"{path} holds a {kind} of another protocol ({shown}); its results cannot be "
                                f"mixed with these: choose another {name}, or pass --overwrite to replace it")
         return old, present, old.get("run_id"), True
@@ -380,15 +445,18 @@ def _decide(path: Path, kind: str, parameters: dict, outputs, *, resume: bool, o
 
 def check(path, kind: str, parameters: dict, outputs, *, resume: bool = False, overwrite: bool = False,
           resumable: bool = False, replace_same_kind: bool = False, append: bool = False,
-          legacy: dict | None = None, name: str = "--out") -> None:
+          legacy: dict | None = None, name: str = "--out", inputs=()) -> None:
     """Refuse, before any work, what :func:`claim` would refuse; changes nothing."""
-    _decide(Path(path), kind, parameters, outputs, resume=resume, overwrite=overwrite, resumable=resumable,
-            replace_same_kind=replace_same_kind, append=append, legacy=legacy, name=name)
+    path = Path(path)
+    old, present, _, keep = _decide(path, kind, parameters, outputs, resume=resume, overwrite=overwrite,
+                                    resumable=resumable, replace_same_kind=replace_same_kind, append=append,
+                                    legacy=legacy, name=name, inputs=inputs)
+    _refuse_inputs_removed(path, kind, old, present, keep, inputs, name)
 
 
 def claim(path, kind: str, parameters: dict, outputs, *, resume: bool = False, overwrite: bool = False,
           resumable: bool = False, replace_same_kind: bool = False, append: bool = False,
-          legacy: dict | None = None, need_bytes: float = 0.0, name: str = "--out") -> RunDir:
+          legacy: dict | None = None, need_bytes: float = 0.0, name: str = "--out", inputs=()) -> RunDir:
     """Take the output folder ``path`` for a run, or refuse with one line saying why.
 
     Parameters
@@ -421,6 +489,9 @@ def claim(path, kind: str, parameters: dict, outputs, *, resume: bool = False, o
         Estimated disk space of the run (bytes), checked against the free space.
     name : str
         Option name used in messages.
+    inputs : sequence of path-like
+        The files and folders the run reads: refused when they lie among the outputs it
+        deletes first; an analysis may lie in the run folder it analyses.
 
     Returns
     -------
@@ -429,7 +500,8 @@ def claim(path, kind: str, parameters: dict, outputs, *, resume: bool = False, o
     path = Path(path)
     old, present, run_id, keep = _decide(path, kind, parameters, outputs, resume=resume, overwrite=overwrite,
                                          resumable=resumable, replace_same_kind=replace_same_kind, append=append,
-                                         legacy=legacy, name=name)
+                                         legacy=legacy, name=name, inputs=inputs)
+    _refuse_inputs_removed(path, kind, old, present, keep, inputs, name)
     if need_bytes > 0:
         # outputs about to be replaced free their space
         need = need_bytes - (0 if keep else sum(_size(path / o) for o in present))
