@@ -379,6 +379,55 @@ EXTRA: list[tuple] = [
 ]
 
 
+#: issue 47's findings, each through the real command line: (finding, what, arguments with $TMP,
+#: expected exit code, what the message must say); inputs from :func:`make_inputs_47`
+CASES_47: list[tuple] = [
+    ("bounds", "lab --amplitude 1e3 (a/g 1e5)", "simulate --protocol lab --amplitude 1e3 --out $TMP/b1", 2,
+     "--amplitude must be >= 0 m and <= 100 m"),
+    ("bounds", "--freq 1e4", "simulate --freq 1e4 --out $TMP/b2", 2, "--freq must be >= 0 Hz and <= 1000 Hz"),
+    ("bounds", "lab --amplitude 0.5 with 5 cm rods", "simulate --protocol lab --length 0.05 --gravity 9.81 --freq 1 "
+     "--amplitude 0.5 --out $TMP/b3", 2, "more than 2 rod lengths"),
+    ("bounds", "--imc-stiffness 1e30", "simulate --contact-law imc --imc-stiffness 1e30 --out $TMP/b4", 2,
+     "--imc-stiffness must be"),
+    ("bounds", "--imc-stiffness 1e12 (3e9 rod weights per delta)", "simulate --contact-law imc --imc-stiffness 1e12 "
+     "--out $TMP/b5", 2, "rod weights per delta"),
+    ("bounds", "--imc-delta 1e-12", "simulate --contact-law imc --imc-delta 1e-12 --out $TMP/b6", 2,
+     "--imc-delta must be >= 0.01"),
+    ("messages", "lab --entangled-from RUN", "simulate --protocol lab --entangled-from $TMP/base --out $TMP/m1", 2,
+     "--entangled-from applies only with --protocol paper"),
+    ("messages", "a lab run resumed with paper options", f"simulate {SHORT} --resume --out $TMP/labk", 2,
+     "it holds a --protocol lab run"),
+    ("messages", "analyze --radius 1e-9", "analyze $TMP/base --radius 1e-9 --quiet --out $TMP/m3", 2,
+     "--radius 1e-09 m is below half the rods' diameter"),
+    ("messages", "simulate --length 1e-9", "simulate --length 1e-9 --out $TMP/m4", 2, "--length must be >= 1e-05 m"),
+    ("messages", "simulate --length 1e-4 (the stroke does not fit)", "simulate --length 1e-4 --out $TMP/m5", 2,
+     "--amplitude 0.001 m (a stroke of 0.002 m) does not fit the box"),
+    ("silent", "--fill-height with --n-rods", "simulate --protocol lab --fill-height 2 --n-rods 40 --out $TMP/s1", 2,
+     "--fill-height and --n-rods both set"),
+    ("folders", "simulate --initial R/final.npz --overwrite --out R",
+     "simulate --initial $TMP/own/final.npz --duration 0.02 --save-every 0.01 --device cpu --quiet --overwrite "
+     "--out $TMP/own", 2, "deletes first (final.npz)"),
+    ("folders", "a run inside another run's folder", f"simulate {SHORT} --out $TMP/base/inner", 2,
+     "in the folder of another run"),
+    ("folders", "analyze R --out R/checkpoints", "analyze $TMP/base --quiet --out $TMP/base/checkpoints", 2,
+     "checkpoints, an output of another run"),
+    ("folders", "analyze R (its analysis/ inside R: allowed)", "analyze $TMP/base --quiet --no-figures", 0, ""),
+]
+
+
+def make_inputs_47(d: Path) -> None:
+    """The inputs of :data:`CASES_47`: a finished run to overwrite from inside, and a lab run
+    left unfinished (as a kill leaves it) to resume with the paper's options."""
+    shutil.copytree(d / "base", d / "own")
+    rc, msg, *_ = rodwarp("simulate --protocol lab --alpha 20 --n-rods 30 --pour-duration 0.05 --lift-duration 0 "
+                          "--duration 0.04 --save-every 0.02 --checkpoint-every 0.02 --device cpu --quiet "
+                          f"--out {d}/labk", d)
+    assert rc == 0, msg
+    m = json.loads((d / "labk" / "rodwarp-run.json").read_text())
+    m.update(complete=False, status="failed")
+    (d / "labk" / "rodwarp-run.json").write_text(json.dumps(m))
+
+
 def _write_csv(path: Path, rods, radius: bool = True) -> None:
     rows = ["rod,x,y,z" + (",radius" if radius else "")]
     for i in range(rods.n_rods):
@@ -537,10 +586,13 @@ def _cpu_model() -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bad_inputs.md"))
+    ap.add_argument("--only", help="run only the cases whose class starts with this (e.g. 47); a check of a part, "
+                                   "written to --out")
     args = ap.parse_args(argv)
     d = Path(tempfile.mkdtemp(prefix="rodwarp_bad_"))
     make_inputs(d)
     make_inputs_29(d)
+    make_inputs_47(d)
     rows = []
     killed = False
     ok_cases = {"input on z = 0", "input alpha 50", "finished run in --out", "  ... --overwrite", "killed run, resume",
@@ -548,6 +600,10 @@ def main(argv=None) -> int:
     plan = [("15", what, a, None, 0 if what in ok_cases else (4 if "fails at run time" in what else 2))
             for what, a in cases(d)] + cases_29(d) + [(e[0], e[1], e[2], None, e[3] if len(e) > 3 else 2)
                                                        for e in EXTRA]
+    plan += [(f"47 {finding}", what, a, None, rc) for finding, what, a, rc, _ in CASES_47]
+    SAYS.update({what: says for _, what, _, _, says in CASES_47})
+    if args.only:
+        plan = [c for c in plan if c[0].startswith(args.only)]
     for cls, what, a, setup, expect in plan:
         a = a.replace("$TMP", str(d))
         if "killed" in a and not killed:

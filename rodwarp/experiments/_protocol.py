@@ -207,15 +207,20 @@ def _effective(parameters: dict) -> dict:
     return out
 
 
+def check_branch_protocol(params: ProtocolParams) -> None:
+    """Refuse ``--entangled-from`` for a protocol without an entangling stage (one line)."""
+    if params.protocol != "paper":
+        raise RodwarpError(f"--entangled-from applies only with --protocol paper (it starts the stability test "
+                           f"from another run's entangled packing); --protocol {params.protocol} pours its packing "
+                           f"and has no entangling stage: drop --entangled-from")
+
+
 def _entangled_point(params: ProtocolParams, donor: Path, outdir: Path):
     """``(arrays, meta)`` of ``donor``'s end-of-entangling checkpoint, refused (one line) when
     it is missing, unreadable, or of another packing or entangling than ``params``."""
     from rodwarp.rodset.trajectory import read_checkpoint_file
 
-    if params.protocol != "paper":
-        raise RodwarpError(f"--entangled-from applies only with --protocol paper (it starts the stability test "
-                           f"from another run's entangled packing); --protocol {params.protocol} pours its packing "
-                           f"and has no entangling stage: drop --entangled-from")
+    check_branch_protocol(params)
     if plan(params)[0].name != ENTANGLE:
         raise RodwarpError("--entangled-from: this run has no entangling stage (entangle duration 0, or --initial "
                            "without --entangle); drop --entangled-from")
