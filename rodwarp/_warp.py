@@ -22,6 +22,58 @@ def kernel_cache_dir() -> str:
     )
 
 
+def usable_cache_dir(path: str) -> str:
+    """``path``, created if missing, once a real write there succeeded.
+
+    Warp writes compiled kernels into the cache on the first launch of each module; an
+    unusable place would otherwise fail deep inside Warp with an OSError about a file the
+    user never named.  Checked once per process, before Warp is initialised.  A read-only
+    cache that already holds this Warp version's kernels (a shared installation's) is
+    accepted: Warp only reads it.
+
+    Parameters
+    ----------
+    path : str
+        The kernel cache folder (:func:`kernel_cache_dir`).
+
+    Returns
+    -------
+    str
+        ``path``.
+
+    Raises
+    ------
+    RodwarpError
+        One line naming ``RODWARP_KERNEL_CACHE``, what is wrong with the place (a file, not
+        writable) and the fix.
+    """
+    from rodwarp.validation import existing_ancestor, fail, probe_write
+
+    if os.environ.get("RODWARP_KERNEL_CACHE"):
+        what, fix = f"RODWARP_KERNEL_CACHE={path}", "unset RODWARP_KERNEL_CACHE or point it at a writable folder"
+    else:
+        what, fix = f"the kernel cache {path}", "set RODWARP_KERNEL_CACHE to a writable folder"
+    base = existing_ancestor(path)
+    if not base.is_dir():
+        fail(f"{what}: {base} is a file, not a folder, so the kernel cache cannot live there; {fix}")
+    try:
+        os.makedirs(path, exist_ok=True)
+        probe_write(path)
+    except OSError as e:
+        if not _prebuilt(path):
+            fail(f"{what} is not a writable folder ({e.strerror or e}); {fix}")
+    return path
+
+
+def _prebuilt(path: str) -> bool:
+    """Whether ``path`` holds kernels built by this Warp version (its ``<version>`` subfolder)."""
+    built = os.path.join(path, wp.config.version)
+    try:
+        return os.path.isdir(built) and bool(os.listdir(built))
+    except OSError:
+        return False
+
+
 #: what Warp's native library prints on stderr, once per process, when it finds no NVIDIA driver
 #: (warp/native/cuda_util.cpp; no Warp setting turns that probe's message off)
 _NO_DRIVER_LINE = "Could not find or load the NVIDIA CUDA driver"
@@ -39,7 +91,7 @@ def init() -> None:
     global _configured
     if _configured:
         return
-    wp.config.kernel_cache_dir = kernel_cache_dir()
+    wp.config.kernel_cache_dir = usable_cache_dir(kernel_cache_dir())
     wp.config.quiet = True
     # warp >= 1.19 routes its greeting and module-load lines through a logger
     if hasattr(wp, "LOG_WARNING"):
@@ -168,9 +220,20 @@ def load_kernels(device: str, names=SIMULATION_MODULES, *, progress: bool = True
 
 
 def resolve_device(device: str | None) -> str:
-    """Map ``auto|cpu|cuda|cuda:N`` to a Warp device name, with a clear error."""
-    from rodwarp.errors import RodwarpError
+    """Map ``auto|cpu|cuda|cuda:N`` to a Warp device name, with a clear error.
 
+    Raises
+    ------
+    TypeError
+        ``device`` is not a string (nor None, which means ``auto``).
+    RodwarpError
+        An unknown device, or CUDA asked for where none is available.
+    """
+    from rodwarp.errors import RodwarpError, RodwarpTypeError
+
+    if device is not None and not isinstance(device, str):
+        raise RodwarpTypeError(f"device must be a string (auto, cpu, cuda or cuda:N), got {type(device).__name__} "
+                               f"{device!r}")
     init()
     name = (device or "auto").lower()
     if name == "auto":

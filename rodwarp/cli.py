@@ -145,9 +145,16 @@ def _friendly(fn):
             raise typer.Exit(2)
         except OSError as e:  # a location problem found during the work (disk full, read-only)
             import errno
+            import os
 
             where = f" {e.filename}" if e.filename else ""
-            if e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO):
+            # a kernel that Warp compiles mid-run is written to the kernel cache, not to --out
+            warp_layer = sys.modules.get("rodwarp._warp")
+            cache = os.path.realpath(warp_layer.kernel_cache_dir()) if warp_layer is not None else None
+            if cache and e.filename and os.path.realpath(str(e.filename)).startswith(cache):
+                typer.echo(f"error: cannot write the Warp kernel cache{where}: {e.strerror or e}; unset "
+                           "RODWARP_KERNEL_CACHE or point it at a writable folder", err=True)
+            elif e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO):
                 typer.echo(f"error: cannot write{where}: {e.strerror or e}; free space or choose another --out "
                            "(earlier results are kept)", err=True)
             else:

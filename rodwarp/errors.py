@@ -7,6 +7,14 @@ class RodwarpError(ValueError):
     """Bad input or an impossible request: the message says what is wrong and how to fix it."""
 
 
+class RodwarpTypeError(RodwarpError, TypeError):
+    """An argument of the wrong kind (a string where a number goes, a list where a RodSet goes).
+
+    A ``TypeError`` for Python callers, and a :class:`RodwarpError` (so a ``ValueError``) so
+    that code catching bad input, the CLI included, reports it as one line like any other.
+    """
+
+
 class StepTooLarge(RodwarpError):
     """A step above the scene's step bound at the speeds it starts from; ``bound`` (s) is the
     largest step the guard accepts. :meth:`rodwarp.sim.RodSolver.adaptive_step` retries it shorter."""

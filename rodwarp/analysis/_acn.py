@@ -11,11 +11,19 @@ import numpy as np
 import warp as wp
 
 from rodwarp import _warp
-from rodwarp.errors import RodwarpError
+from rodwarp.errors import RodwarpError, RodwarpTypeError
+from rodwarp.rodset import MAX_COORDINATE
 
 
 def _points(name: str, p, min_len: int = 2) -> np.ndarray:
-    arr = np.asarray(p, dtype=np.float64)
+    """``p`` as an (n, 3) float64 array of finite points within :data:`MAX_COORDINATE` (1e12) of
+    the origin, n >= ``min_len``: farther ones overflow the integral's cubed distances."""
+    try:
+        arr = np.asarray(p, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = None
+    if arr is None or isinstance(p, (str, bytes, dict)):
+        raise RodwarpTypeError(f"{name} must be an array of 3D points of shape (n, 3), got {type(p).__name__}")
     if arr.ndim == 1 and arr.size == 3:
         arr = arr[None, :]
     if arr.ndim != 2 or arr.shape[1] != 3:
@@ -24,6 +32,9 @@ def _points(name: str, p, min_len: int = 2) -> np.ndarray:
         raise RodwarpError(f"{name} needs at least {min_len} points, got {arr.shape[0]}")
     if not np.isfinite(arr).all():
         raise RodwarpError(f"{name} holds NaN or infinite coordinates; remove or repair those points")
+    if np.max(np.abs(arr)) > MAX_COORDINATE:
+        raise RodwarpError(f"{name} holds a coordinate of {float(np.max(np.abs(arr))):.3g}, beyond {MAX_COORDINATE:g} "
+                           f"(any length unit); fix those points or use a larger unit")
     return arr
 
 
@@ -34,7 +45,7 @@ def gauss_linking(p1, p2, p3, p4, device: str | None = "cpu") -> np.ndarray:
     ----------
     p1, p2, p3, p4 : array_like, shape (n, 3) or (3,)
         Segment i joins ``p1[i]`` to ``p2[i]``; its partner joins ``p3[i]`` to ``p4[i]``.
-        Any length unit (the integral is dimensionless).
+        Any length unit (the integral is dimensionless); finite and within 1e12 of the origin.
     device : str
         Warp device (``cpu``, ``cuda``, ``auto``).
 
@@ -58,8 +69,10 @@ def gauss_linking(p1, p2, p3, p4, device: str | None = "cpu") -> np.ndarray:
 
 
 def _polyline_sums(a, b, closed: bool, device) -> tuple[float, float]:
-    a = _points("curve a", a)
-    b = _points("curve b", b)
+    if not isinstance(closed, (bool, np.bool_)):
+        raise RodwarpTypeError(f"closed must be True or False, got {type(closed).__name__} {closed!r}")
+    a = _points("a", a)
+    b = _points("b", b)
     na = a.shape[0] if closed else a.shape[0] - 1
     nb = b.shape[0] if closed else b.shape[0] - 1
     if closed and (a.shape[0] < 3 or b.shape[0] < 3):
@@ -87,7 +100,8 @@ def linking_number(a, b, closed: bool = True, device: str | None = "cpu") -> flo
     Parameters
     ----------
     a, b : array_like, shape (n, 3)
-        Vertices.  With ``closed=True`` the last vertex joins the first (do not repeat it).
+        Vertices, finite and within 1e12 of the origin.  With ``closed=True`` the last vertex
+        joins the first (do not repeat it).
     closed : bool
         Treat both curves as closed polygons.
     device : str
@@ -108,7 +122,8 @@ def average_crossing_number(a, b, closed: bool = False, device: str | None = "cp
     Parameters
     ----------
     a, b : array_like, shape (n, 3)
-        Vertices, any length unit (the result is dimensionless).
+        Vertices, any length unit (the result is dimensionless), finite and within 1e12 of
+        the origin.
     closed : bool
         Treat both curves as closed polygons.
     device : str

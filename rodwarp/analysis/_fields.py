@@ -26,11 +26,15 @@ from rodwarp import _warp
 from rodwarp.analysis._fieldset import Fields
 from rodwarp.analysis import _registry
 from rodwarp.analysis._registry import BallMeasures
-from rodwarp.errors import RodwarpError
-from rodwarp.rodset import Contacts, RodSet, detect_contacts
+from rodwarp.errors import RodwarpError, RodwarpTypeError
+from rodwarp.rodset import MAX_COORDINATE, Contacts, RodSet, detect_contacts
+from rodwarp.rodset._args import instance, real
 
 # Clipped parts held at once (each ~60 bytes): bounds memory on big grids.
 MAX_CLIPPED_PER_BATCH = 2_000_000
+#: smallest rod diameter and length accepted, as a fraction of the analysed domain's largest edge:
+#: a grid of at most 2^31 voxels has a spacing of at least 4.7e-10 of it, so it resolves nothing finer
+MIN_RELATIVE_LENGTH = 1e-9
 
 
 @dataclass
@@ -84,6 +88,8 @@ def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float 
 
     Parameters
     ----------
+    rods : RodSet
+        The rods; every length below is in ``rods.units``.
     radius : float, optional
         Ball radius R; default sqrt(d l).
     spacing : float, optional
@@ -92,36 +98,50 @@ def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float 
         Rod diameter d and length l used for the default R (and for the contact tolerance);
         default the rods' mean diameter and mean polyline length.
     domain : array_like (2, 3), optional
-        Analysed box; default the container box recorded in the rod set, else its bounding box.
+        Analysed box (lower corner, upper corner); default the container box recorded in the
+        rod set, else its bounding box.
     keep_outside : bool
         Compute voxels whose ball leaves the domain instead of masking them (NaN).
     contact_tolerance : float, optional
-        Surface gap below which two rods touch when contacts are detected; default d / 10.
+        Surface gap below which two rods touch when contacts are detected (>= 0); default d / 10.
+
+    Every length given must be positive and at most :data:`~rodwarp.rodset.MAX_COORDINATE`
+    (1e12); ``diameter`` and ``length`` at least ``MIN_RELATIVE_LENGTH`` (1e-9) times the
+    domain's largest edge (a grid of at most 2^31 voxels resolves nothing finer), ``radius`` at
+    least d / 2 and ``spacing`` 0.01 to 2 R (:data:`MIN_RADIUS_DIAMETERS`, :data:`SPACING_RADII`).
+
+    Raises
+    ------
+    TypeError
+        ``rods`` not a RodSet, a length not a number, ``domain`` not 2 x 3 numbers.
+    RodwarpError
+        A value out of its range (named, with the range), or a grid that cannot be built.
     """
+    instance("rods", rods, RodSet, "a RodSet (rodwarp.load(path) or RodSet.from_polylines(...))")
     if rods.n_rods == 0:
         raise RodwarpError("the rod set is empty: nothing to analyse")
+    dom = _domain(rods.box if domain is None and rods.box is not None else
+                  rods.bounding_box() if domain is None else domain, rods.units)
+    floor = MIN_RELATIVE_LENGTH * float(np.max(dom[1] - dom[0]))
 
-    def pos(v, name):
+    def pos(v, name, least=None):
         if v is None:
             return None
-        v = float(v)
-        if not math.isfinite(v) or v <= 0:
-            raise RodwarpError(f"{name} must be a positive number, got {v:g}")
-        return v
+        if least is None:  # the ball and the grid: their lower bounds are _check_ball_and_grid's
+            real(name, v, gt=0, unit=rods.units)
+            return real(name, v, le=MAX_COORDINATE, unit=rods.units)
+        return real(name, v, ge=least, le=MAX_COORDINATE, unit=rods.units,
+                    hint=f"at least {MIN_RELATIVE_LENGTH:g} of the analysed domain's largest edge")
 
-    d = pos(diameter, "--diameter") or float(np.mean(rods.diameters))
-    l = pos(length, "--length") or float(np.mean(rods.rod_lengths()))
+    d = pos(diameter, "diameter", floor) or float(np.mean(rods.diameters))
+    l = pos(length, "length", floor) or float(np.mean(rods.rod_lengths()))
     if not (d > 0 and l > 0):
         raise RodwarpError("rods have zero diameter or length; give --diameter and --length")
-    R = pos(radius, "--radius") or math.sqrt(d * l)
-    h = pos(spacing, "--spacing") or 0.5 * R
+    R = pos(radius, "radius") or math.sqrt(d * l)
+    h = pos(spacing, "spacing") or 0.5 * R
     _check_ball_and_grid(R, h, d, l, spacing is not None, rods.units)
-    tol = pos(contact_tolerance, "contact tolerance") or 0.1 * d
-    if domain is None:
-        domain = rods.box if rods.box is not None else rods.bounding_box()
-    dom = np.asarray(domain, dtype=np.float64).reshape(2, 3)
-    if not np.isfinite(dom).all() or np.any(dom[1] <= dom[0]):
-        raise RodwarpError(f"the analysis domain {dom.tolist()} is empty or not finite")
+    tol = 0.1 * d if contact_tolerance is None else real(
+        "contact_tolerance", contact_tolerance, ge=0, le=MAX_COORDINATE, unit=rods.units, hint="a surface gap")
     size = dom[1] - dom[0]
     if not keep_outside and np.any(size < 2 * R):
         from rodwarp.rodset._scale import unit_hint
@@ -143,6 +163,22 @@ def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float 
                                f"units first: {hint}; else raise --spacing")
         raise RodwarpError(f"the grid would have {n_vox:.3g} voxels; raise --spacing")
     return FieldParams(R, h, d, l, dom, bool(keep_outside), tol)
+
+
+def _domain(domain, units: str) -> np.ndarray:
+    """The analysed box as a (2, 3) array: finite, within ``MAX_COORDINATE``, not empty."""
+    try:
+        dom = np.asarray(domain, dtype=np.float64)
+    except (TypeError, ValueError):
+        dom = None
+    if dom is None or dom.shape != (2, 3) or isinstance(domain, (str, bytes)):
+        raise RodwarpTypeError(f"domain must be two corners (lower, upper) of 3 numbers each in {units}, "
+                               f"got {domain!r}")
+    if not np.isfinite(dom).all() or np.any(dom[1] <= dom[0]) or np.max(np.abs(dom)) > MAX_COORDINATE:
+        raise RodwarpError(f"the analysis domain {dom.tolist()} is empty, not finite or beyond "
+                           f"{MAX_COORDINATE:g} {units}; give domain as (lower corner, upper corner), upper above "
+                           f"lower on every axis")
+    return dom
 
 
 def grid_axes(p: FieldParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -214,9 +250,21 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
     Fields
         One array (nz, ny, nx) per registered field, NaN outside the domain; ``attrs`` record
         d, l, rho (rods per unit volume), Z (contacts per rod), the contact source and timings.
+
+    Raises
+    ------
+    TypeError
+        An argument of the wrong kind (``rods`` not a RodSet, ``contacts`` not Contacts, ...).
+    RodwarpError
+        A parameter out of its range (:func:`resolve_params`), or an unknown device.
     """
     p = resolve_params(rods, radius=radius, spacing=spacing, diameter=diameter, length=length,
                        domain=domain, keep_outside=keep_outside, contact_tolerance=contact_tolerance)
+    if contacts is not None:
+        instance("contacts", contacts, Contacts, "a Contacts object or None (detected from the geometry)")
+    if progress is not None and not callable(progress):
+        raise RodwarpTypeError(f"progress must be a callable progress(done, total) or None, got "
+                               f"{type(progress).__name__}")
     dev = _warp.resolve_device(device)
     from rodwarp.kernels import fields as k
 

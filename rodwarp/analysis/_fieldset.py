@@ -26,6 +26,9 @@ import numpy as np
 from rodwarp._util import json_safe
 from rodwarp.analysis._registry import field_names
 from rodwarp.errors import RodwarpError
+from rodwarp.rodset import MAX_COORDINATE
+from rodwarp.rodset._args import real
+from rodwarp.rodset._units import _check_units
 from rodwarp.rodset.files import atomic_path, consolidate_zarr
 
 __all__ = ["Fields"]
@@ -46,9 +49,9 @@ class Fields:
     x, y, z : ndarray
         Voxel-centre coordinates along each axis, in ``units``.
     radius : float
-        Ball radius R, in ``units``.
+        Ball radius R, in ``units`` (positive, at most 1e12).
     spacing : float
-        Grid spacing, in ``units``.
+        Grid spacing, in ``units`` (positive, at most 1e12).
     units : str
         Length unit of coordinates, radius and spacing (``m``, ``mm``, ``um`` or ``voxel``).
     attrs : dict
@@ -83,9 +86,9 @@ class Fields:
             if a.size != size:
                 raise RodwarpError(f"coordinate '{name}' has {a.size} values but the grid has {size} along {name}")
             object.__setattr__(self, name, a)
-        self.radius = radius
-        self.spacing = spacing
-        self.units = units
+        self.radius = real("radius", radius, gt=0, le=MAX_COORDINATE, unit=str(units))
+        self.spacing = real("spacing", spacing, gt=0, le=MAX_COORDINATE, unit=str(units))
+        self.units = _check_units(units)
         self.attrs = {} if attrs is None else attrs
 
     def __getattr__(self, name: str):
@@ -201,6 +204,14 @@ def _load_zarr(path: Path) -> Fields:
 
 
 def _from_dict(data: dict, path: Path) -> Fields:
+    try:
+        return _fields_of(data, path)
+    except RodwarpError as e:  # a bad radius, spacing or unit recorded in the file: say which file
+        msg = str(e)
+        raise RodwarpError(msg if str(path) in msg else f"'{path}': {msg}") from None
+
+
+def _fields_of(data: dict, path: Path) -> Fields:
     if "e" not in data:
         raise RodwarpError(f"'{path}' holds no 'e' array; precomputed fields need at least 'e' and 'n'")
     meta = {}

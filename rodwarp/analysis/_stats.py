@@ -23,8 +23,10 @@ import numpy as np
 from scipy import ndimage
 
 from rodwarp._util import json_safe
+from rodwarp.analysis._fieldset import Fields
 from rodwarp.analysis._registry import fields_with
-from rodwarp.errors import RodwarpError
+from rodwarp.errors import RodwarpError, RodwarpTypeError
+from rodwarp.rodset._args import instance, real, whole
 
 __all__ = ["outlier_bound", "find_tangles", "histogram", "z_profiles", "field_statistics", "power_law_fit",
            "power_law_density", "log_histogram",
@@ -34,6 +36,8 @@ AXES = ("x", "y", "z")
 # Array axis of each reported axis: arrays are (z, y, x).
 _ARRAY_AXIS = {"x": 2, "y": 1, "z": 0}
 _MAX_TANGLES_REPORTED = 50
+#: most histogram bins, as ``rodwarp analyze --bins``
+MAX_BINS = 100_000
 
 
 # ----------------------------------------------------------------------------------------------
@@ -121,7 +125,7 @@ def find_tangles(e, valid, e_lb: float, connectivity: int = 26, spacing=1.0, sys
     valid : ndarray of bool, shape (nz, ny, nx)
         Voxels inside the analysed domain (``Fields.valid``).
     e_lb : float
-        Outlier bound (see :func:`outlier_bound`); the comparison is strict.
+        Outlier bound, finite (see :func:`outlier_bound`); the comparison is strict.
     connectivity : {26, 6}
         26: voxels touching by a face, an edge or a corner belong together (full 3x3x3
         structure); 6: faces only.
@@ -153,6 +157,7 @@ def find_tangles(e, valid, e_lb: float, connectivity: int = 26, spacing=1.0, sys
         Shapes that do not match, a connectivity other than 26 or 6, a bad spacing or size.
     """
     structure = _structure(connectivity)
+    e_lb = real("e_lb", e_lb, hint="the outlier bound of outlier_bound()")
     e = np.asarray(e, dtype=np.float64)
     valid = np.asarray(valid, dtype=bool)
     if e.ndim != 3 or e.shape != valid.shape:
@@ -223,9 +228,10 @@ def histogram(values, bins: int = 40, range=None) -> dict[str, np.ndarray]:  # n
     values : array_like
         Sample (field values, any shape); NaN and inf are dropped.
     bins : int
-        Number of equal-width bins.
+        Number of equal-width bins, 1 to ``MAX_BINS``.
     range : (float, float), optional
-        Lower and upper edge; default the min and max of the finite values.
+        Lower and upper edge (finite, lower below upper); default the min and max of the
+        finite values.
 
     Returns
     -------
@@ -235,6 +241,9 @@ def histogram(values, bins: int = 40, range=None) -> dict[str, np.ndarray]:  # n
         NaN when there is no finite value) and ``n`` (finite values counted, inside or outside
         the range).
     """
+    bins = whole("bins", bins, ge=1, le=MAX_BINS)
+    if range is not None:
+        range = _range(range)
     v = np.asarray(values, dtype=np.float64).ravel()
     v = v[np.isfinite(v)]
     if range is None and v.size and 0 < v.max() - v.min() < 1e-9 * max(1.0, abs(v.max()), abs(v.min())):
@@ -252,6 +261,18 @@ def histogram(values, bins: int = 40, range=None) -> dict[str, np.ndarray]:  # n
         # no sample: a density is undefined, and NaN says so without a divide warning
         density = np.full(counts.shape, np.nan)
     return {"edges": edges, "counts": counts, "density": density, "n": int(v.size)}
+
+
+def _range(value) -> tuple[float, float]:
+    """A histogram's (lower, upper) edges: two finite numbers, lower below upper."""
+    try:
+        lo, hi = value
+    except (TypeError, ValueError):
+        raise RodwarpTypeError(f"range must be two numbers (lower, upper) or None, got {value!r}") from None
+    lo, hi = real("range lower edge", lo), real("range upper edge", hi)
+    if not lo < hi:
+        raise RodwarpError(f"range lower edge {lo:g} must be below its upper edge {hi:g}")
+    return lo, hi
 
 
 def _truncated_gamma(logx: np.ndarray, la: float, lb: float) -> float:
@@ -299,9 +320,9 @@ def power_law_fit(values, *, min_range: int = 50, candidates: int = 24) -> dict 
     values : array_like
         Sample (e.g. a field's valid voxels); non-finite and non-positive values are dropped.
     min_range : int
-        Fewest samples a range may hold.
+        Fewest samples a range may hold (>= 2).
     candidates : int
-        Candidate bounds tried on each side.
+        Candidate bounds tried on each side (1 to 1000).
 
     Returns
     -------
@@ -313,6 +334,8 @@ def power_law_fit(values, *, min_range: int = 50, candidates: int = 24) -> dict 
         ``accepted`` (the KS test passed) and ``note`` (says when the range spans less than one
         decade, or no range passed); None when fewer than ``min_range`` positive values exist.
     """
+    min_range = whole("min_range", min_range, ge=2)
+    candidates = whole("candidates", candidates, ge=1, le=1000, hint="the fit tries candidates^2 ranges")
     v = np.asarray(values, dtype=np.float64).ravel()
     v = np.sort(v[np.isfinite(v) & (v > 0)])
     n = v.size
@@ -361,6 +384,7 @@ def log_histogram(values, bins: int = 30) -> dict | None:
         ``x`` (geometric bin centres) and ``density`` (counts / (n * bin width), in 1 / units
         of ``values``) of the non-empty bins; None with fewer than two distinct positive values.
     """
+    bins = whole("bins", bins, ge=2, le=MAX_BINS, hint="log-spaced bin edges")
     v = np.asarray(values, dtype=np.float64).ravel()
     v = v[np.isfinite(v) & (v > 0)]
     if v.size < 2 or v.max() <= v.min():
@@ -426,9 +450,9 @@ def field_statistics(fields, method: str = "q3", connectivity: int = 26, bins: i
     connectivity : {26, 6}
         Voxel connectivity of tangles, see :func:`find_tangles`.
     bins : int
-        Bins of each histogram.
+        Bins of each histogram, 1 to ``MAX_BINS``.
     contact_cluster_fraction : float, optional
-        Fraction of rods in the largest contact cluster (the paper's stability measure f),
+        Fraction of rods in [0, 1] in the largest contact cluster (the paper's stability measure f),
         when the caller has it; stored as ``largest_contact_cluster_fraction``.
     power_laws : bool
         Fit the power laws of p(e) and p(c) (``power_law``; about 0.1-1 s); False leaves
@@ -459,7 +483,11 @@ def field_statistics(fields, method: str = "q3", connectivity: int = 26, bins: i
     RodwarpError
         No valid voxel, or a bad method or connectivity.
     """
+    instance("fields", fields, Fields, "a Fields object (compute_fields(rods) or Fields.load(path))")
     _structure(connectivity)  # fail on a bad connectivity before any work
+    bins = whole("bins", bins, ge=1, le=MAX_BINS)
+    if contact_cluster_fraction is not None:
+        real("contact_cluster_fraction", contact_cluster_fraction, ge=0, le=1, hint="a fraction of the rods")
     valid = fields.valid
     n_valid = int(valid.sum())
     if n_valid == 0:

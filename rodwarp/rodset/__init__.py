@@ -22,9 +22,9 @@ one run: the ``rodwarp-run.json`` manifest).  Nothing here imports warp.
 from rodwarp.rodset._formats import load
 from rodwarp.rodset._geometry import detect_contacts, segment_closest_params, segment_distance
 from rodwarp.rodset._graph import contacts_per_rod, largest_cluster, largest_cluster_fraction
-from rodwarp.rodset._rodset import FORMAT_NAME, FORMAT_VERSION, SUPPORTED_SUFFIXES, Contacts, RodSet
+from rodwarp.rodset._rodset import FORMAT_NAME, FORMAT_VERSION, MAX_COORDINATE, SUPPORTED_SUFFIXES, Contacts, RodSet
 from rodwarp.rodset._units import UNITS
 
 __all__ = ["RodSet", "Contacts", "load", "UNITS", "FORMAT_NAME", "FORMAT_VERSION", "SUPPORTED_SUFFIXES",
-           "detect_contacts", "segment_distance", "segment_closest_params", "contacts_per_rod", "largest_cluster",
-           "largest_cluster_fraction"]
+           "MAX_COORDINATE", "detect_contacts", "segment_distance", "segment_closest_params", "contacts_per_rod",
+           "largest_cluster", "largest_cluster_fraction"]

@@ -20,7 +20,7 @@ import numpy as np
 from rodwarp._util import json_safe
 from rodwarp._util import one_line_error as _fail
 from rodwarp.errors import RodwarpError
-from rodwarp.rodset._rodset import FORMAT_NAME, FORMAT_VERSION, SUPPORTED_SUFFIXES, Contacts, RodSet
+from rodwarp.rodset._rodset import FORMAT_NAME, FORMAT_VERSION, MAX_COORDINATE, SUPPORTED_SUFFIXES, Contacts, RodSet
 from rodwarp.rodset._units import _check_units, _positive
 from rodwarp.rodset.files import atomic_path
 
@@ -146,9 +146,9 @@ def load(path: str | os.PathLike, *, radius: float | None = None, diameter: floa
         rods = _load_npz(path)
     elif suffix == ".csv":
         if diameter is not None:
-            radius = _positive(diameter, "diameter") / 2.0
+            radius = _length(diameter, "diameter") / 2.0
         elif radius is not None:
-            radius = _positive(radius, "radius")
+            radius = _length(radius, "radius")
         return _load_csv(path, radius, units or "m")
     else:
         raise _fail(f"unsupported file type {path.suffix or '(none)'!r} for {path}; "
@@ -159,6 +159,14 @@ def load(path: str | os.PathLike, *, radius: float | None = None, diameter: floa
         except RodwarpError as e:
             raise _fail(f"{path}: {e}") from None
     return rods
+
+
+def _length(v, name: str) -> float:
+    """A rod size given to :func:`load`: positive and at most :data:`MAX_COORDINATE`."""
+    f = _positive(v, name, f"a positive number (at most {MAX_COORDINATE:g}) in the file's units")
+    if f > MAX_COORDINATE:
+        raise _fail(f"{name} must be a positive number (at most {MAX_COORDINATE:g}) in the file's units, got {v!r}")
+    return f
 
 
 def _parse_meta(meta, path: Path) -> dict:

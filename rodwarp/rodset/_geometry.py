@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rodwarp.rodset._rodset import Contacts
+from rodwarp.rodset._args import instance, real
+from rodwarp.rodset._rodset import MAX_COORDINATE, Contacts, RodSet
 
 __all__ = ["segment_closest_params", "segment_distance", "detect_contacts"]
 
@@ -94,8 +95,8 @@ def detect_contacts(rods, tolerance: float | None = None):
     rods : RodSet
         The rods, in any length unit.
     tolerance : float, optional
-        Largest surface gap counted as a contact, in the rod set's units; default d / 10 with
-        d the mean rod diameter.
+        Largest surface gap counted as a contact, in the rod set's units (negative: only
+        overlaps deeper than that; within 1e12); default d / 10 with d the mean rod diameter.
 
     Returns
     -------
@@ -106,9 +107,13 @@ def detect_contacts(rods, tolerance: float | None = None):
     """
     from scipy.spatial import cKDTree
 
+    instance("rods", rods, RodSet, "a RodSet")
     p0, p1, rod = rods.segments()
     if tolerance is None:
         tolerance = 0.1 * float(np.mean(rods.diameters))
+    else:  # negative: only overlaps deeper than |tolerance| count
+        tolerance = real("tolerance", tolerance, ge=-MAX_COORDINATE, le=MAX_COORDINATE, unit=rods.units,
+                         hint="a surface gap")
     if len(rod) < 2:
         return Contacts.empty()
     mid = 0.5 * (p0 + p1)

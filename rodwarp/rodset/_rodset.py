@@ -24,15 +24,23 @@ from typing import Sequence
 import numpy as np
 
 from rodwarp._util import json_safe
+from rodwarp.errors import RodwarpTypeError
 from rodwarp._util import one_line_error as _fail
 from rodwarp.rodset._units import UNITS, _check_units, _scale, _unit_scale
 
-__all__ = ["UNITS", "FORMAT_NAME", "FORMAT_VERSION", "SUPPORTED_SUFFIXES", "Contacts", "RodSet"]
+__all__ = ["UNITS", "FORMAT_NAME", "FORMAT_VERSION", "SUPPORTED_SUFFIXES", "MAX_COORDINATE", "Contacts", "RodSet"]
 
 
 FORMAT_NAME = "rodwarp.rodset"
 FORMAT_VERSION = 1
 SUPPORTED_SUFFIXES = (".npz", ".zarr", ".csv")
+#: largest magnitude of a coordinate, radius, gap or box corner, in the set's own unit (and of a
+#: velocity, in that unit per second).  1e12 of any unit (1000 km in um, 7 AU in m) is beyond
+#: any packing or scan, while squares and cubes of such values (distances, box volumes) stay far
+#: from float64 overflow (1e308): a larger value is a stray or corrupt number, not a length.
+#: Sets far smaller than this but spread over many rod lengths are refused with their own
+#: message (:func:`rodwarp.rodset._sanity.far_rod`, the engine's and the grid's limits).
+MAX_COORDINATE = 1e12
 
 
 # ----------------------------------------------------------------------------------------------
@@ -66,6 +74,28 @@ def _check_finite(a: np.ndarray, name: str) -> None:
         bad = np.argwhere(~np.isfinite(a))[0]
         where = f"row {bad[0]}" if a.ndim > 1 else f"index {bad[0]}"
         raise _fail(f"{name} contains NaN or inf (first at {where}); remove or fix those values")
+
+
+def _check_magnitude(a: np.ndarray, name: str, unit: str | None, what: str = "length", row: str = "row") -> None:
+    """Refuse finite values beyond :data:`MAX_COORDINATE` of ``unit`` (None: the rod set's unit,
+    not known here): they are stray or corrupt numbers, and their squares overflow.  ``row``
+    names what a row of ``a`` is (``vertex``, ``contact``)."""
+    if not (a.size and float(np.max(np.abs(a))) > MAX_COORDINATE):
+        return
+    bad = np.argwhere(np.abs(a) > MAX_COORDINATE)[0]
+    where = f"{row} {bad[0]}"
+    u = f" {unit}" if unit else ""
+    of = f"'{unit}'" if unit else "the rod set's unit"
+    raise _fail(f"{name} hold {float(a[tuple(bad)]):.3g}{u} (first at {where}), too large to be a {what} in {of} "
+                f"(|value| <= {MAX_COORDINATE:g}{u}); fix those values, or give the rods' true units")
+
+
+def _array_like(value, name: str):
+    """``value`` unless it is plainly not an array of numbers (a string, a mapping, a set, None)."""
+    if value is None or isinstance(value, (str, bytes, dict, set)):
+        raise RodwarpTypeError(f"{name} must be numeric (an array of numbers), got {type(value).__name__} "
+                        f"{' '.join(repr(value).split())[:60]}")
+    return value
 
 
 # ----------------------------------------------------------------------------------------------
@@ -105,6 +135,8 @@ class Contacts:
                 f"point {self.point.shape}, gap {self.gap.shape}; expected (K,), (K,), (K,3), (K,)")
         _check_finite(self.point, "contacts.point")
         _check_finite(self.gap, "contacts.gap")
+        _check_magnitude(self.point, "contacts.point", None, row="contact")
+        _check_magnitude(self.gap, "contacts.gap", None, row="contact")
         if K and np.any(self.rod_i > self.rod_j):
             lo = np.minimum(self.rod_i, self.rod_j)
             hi = np.maximum(self.rod_i, self.rod_j)
@@ -176,11 +208,11 @@ class RodSet:
     # -- construction / validation -------------------------------------------------------------
 
     def __post_init__(self) -> None:
-        self.points = _float_array(self.points, "points")
+        self.points = _float_array(_array_like(self.points, "points"), "points")
         if self.points.size == 0 and self.points.ndim == 1:
             self.points = self.points.reshape(0, 3)
-        self.offsets = _int_array(self.offsets, "offsets")
-        self.radii = _float_array(self.radii, "radii")
+        self.offsets = _int_array(_array_like(self.offsets, "offsets"), "offsets")
+        self.radii = _float_array(_array_like(self.radii, "radii"), "radii")
         if self.radii.ndim == 0:  # a scalar radius applies to every rod
             n = max(self.offsets.shape[0] - 1, 0) if self.offsets.ndim == 1 else 0
             self.radii = np.full(n, float(self.radii))
@@ -228,6 +260,8 @@ class RodSet:
             raise _fail(f"radii must have shape ({N},) (one per rod), got {r.shape}")
         _check_finite(p, "points")
         _check_finite(r, "radii")
+        _check_magnitude(p, "points", self.units, row="vertex")
+        _check_magnitude(r, "radii", self.units, row="rod")
         if np.any(r <= 0):
             bad = int(np.flatnonzero(r <= 0)[0])
             raise _fail(f"radius of rod {bad} is {float(r[bad])!r}; radii must be positive")
@@ -238,11 +272,15 @@ class RodSet:
             if a.shape != p.shape:
                 raise _fail(f"{name} must have the same shape as points {p.shape}, got {a.shape}")
             _check_finite(a, name)
+            speed = name == "velocities"
+            _check_magnitude(a, name, self.units + "/s" if speed else self.units, "speed" if speed else "length",
+                             row="vertex")
         if self.box is not None:
             b = self.box
             if b.shape != (2, 3):
                 raise _fail(f"box must have shape (2, 3) (lower corner, upper corner), got {b.shape}")
             _check_finite(b, "box")
+            _check_magnitude(b, "box", self.units, row="corner")
             if np.any(b[0] >= b[1]):
                 raise _fail(f"box lower corner {b[0].tolist()} must be below upper corner {b[1].tolist()} "
                             f"on every axis")
@@ -383,9 +421,12 @@ class RodSet:
         -------
         RodSet
         """
+        if polylines is None or isinstance(polylines, (str, bytes, dict, set)):
+            raise RodwarpTypeError(f"polylines must be a sequence of (n, 3) vertex arrays, got "
+                                   f"{type(polylines).__name__}")
         polys = []
         for k, pl in enumerate(polylines):
-            a = _float_array(pl, f"polyline {k}")
+            a = _float_array(_array_like(pl, f"polyline {k}"), f"polyline {k}")
             if a.ndim != 2 or a.shape[1] != 3:
                 raise _fail(f"polyline {k} must have shape (n, 3), got {a.shape}")
             if a.shape[0] < 2:
@@ -395,7 +436,7 @@ class RodSet:
             raise _fail("rod set is empty; pass at least one polyline")
         offsets = np.zeros(len(polys) + 1, dtype=np.int64)
         offsets[1:] = np.cumsum([a.shape[0] for a in polys])
-        r = _float_array(radii, "radii")
+        r = _float_array(_array_like(radii, "radii"), "radii")
         if r.ndim == 0:
             r = np.full(len(polys), float(r))
         return cls(np.concatenate(polys), offsets, r, units=units, **kw)

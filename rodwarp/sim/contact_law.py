@@ -9,10 +9,11 @@ rod-wall contacts alike.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
-from rodwarp.errors import RodwarpError
+from rodwarp.errors import RodwarpError, RodwarpTypeError
+from rodwarp.rodset._args import real
+from rodwarp.sim._limits import MAX_LENGTH_M, MAX_SPEED
 
 LAWS = ("exact", "imc")
 #: IMC's K1 = 15 / delta and K2 = 15 / nu (DisMech's contact_force.cpp and floor_contact_force.cpp)
@@ -28,6 +29,9 @@ IMC_NU = 1e-3
 #: an impact at 3 m/s on l = 1 m steel rods stays within 0.7 delta (k_c = 1000 m g / delta;
 #: DisMech's floor, 1e4 N/m for gram-scale rods with delta ~ 0.1 mm, sits at about 100 m g / delta)
 IMC_STIFFNESS_WEIGHTS = 1000.0
+#: stiffest contact accepted (N/m): a steel bar of 1 m^2 section and 0.2 mm length, far beyond
+#: any contact between rods
+IMC_MAX_STIFFNESS = 1e15
 
 
 @dataclass(frozen=True)
@@ -39,12 +43,14 @@ class ContactLaw:
     name : {"exact", "imc"}
         ``exact`` (default) or ``imc``.
     delta : float, optional
-        IMC distance tolerance (m): the penalty acts at surface gaps below it. Default
-        ``IMC_DELTA_DIAMETERS`` (0.1) diameters of the thinnest rod.
+        IMC distance tolerance (m, in (0, 1e6]): the penalty acts at surface gaps below it.
+        Default ``IMC_DELTA_DIAMETERS`` (0.1) diameters of the thinnest rod.
     nu : float
-        IMC slip tolerance (m/s): friction is full Coulomb above it and smoothed below it.
+        IMC slip tolerance (m/s, in (0, 1e3]): friction is full Coulomb above it and smoothed
+        below it.
     stiffness : float, optional
-        IMC contact stiffness k_c (N/m) of the energy k_c [softplus(-K1 g) / K1]^2. Default
+        IMC contact stiffness k_c (N/m, in (0, ``IMC_MAX_STIFFNESS``]) of the energy
+        k_c [softplus(-K1 g) / K1]^2. Default
         ``IMC_STIFFNESS_WEIGHTS`` heaviest-rod weights per delta (gravity's magnitude, 9.81 m/s^2
         without gravity).
     """
@@ -55,11 +61,14 @@ class ContactLaw:
     stiffness: float | None = None
 
     def __post_init__(self):
+        if not isinstance(self.name, str):
+            raise RodwarpTypeError(f"name must be 'exact' or 'imc', got {type(self.name).__name__} {self.name!r}")
         if self.name not in LAWS:
             raise RodwarpError(f"contact law must be exact or imc, got '{self.name}'")
-        for what, value in (("delta", self.delta), ("stiffness", self.stiffness), ("nu", self.nu)):
-            if value is not None and not (math.isfinite(value) and value > 0):
-                raise RodwarpError(f"IMC {what} must be a positive number, got {value}")
+        for what, value, top, unit in (("delta", self.delta, MAX_LENGTH_M, "m"), ("nu", self.nu, MAX_SPEED, "m/s"),
+                                       ("stiffness", self.stiffness, IMC_MAX_STIFFNESS, "N/m")):
+            if value is not None and not real(what, value, le=top, unit=unit, hint=f"the IMC {what}") > 0:
+                raise RodwarpError(f"{what} must be a positive number ({unit}), the IMC {what}, got {value:g}")
 
     @property
     def imc(self) -> bool:

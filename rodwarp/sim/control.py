@@ -13,7 +13,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from rodwarp.errors import RodwarpError
+from rodwarp.errors import RodwarpError, RodwarpTypeError
+from rodwarp.rodset._args import direction as _direction
+from rodwarp.rodset._args import real
+from rodwarp.sim._limits import MAX_FREQUENCY, MAX_LENGTH_M, MAX_SPEED
 
 
 @dataclass
@@ -115,11 +118,11 @@ class Control:
         """Moving walls follow x = A sin(2 pi f (t - phase_time)) along ``direction`` (m, Hz); with
         ``from_rest``, x = A (1 - cos(2 pi f (t - phase_time))): the same oscillation started at
         rest at its lowest point, so a pile resting on the wall is not struck at the drive's
-        peak speed in the first step."""
-        if frequency < 0:
-            raise RodwarpError(f"drive frequency must be >= 0 Hz, got {frequency}")
-        d = np.asarray(direction, float)
-        self.drive = Drive(float(amplitude), float(frequency), d / np.linalg.norm(d), float(phase_time),
+        peak speed in the first step. ``amplitude`` within 1e6 m, ``frequency`` in [0, 1e6] Hz,
+        ``phase_time`` (s) finite, ``direction`` any non-zero vector."""
+        a = real("amplitude", amplitude, ge=-MAX_LENGTH_M, le=MAX_LENGTH_M, unit="m")
+        f = real("frequency", frequency, ge=0, le=MAX_FREQUENCY, unit="Hz")
+        self.drive = Drive(a, f, _direction("direction", direction), real("phase_time", phase_time, unit="s"),
                            from_rest=bool(from_rest))
 
     def set_ramp(self, speed: float, duration: float = math.inf, direction=(0.0, 0.0, 1.0),
@@ -127,13 +130,15 @@ class Control:
         """Moving walls travel at ``speed`` (m/s) along ``direction`` from ``start_time`` (s) for
         ``duration`` (s), then stay: a piston pressing by speed x duration, a container lifted
         away. ``start`` (m) is their displacement when the ramp begins (a piston already
-        lowered onto the packing)."""
-        if not (math.isfinite(speed) and math.isfinite(start) and duration > 0):
-            raise RodwarpError(f"a ramp needs a finite speed and start and a positive duration, got {speed} m/s "
-                               f"from {start} m for {duration} s")
-        d = np.asarray(direction, float)
-        self.drive = Drive(direction=d / np.linalg.norm(d), phase_time=float(start_time), ramp_speed=float(speed),
-                           ramp_duration=float(duration), ramp_start=float(start), ramp=True)
+        lowered onto the packing). ``speed`` within 1e3 m/s, ``start`` within 1e6 m,
+        ``duration`` > 0 s (``math.inf``: for ever), ``start_time`` (s) finite."""
+        v = real("speed", speed, ge=-MAX_SPEED, le=MAX_SPEED, unit="m/s")
+        s0 = real("start", start, ge=-MAX_LENGTH_M, le=MAX_LENGTH_M, unit="m")
+        # inf is the documented "never stops"; every other duration must be a positive number
+        T = math.inf if duration == math.inf else real("duration", duration, gt=0, unit="s")
+        t0 = real("start_time", start_time, unit="s")
+        self.drive = Drive(direction=_direction("direction", direction), phase_time=t0, ramp_speed=v,
+                           ramp_duration=T, ramp_start=s0, ramp=True)
 
     def floor_height(self, t: float) -> float | None:
         """Height z (m) at time t of the wall named ``floor`` (moving with the drive when it is
@@ -155,7 +160,7 @@ class Control:
         if torque is None:
             self._torque = None
             return
-        t = np.asarray(torque, dtype=np.float64).ravel()
+        t = _torques(torque)
         if t.size == m.n_rods:
             I = m.inertia_np
             tot = np.bincount(m.vertex_rod_np, weights=I, minlength=m.n_rods)
@@ -170,3 +175,18 @@ class Control:
         if self._torque is None:
             self._torque = wp.zeros(self.model.n_vertices, dtype=wp.float64, device=self.model.device)
         return self._torque
+
+
+def _torques(torque) -> np.ndarray:
+    """``torque`` as a flat float64 array of finite values (N m)."""
+    try:
+        t = np.asarray(torque, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise RodwarpTypeError(f"torque must be numbers (N m), one per rod or per vertex slot, got "
+                        f"{type(torque).__name__}") from None
+    if isinstance(torque, (str, bytes)):
+        raise RodwarpTypeError(f"torque must be numbers (N m), one per rod or per vertex slot, got {torque!r}")
+    if not np.all(np.isfinite(t)):
+        raise RodwarpError(f"torque must be finite (N m), got {t[~np.isfinite(t)][0]} at index "
+                           f"{int(np.flatnonzero(~np.isfinite(t))[0])}")
+    return t

@@ -16,6 +16,8 @@ import warp as wp
 
 from rodwarp.kernels import narrowphase
 from rodwarp.rodset import Contacts
+from rodwarp.rodset._args import optional_real, real
+from rodwarp.sim._limits import MAX_LENGTH_M
 from rodwarp.sim.model import Model
 from rodwarp.sim.state import State
 
@@ -33,14 +35,16 @@ def rod_contacts(model: Model, state: State, points, tolerance: float | None = N
     points : ContactPoints
         The contact points of that step (``points.last``; :meth:`RodSolver.collide`).
     tolerance : float, optional
-        Contact distance (m); default ``model.contact_distance`` (d / 10).
+        Contact distance (m, within 1e6 m; negative counts only overlaps deeper than it);
+        default ``model.contact_distance`` (d / 10).
 
     Returns
     -------
     Contacts
         One entry per touching rod pair (the closest of its segment pairs).
     """
-    tol = model.contact_distance if tolerance is None else tolerance
+    tol = optional_real("tolerance", tolerance, ge=-MAX_LENGTH_M, le=MAX_LENGTH_M, unit="m")
+    tol = model.contact_distance if tol is None else tol
     last = points.last
     n = last.count
     if n == 0:
@@ -77,6 +81,7 @@ def rod_contacts(model: Model, state: State, points, tolerance: float | None = N
 
 def centroid_height(model: Model, state: State, floor: float = 0.0) -> float:
     """Mass-weighted mean height of all vertices above the floor plane z = ``floor`` (m)
-    (``Control.floor_height`` gives the floor of a scene at a time)."""
+    (``Control.floor_height`` gives the floor of a scene at a time; within 1e6 m)."""
+    floor = real("floor", floor, ge=-MAX_LENGTH_M, le=MAX_LENGTH_M, unit="m")
     x = state.x.numpy()
     return float(np.average(x[:, 2], weights=model.mass_np) - floor)

@@ -32,8 +32,11 @@ import numpy as np
 import warp as wp
 
 from rodwarp import _warp
-from rodwarp.errors import RodwarpError
+from rodwarp.errors import RodwarpError, RodwarpTypeError
 from rodwarp.rodset import RodSet
+from rodwarp.rodset._args import instance, real
+from rodwarp.sim._limits import (DENSITY_RANGE, MAX_LENGTH_M, YOUNG_RANGE, check_model_options, check_rods, friction,
+                                 pinned_indices)
 from rodwarp.sim.contact_law import ContactLaw
 from rodwarp.sim.walls import Plane
 
@@ -50,11 +53,11 @@ class Material:
     Parameters
     ----------
     young : float
-        Young's modulus E (Pa).
+        Young's modulus E (Pa), in ``YOUNG_RANGE`` (1 Pa to 1e13 Pa).
     density : float
-        Mass density rho (kg/m^3).
+        Mass density rho (kg/m^3), in ``DENSITY_RANGE`` (1e-2 to 1e5 kg/m^3).
     poisson : float
-        Poisson ratio nu; sets the shear modulus G = E / (2 (1 + nu)) of twist.
+        Poisson ratio nu in (-1, 0.5); sets the shear modulus G = E / (2 (1 + nu)) of twist.
     """
 
     young: float = 200e9
@@ -62,12 +65,11 @@ class Material:
     poisson: float = 0.3
 
     def __post_init__(self):
-        if not (self.young > 0 and math.isfinite(self.young)):
-            raise RodwarpError(f"Young's modulus must be positive, got {self.young}; pass e.g. --young 2e11")
-        if not (self.density > 0 and math.isfinite(self.density)):
-            raise RodwarpError(f"density must be positive, got {self.density}; pass e.g. --density 7850")
-        if not (-1.0 < self.poisson < 0.5):
-            raise RodwarpError(f"Poisson ratio must lie in (-1, 0.5), got {self.poisson}")
+        real("young", self.young, ge=YOUNG_RANGE[0], le=YOUNG_RANGE[1], unit="Pa",
+             hint="Young's modulus; steel is 2e11 Pa (--young 2e11)")
+        real("density", self.density, ge=DENSITY_RANGE[0], le=DENSITY_RANGE[1], unit="kg/m^3",
+             hint="steel is 7850 kg/m^3 (--density 7850)")
+        real("poisson", self.poisson, gt=-1.0, lt=0.5, hint="the Poisson ratio; steel's is 0.3")
 
     @property
     def shear(self) -> float:
@@ -159,16 +161,18 @@ class Model:
     material : Material
         Elastic material of every rod (steel by default).
     gravity : (3,) float
-        Body acceleration (m/s^2); the default is Earth gravity along -z.
+        Body acceleration (m/s^2), of magnitude at most ``MAX_GRAVITY`` (1e5 m/s^2); the
+        default is Earth gravity along -z.
     mu : float
-        Rod-rod friction coefficient.
+        Rod-rod friction coefficient, in [0, ``MAX_MU``] (10).
     damping : float
-        Viscous damping rate gamma (1/s) on every vertex velocity and edge spin. Off by default.
+        Viscous damping rate gamma (1/s) on every vertex velocity and edge spin, in [0,
+        ``MAX_DAMPING``] (1e6 1/s). Off by default.
     pinned : array of int, optional
         Input vertex indices held fixed (infinite mass); an edge with both ends pinned is
         clamped in twist too. With ``rod_model="rigid"`` a rod with any pinned vertex is fixed.
     contact_distance : float, optional
-        Surface gap below which two rods count as touching (m); default d_min / 10.
+        Surface gap below which two rods count as touching (m), in [0, 1e6 m]; default d_min / 10.
     rod_contacts : bool
         Detect rod-rod contacts (off for single-rod validation scenes).
     extensible : bool
@@ -197,7 +201,16 @@ class Model:
         Container corners (m) that size the broadphase's hash grid; default ``rods.box``.
 
     A model does not change once built: build the scene with
-    :class:`~rodwarp.sim.builder.ModelBuilder` and call its ``finalize()``.
+    :class:`~rodwarp.sim.builder.ModelBuilder` and call its ``finalize()``. The rods' radii must
+    lie in [1 nm, 1000 km] and their coordinates within 1000 km of the origin
+    (:mod:`rodwarp.sim._limits`).
+
+    Raises
+    ------
+    TypeError
+        An argument of the wrong kind (``rods`` not a RodSet, ``gravity`` not 3 numbers, ...).
+    RodwarpError
+        A value out of its range; the message names the argument, its range and unit.
     """
 
     def __init__(
@@ -219,17 +232,14 @@ class Model:
         walls=(),
         box=None,
     ):
-        _warp.init()
-        if rods.units != "m":
-            if rods.units == "voxel":
-                raise RodwarpError("rods are in voxels; convert with rods.to_units('m', voxel_size=...) first")
-            rods = rods.to_units("m")
-        if not (mu >= 0 and math.isfinite(mu)):
-            raise RodwarpError(f"friction coefficient must be >= 0, got {mu}")
-        if damping < 0:
-            raise RodwarpError(f"damping must be >= 0, got {damping}")
+        rods = check_rods(rods)
+        instance("material", material, Material, "a Material (Material(young=..., density=...))")
+        instance("contact_law", contact_law, (ContactLaw, str), "a ContactLaw or 'exact' or 'imc'")
+        check_model_options(dict(gravity=gravity, mu=mu, damping=damping, pinned=pinned,
+                                 contact_distance=contact_distance, rod_model=rod_model, device=device))
         if rod_model not in ROD_MODELS:
-            raise RodwarpError(f"rod model must be elastic or rigid, got '{rod_model}'")
+            raise RodwarpError(f"rod_model must be 'elastic' or 'rigid', got '{rod_model}'")
+        _warp.init()
         self.rod_model = rod_model
         self.rolling = bool(rolling)
         self.material = material
@@ -241,13 +251,10 @@ class Model:
         self.walls = self._checked_walls(walls)
         if box is None and rods.box is not None:
             box = rods.box
-        self.box: np.ndarray | None = None if box is None else np.asarray(box, float)
+        self.box: np.ndarray | None = None if box is None else checked_box(box)
         pin_in = np.zeros(rods.n_vertices, dtype=bool)
         if pinned is not None:
-            idx = np.asarray(pinned, dtype=np.int64).ravel()
-            if idx.size and (idx.min() < 0 or idx.max() >= rods.n_vertices):
-                raise RodwarpError(f"pinned vertex index out of range 0..{rods.n_vertices - 1}")
-            pin_in[idx] = True
+            pin_in[pinned_indices(pinned, rods.n_vertices)] = True
         if rod_model == "rigid":
             rods, pin_in = self._as_rigid(rods, pin_in)
         self.rods = rods
@@ -394,8 +401,8 @@ class Model:
             names.add(w.name)
             if w.mu is None:
                 w.mu = self.mu
-            elif not (w.mu >= 0 and math.isfinite(w.mu)):
-                raise RodwarpError(f"wall friction coefficient must be >= 0, got {w.mu}")
+            else:
+                friction(f"mu of wall '{w.name}'", w.mu)
             out.append(w)
         return tuple(out)
 
@@ -474,6 +481,43 @@ class Model:
             s.v.assign(wp.array(self.rods.velocities, dtype=wp.vec3d, device=self.device))
         s.director.assign(wp.array(self.director0_np, dtype=wp.vec3d, device=self.device))
         return s
+
+
+def checked_box(box, names=("box lower corner", "box upper corner")) -> np.ndarray:
+    """A container's corners (lower, upper) as a (2, 3) array (m): finite, within 1e6 m of the
+    origin, upper above lower on every axis.
+
+    Parameters
+    ----------
+    box : sequence of two (3,) array_like
+        Lower corner, upper corner (m).
+    names : (str, str)
+        How messages name the two corners (the Python arguments: ``lower``, ``upper``).
+
+    Raises
+    ------
+    TypeError
+        A corner that is not 3 numbers.
+    RodwarpError
+        A coordinate out of range, or the upper corner not above the lower one.
+    """
+    rows = []
+    for name, corner in zip(names, box if isinstance(box, (list, tuple, np.ndarray)) else ()):
+        try:
+            c = np.asarray(corner, dtype=np.float64)
+        except (TypeError, ValueError):
+            c = None
+        if c is None or c.shape != (3,) or isinstance(corner, (str, bytes)):
+            raise RodwarpTypeError(f"{name} must be 3 numbers (x, y, z) in m, got {corner!r}")
+        for axis, v in zip("xyz", c):
+            real(f"{name} {axis}", float(v), ge=-MAX_LENGTH_M, le=MAX_LENGTH_M, unit="m")
+        rows.append(c)
+    if len(rows) != 2 or len(box) != 2:
+        raise RodwarpTypeError(f"box must be two corners (lower, upper) of 3 numbers each in m, got {box!r}")
+    b = np.stack(rows)
+    if np.any(b[1] <= b[0]):
+        raise RodwarpError(f"{names[1]} {b[1].tolist()} must exceed {names[0]} {b[0].tolist()} on every axis")
+    return b
 
 
 def _structs():

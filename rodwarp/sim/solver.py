@@ -42,8 +42,34 @@ from rodwarp.sim._diagnostics import SolverChecks
 from rodwarp.sim._launches import SolveLaunches
 from rodwarp.sim.contact_law import IMC_SHARPNESS
 from rodwarp.sim.contacts import ContactPipeline, ContactPoints
+from rodwarp.rodset._args import instance, optional_real, real, whole
+from rodwarp.sim._limits import MAX_LENGTH_M, MAX_SPEED
 from rodwarp.sim.model import Model
 from rodwarp.sim.state import State
+
+#: most Gauss-Seidel sweeps (of velocities or positions) per step, as ``rodwarp simulate --iterations``
+MAX_SWEEPS = 100_000
+#: most steps :func:`run` takes (1e9 steps of the smallest scene take weeks on a CPU core)
+MAX_STEPS = 1e9
+
+
+def _check_settings(*, iterations, tolerance, warm_start, baumgarte, slop, relax, position_sweeps,
+                    position_tolerance, penetration_limit, speed_limit, energy_check_every, skin,
+                    steps_per_period) -> None:
+    """The ranges of :class:`RodSolver`'s settings (their meaning and units are in its docstring)."""
+    whole("iterations", iterations, ge=1, le=MAX_SWEEPS)
+    real("tolerance", tolerance, ge=0, le=MAX_SPEED, unit="m/s", hint="0 always runs every sweep")
+    for name, v in (("warm_start", warm_start), ("baumgarte", baumgarte)):
+        real(name, v, ge=0, le=1, hint="a fraction")
+    for name, v in (("slop", slop), ("position_tolerance", position_tolerance)):
+        real(name, v, ge=0, le=1, hint="in diameters of the thinnest rod")
+    real("relax", relax, gt=0, lt=2, hint="over-relaxation converges only in (0, 2); 1 is plain Gauss-Seidel")
+    whole("position_sweeps", position_sweeps, ge=0, le=MAX_SWEEPS)
+    real("penetration_limit", penetration_limit, gt=0, le=10, hint="in diameters of the thinnest rod")
+    optional_real("speed_limit", speed_limit, gt=0, le=1e6, unit="m/s", hint="leave it None for the default")
+    whole("energy_check_every", energy_check_every, ge=0, le=int(MAX_STEPS))
+    optional_real("skin", skin, gt=0, le=MAX_LENGTH_M, unit="m", hint="leave it None for the default")
+    real("steps_per_period", steps_per_period, ge=1, le=1e6)
 
 
 @dataclass
@@ -176,8 +202,12 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         skin: float | None = None,
         steps_per_period: float = STEPS_PER_PERIOD,
     ):
-        if iterations < 1:
-            raise RodwarpError(f"iterations must be >= 1, got {iterations}")
+        instance("model", model, Model, "a Model (ModelBuilder(rods, ...).finalize())")
+        _check_settings(iterations=iterations, tolerance=tolerance, warm_start=warm_start, baumgarte=baumgarte,
+                        slop=slop, relax=relax, position_sweeps=position_sweeps,
+                        position_tolerance=position_tolerance, penetration_limit=penetration_limit,
+                        speed_limit=speed_limit, energy_check_every=energy_check_every, skin=skin,
+                        steps_per_period=steps_per_period)
         if bending not in ("auto", "implicit", "explicit"):
             raise RodwarpError(f"bending must be auto, implicit or explicit, got '{bending}'")
         if bending == "explicit" and model.curved:
@@ -185,8 +215,6 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
                                "twist); use bending='implicit' or 'auto'")
         if coloring not in ("auto", "on", "off"):
             raise RodwarpError(f"coloring must be auto, on or off, got '{coloring}'")
-        if not (steps_per_period >= 1 and math.isfinite(steps_per_period)):
-            raise RodwarpError(f"steps_per_period must be a number >= 1, got {steps_per_period}")
         self.model = model
         self.steps_per_period = float(steps_per_period)
         self.iterations = int(iterations)
@@ -568,7 +596,8 @@ def run(solver: RodSolver, state: State, duration: float, dt: float, *, control=
     the warm start in and out). ``callback(state, info)`` is called every ``every`` steps with
     the state just written. The input ``state`` object is updated in place at the end.
     """
-    n = int(round(duration / dt))
+    n = _step_count(duration, dt)
+    whole("every", every, ge=1)
     contacts = solver.contacts() if contacts is None else contacts
     a = state
     b = State(solver.model)
@@ -582,3 +611,14 @@ def run(solver: RodSolver, state: State, duration: float, dt: float, *, control=
     if a is not state:
         state.copy_from(a)
     return state
+
+
+def _step_count(duration, dt) -> int:
+    """Steps of ``dt`` s in ``duration`` s: ``duration`` >= 0, ``dt`` > 0, at most :data:`MAX_STEPS` steps."""
+    T = real("duration", duration, ge=0, unit="s")
+    h = real("dt", dt, gt=0, unit="s")
+    steps = T / h  # inf when it overflows, refused below like any count too large
+    if steps > MAX_STEPS:
+        raise RodwarpError(f"duration {T:g} s at dt {h:g} s is {steps:.3g} steps, more than {MAX_STEPS:g}; "
+                           f"raise dt or shorten duration")
+    return int(round(steps))

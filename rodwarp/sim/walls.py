@@ -14,7 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rodwarp.errors import RodwarpError
+from rodwarp.errors import RodwarpError, RodwarpTypeError
+from rodwarp.rodset._args import direction, real, vector
+from rodwarp.sim._limits import MAX_LENGTH_M, friction
 
 #: the device's kind codes (kernels/walls.py)
 KINDS = {"plane": 0, "cylinder": 1}
@@ -72,12 +74,10 @@ class Plane(_Wall):
 
     @classmethod
     def make(cls, normal, offset: float, *, mu: float | None = None, moving: bool = False, name: str = "plane"):
-        """A plane with its normal normalised; ``mu`` None takes the model's."""
-        n = np.asarray(normal, dtype=np.float64).reshape(3)
-        ln = np.linalg.norm(n)
-        if not ln > 0:
-            raise RodwarpError("plane normal must be a non-zero vector")
-        return cls(n / ln, float(offset), mu=mu, moving=bool(moving), name=name)
+        """A plane with its normal normalised (any non-zero length); ``offset`` (m) within
+        1e6 m; ``mu`` in [0, 10], None takes the model's."""
+        n = direction("normal", normal)
+        return cls(n, _length("offset", offset), mu=_mu(mu), moving=bool(moving), name=_name(name))
 
 
 @dataclass
@@ -111,15 +111,13 @@ class Cylinder(_Wall):
     @classmethod
     def make(cls, point, axis, radius: float, *, mu: float | None = None, moving: bool = False,
              name: str = "cylinder"):
-        """A cylinder with its axis normalised; ``mu`` None takes the model's."""
-        a = np.asarray(axis, dtype=np.float64).reshape(3)
-        la = np.linalg.norm(a)
-        if not la > 0:
-            raise RodwarpError("cylinder axis must be a non-zero vector")
-        if not (np.isfinite(radius) and radius > 0):
-            raise RodwarpError(f"cylinder radius must be a positive length (m), got {radius}")
-        return cls(np.asarray(point, dtype=np.float64).reshape(3), a / la, float(radius), mu=mu, moving=bool(moving),
-                   name=name)
+        """A cylinder with its axis normalised (any non-zero length); ``point`` (m) and
+        ``radius`` (m, > 0) within 1e6 m; ``mu`` in [0, 10], None takes the model's."""
+        p = vector("point", point, unit="m", limit=MAX_LENGTH_M)
+        r = real("radius", radius, le=MAX_LENGTH_M, unit="m", hint="the cylinder's inner radius")
+        if not r > 0:
+            raise RodwarpError(f"radius must be a positive length (m), the cylinder's inner radius, got {r:g}")
+        return cls(p, direction("axis", axis), r, mu=_mu(mu), moving=bool(moving), name=_name(name))
 
     def distance(self, x, displacement=0.0, direction=(0.0, 0.0, 1.0)):
         """As :meth:`Plane.distance`: R minus the distance from the axis (m)."""
@@ -127,6 +125,20 @@ class Cylinder(_Wall):
         rel = np.asarray(x, float) - c
         rho = rel - np.outer(rel @ self.axis, self.axis).reshape(rel.shape)
         return self.radius - np.linalg.norm(rho, axis=-1)
+
+
+def _length(name: str, v) -> float:
+    return real(name, v, ge=-MAX_LENGTH_M, le=MAX_LENGTH_M, unit="m")
+
+
+def _mu(mu) -> float | None:
+    return None if mu is None else friction("mu", mu)
+
+
+def _name(name) -> str:
+    if not isinstance(name, str):
+        raise RodwarpTypeError(f"name must be a string (the wall's label), got {type(name).__name__} {name!r}")
+    return name
 
 
 def device_rows(walls, on, drive_direction, moving=None) -> dict:
