@@ -21,11 +21,15 @@ from pathlib import Path
 
 from rodwarp._util import one_line_error
 
-__all__ = ["BASE_BYTES", "Range", "check_ranges", "field_range", "fail", "number", "integer", "device_name", "human_bytes", "available_memory",
+__all__ = ["BASE_BYTES", "MAX_MU", "Range", "check_ranges", "field_range", "fail", "number", "integer", "device_name", "human_bytes", "available_memory",
            "memory_fits", "existing_ancestor", "disk_fits", "probe_write", "output_location"]
 
 #: fixed memory of a run (Python, Warp, NumPy, matplotlib), bytes
 BASE_BYTES = 300e6
+#: largest friction coefficient accepted (the command line and the engine alike): real materials
+#: stay below about 2 (rubber); above 10 the contact solver's friction cone is a typo's, not a
+#: material's
+MAX_MU = 10.0
 
 
 def fail(msg: str):

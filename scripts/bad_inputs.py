@@ -35,11 +35,13 @@ ROOT = Path(__file__).resolve().parent.parent
 SHORT = "--alpha 20 --n-rods 12 --entangle-duration 0.02 --duration 0.02 --save-every 0.01 --device cpu --quiet"
 
 
-def rodwarp(args: str, cwd: Path, timeout=600):
-    """Run ``rodwarp ARGS`` in a fresh process: (exit code, message, stderr lines, traceback?, wall s)."""
+def rodwarp(args: str, cwd: Path, timeout=600, env: dict | None = None):
+    """Run ``rodwarp ARGS`` in a fresh process (with ``env`` added to the environment): (exit
+    code, message, stderr lines, traceback?, wall s)."""
     cmd = [sys.executable, "-m", "rodwarp.cli", *shlex.split(args)]
     t = time.perf_counter()
-    r = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout)
+    r = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout,
+                       env={**os.environ, **env} if env else None)
     wall = time.perf_counter() - t
     err = [ln for ln in r.stderr.splitlines() if ln.strip()]
     out = [ln for ln in r.stdout.splitlines() if ln.strip()]
@@ -412,6 +414,17 @@ CASES_47: list[tuple] = [
     ("folders", "analyze R --out R/checkpoints", "analyze $TMP/base --quiet --out $TMP/base/checkpoints", 2,
      "checkpoints, an output of another run"),
     ("folders", "analyze R (its analysis/ inside R: allowed)", "analyze $TMP/base --quiet --no-figures", 0, ""),
+    ("messages", "1e300 coordinates, analyze", "analyze $TMP/big.csv --quiet --out $TMP/c1", 2,
+     "points hold 1e+300 m (first at vertex 1), too large to be a length in 'm'"),
+    ("messages", "1e300 coordinates, simulate", "simulate --initial $TMP/big.csv --quiet --out $TMP/c2", 2,
+     "too large to be a length in 'm'"),
+    ("messages", "RODWARP_KERNEL_CACHE is a file (simulate)", f"simulate {SHORT} --out $TMP/c3", 2,
+     "RODWARP_KERNEL_CACHE=$TMP/cachefile: $TMP/cachefile is a file", {"RODWARP_KERNEL_CACHE": "$TMP/cachefile"}),
+    ("messages", "RODWARP_KERNEL_CACHE under a file (analyze)", "analyze $TMP/ok.csv --keep-outside --quiet "
+     "--out $TMP/c4", 2, "is a file, not a folder", {"RODWARP_KERNEL_CACHE": "$TMP/cachefile/sub"}),
+    ("messages", "RODWARP_KERNEL_CACHE that cannot be created", "analyze $TMP/ok.csv --keep-outside --quiet "
+     "--out $TMP/c5", 2, "RODWARP_KERNEL_CACHE=/proc/rodwarp-cache is not a writable folder",
+     {"RODWARP_KERNEL_CACHE": "/proc/rodwarp-cache"}),
 ]
 
 
@@ -426,6 +439,11 @@ def make_inputs_47(d: Path) -> None:
     m = json.loads((d / "labk" / "rodwarp-run.json").read_text())
     m.update(complete=False, status="failed")
     (d / "labk" / "rodwarp-run.json").write_text(json.dumps(m))
+    (d / "big.csv").write_text("rod,x,y,z,radius\n0,0,0,0,0.01\n0,1e300,0,0,0.01\n1,0,1e300,0,0.01\n"
+                               "1,0,1e300,1e300,0.01\n")
+    (d / "ok.csv").write_text("rod,x,y,z,radius\n0,0,0,0,0.001\n0,0.1,0,0,0.001\n1,0,0.01,0,0.001\n"
+                              "1,0.1,0.01,0,0.001\n")
+    (d / "cachefile").write_text("not a folder")
 
 
 def _write_csv(path: Path, rods, radius: bool = True) -> None:
@@ -600,8 +618,9 @@ def main(argv=None) -> int:
     plan = [("15", what, a, None, 0 if what in ok_cases else (4 if "fails at run time" in what else 2))
             for what, a in cases(d)] + cases_29(d) + [(e[0], e[1], e[2], None, e[3] if len(e) > 3 else 2)
                                                        for e in EXTRA]
-    plan += [(f"47 {finding}", what, a, None, rc) for finding, what, a, rc, _ in CASES_47]
-    SAYS.update({what: says for _, what, _, _, says in CASES_47})
+    plan += [(f"47 {c[0]}", c[1], c[2], None, c[3]) for c in CASES_47]
+    SAYS.update({c[1]: c[4].replace("$TMP", str(d)) for c in CASES_47})
+    envs = {c[1]: {k: v.replace("$TMP", str(d)) for k, v in c[5].items()} for c in CASES_47 if len(c) > 5}
     if args.only:
         plan = [c for c in plan if c[0].startswith(args.only)]
     for cls, what, a, setup, expect in plan:
@@ -612,9 +631,11 @@ def main(argv=None) -> int:
         if setup is not None:
             setup()
         before = _fingerprint(d)
-        rc, msg, n_err, tb, wall = rodwarp(a, d)
+        rc, msg, n_err, tb, wall = rodwarp(a, d, env=envs.get(what))
         touched = _touched_outside(before, _fingerprint(d), _own_outputs(a, d))
         shown = ("rodwarp " + a).strip().replace(str(d), "$TMP")
+        if what in envs:
+            shown = " ".join(f"{k}={v}" for k, v in envs[what].items()).replace(str(d), "$TMP") + " " + shown
         one_line = n_err == 1 and msg.startswith("error:") if expect == 2 else True
         cuda = "CUDA" in msg or (expect == 0 and n_err and "cuda" not in a)
         advice = "pickle" in msg.lower() or "internal error" in msg  # never library advice, never a bug

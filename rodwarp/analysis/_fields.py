@@ -66,9 +66,12 @@ MIN_RADIUS_DIAMETERS = 0.5
 SPACING_RADII = (0.01, 2.0)
 
 
-def _check_ball_and_grid(R: float, h: float, d: float, l: float, given_h: bool, units: str) -> None:
+def _check_ball_and_grid(R: float, h: float, d: float, l: float, given_h: bool, units: str,
+                         unit_hint: str | None = None) -> None:
     """The ball radius against the rods' diameter and the spacing against the radius (one line
-    naming the option that is off)."""
+    naming the option that is off; rods whose sizes are implausible for their units are
+    pointed at ``--units`` first, ``unit_hint``)."""
+    first = f"check the units first: {unit_hint}; else " if unit_hint else ""
     if R < MIN_RADIUS_DIAMETERS * d:
         raise RodwarpError(f"--radius {R:g} {units} is below half the rods' diameter d = {d:.3g} {units}: a ball "
                            f"that small sees one rod's cross-section at most; use --radius {MIN_RADIUS_DIAMETERS * d:.3g} "
@@ -78,7 +81,7 @@ def _check_ball_and_grid(R: float, h: float, d: float, l: float, given_h: bool, 
         raise RodwarpError(f"--spacing {h:g} {units} is {h / R:.3g} ball radii (R = {R:g} {units}); it must be "
                            f"{lo:g} to {hi:g} R: " + ("finer resamples the same balls at a far higher cost"
                                                       if h < lo * R else "coarser leaves gaps between the balls")
-                           + f"; use --spacing {0.5 * R:.3g} (R / 2, the default) or leave it out")
+                           + f"; {first}raise --spacing to {0.5 * R:.3g} (R / 2, the default) or leave it out")
 
 
 def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float | None = None,
@@ -139,7 +142,10 @@ def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float 
         raise RodwarpError("rods have zero diameter or length; give --diameter and --length")
     R = pos(radius, "radius") or math.sqrt(d * l)
     h = pos(spacing, "spacing") or 0.5 * R
-    _check_ball_and_grid(R, h, d, l, spacing is not None, rods.units)
+    from rodwarp.rodset._scale import unit_hint
+
+    _check_ball_and_grid(R, h, d, l, spacing is not None, rods.units,
+                         unit_hint(rods, float(np.max(dom[1] - dom[0]))))
     tol = 0.1 * d if contact_tolerance is None else real(
         "contact_tolerance", contact_tolerance, ge=0, le=MAX_COORDINATE, unit=rods.units, hint="a surface gap")
     size = dom[1] - dom[0]

@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 from rodwarp._util import option, option_table  # noqa: F401 (option_table re-exported)
-from rodwarp.validation import Range
+from rodwarp.validation import MAX_MU, Range
 
 import numpy as np
 
@@ -33,9 +33,6 @@ MIN_VERTICES, MAX_VERTICES = 3, 10
 QUASI_STATIC = 0.1
 
 
-#: largest friction coefficient accepted: real materials stay below about 2 (rubber); above 10
-#: the contact solver's friction cone is a typo's, not a material's
-MAX_MU = 10.0
 #: the strongest drive accepted, peak acceleration over gravity: the paper's entangling drive is
 #: a/g ~ 400 at its rescaled gravity (5 cm at 10 Hz, g 0.5), its tests 0.3 to 7.9; beyond 1000 a
 #: drive is a typo or a shock, and it tears any packing apart

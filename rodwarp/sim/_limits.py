@@ -16,6 +16,7 @@ import numpy as np
 from rodwarp.errors import RodwarpTypeError
 from rodwarp.rodset import RodSet
 from rodwarp.rodset._args import instance, real, vector
+from rodwarp.validation import MAX_MU  # as ``rodwarp simulate --mu``
 
 __all__ = ["MAX_LENGTH_M", "MIN_RADIUS_M", "MAX_GRAVITY", "MAX_MU", "MAX_DAMPING", "YOUNG_RANGE", "DENSITY_RANGE",
            "MAX_FREQUENCY", "MAX_SPEED", "MODEL_OPTIONS", "check_rods", "check_model_options", "friction",
@@ -28,8 +29,6 @@ MAX_LENGTH_M = 1e6
 MIN_RADIUS_M = 1e-9
 #: largest body acceleration (m/s^2): 1e4 g, a laboratory centrifuge's
 MAX_GRAVITY = 1e5
-#: largest friction coefficient, as ``rodwarp simulate --mu`` (real materials stay below about 2)
-MAX_MU = 10.0
 #: largest viscous damping rate (1/s): a rate of 1e6 1/s stops any motion within a microsecond
 MAX_DAMPING = 1e6
 #: Young's modulus (Pa): from a soft gel's (1 Pa) to well above diamond's (1.2e12 Pa)
