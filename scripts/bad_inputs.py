@@ -428,6 +428,34 @@ CASES_47: list[tuple] = [
 ]
 
 
+#: issue 47's misuses of the Python API: (what, the call, the error type it must raise, what its
+#: message must say); each runs in a fresh interpreter (:func:`api_case`)
+API_47: list[tuple] = [
+    ("compute_fields('str')", "compute_fields('str')", "TypeError", "rods must be a RodSet"),
+    ("field_statistics({'e': 1})", "field_statistics({'e': 1})", "TypeError", "fields must be a Fields object"),
+    ("ModelBuilder([[0, 0, 0]])", "ModelBuilder([[0, 0, 0]])", "TypeError", "rods must be a RodSet"),
+    ("ModelBuilder(rods, gravity=(0, 0, nan))", "ModelBuilder(ROD, gravity=(0, 0, float('nan')))", "ValueError",
+     "gravity z must be a finite number"),
+    ("ModelBuilder(rods, mu=-1)", "ModelBuilder(ROD, mu=-1)", "ValueError", "mu must be >= 0"),
+    ("RodSet.from_polylines with 1e300 coordinates", "RodSet.from_polylines([[[0, 0, 0], [1e300, 0, 0]]], radii=0.01)",
+     "ValueError", "too large to be a length"),
+]
+_API_PRELUDE = ("import numpy as np\nfrom rodwarp import ModelBuilder, RodSet\n"
+                "from rodwarp.analysis import compute_fields, field_statistics\n"
+                "ROD = RodSet.from_polylines([np.array([[0, 0, 0], [1, 0, 0.0]])], radii=0.01)\n")
+
+
+def api_case(call: str, cwd: Path):
+    """Run ``call`` in a fresh interpreter: (exception type names of its MRO or 'none', message,
+    whether a warning or traceback reached stderr)."""
+    code = (_API_PRELUDE + "try:\n    " + call + "\n    print('none|')\n"
+            "except Exception as e:\n    print(','.join(c.__name__ for c in type(e).__mro__) + '|' + str(e))\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=300)
+    kinds, _, msg = (r.stdout.strip().splitlines() or ["none|"])[-1].partition("|")
+    noisy = "Traceback" in r.stderr or "Warning" in r.stderr
+    return kinds.split(","), msg, noisy
+
+
 def make_inputs_47(d: Path) -> None:
     """The inputs of :data:`CASES_47`: a finished run to overwrite from inside, and a lab run
     left unfinished (as a kill leaves it) to resume with the paper's options."""
@@ -646,6 +674,14 @@ def main(argv=None) -> int:
             t.replace(str(d), "$TMP") for t in touched[:3]), "pass" if ok else "FAIL", msg.replace(str(d), "$TMP"),
             wall))
         print(f"{'pass' if ok else 'FAIL'} {rc:>3}  {wall:5.1f}s  {shown}\n          {msg[:160]}", flush=True)
+    if not args.only or "47".startswith(args.only) or args.only.startswith("47"):
+        for what, call, kind, says in API_47:
+            t = time.perf_counter()
+            kinds, msg, noisy = api_case(call, d)
+            ok = kind in kinds and says in msg and not noisy and "\n" not in msg
+            rows.append(("47 API", what, f"python: {call.replace('ROD', 'rods')}", None, int(noisy), "yes",
+                         "pass" if ok else "FAIL", f"{kinds[0]}: {msg}", time.perf_counter() - t))
+            print(f"{'pass' if ok else 'FAIL'}  {what}\n          {kinds[0]}: {msg[:150]}", flush=True)
     # location problems on real small file systems
     for what, opts, a in (("--out on a nearly full disk (2 MB tmpfs)", "size=2m",
                            f"simulate {SHORT} --n-rods 200 --duration 1 --out {{m}}/run"),
