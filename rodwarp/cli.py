@@ -371,38 +371,66 @@ def segment(
 
 
 def _floats(text: str, name: str) -> list[float]:
+    """A grid option's comma-separated finite numbers (``--alpha 25,50,100``).
+
+    An empty item (``25,,50``, a trailing comma) or a value given twice is refused, never
+    dropped: either would leave the grid with fewer points than were written.
+    """
+    items = [v.strip() for v in text.split(",")]
+    if not any(items):
+        raise RodwarpError(f"{name} needs at least one value")
+    if "" in items:
+        raise RodwarpError(f"{name} {text}: item {items.index('') + 1} of {len(items)} is empty; give "
+                           f"comma-separated numbers without empty items, e.g. 25,50,100")
     try:
-        vals = [float(v) for v in text.split(",") if v.strip()]
+        vals = [float(v) for v in items]
     except ValueError:
         raise RodwarpError(f"{name} must be comma-separated numbers, e.g. 25,50,100; got '{text}'") from None
-    if not vals:
-        raise RodwarpError(f"{name} needs at least one value")
     import math
 
     bad = [v for v in vals if not math.isfinite(v)]
     if bad:
         raise RodwarpError(f"{name} values must be finite numbers, got {bad[0]:g} in '{text}'")
+    twice = next((v for k, v in enumerate(vals) if v in vals[:k]), None)
+    if twice is not None:
+        raise RodwarpError(f"{name} {text}: {twice:g} is given twice; give each value once (one grid point per "
+                           f"value)")
     return vals
 
 
 def _overrides(items: list[str]) -> dict:
-    """``--set KEY=VALUE`` items as ProtocolParams overrides, each VALUE read as its field's type."""
+    """``--set KEY=VALUE`` items as ProtocolParams overrides, each VALUE read as its field's type.
+
+    A key the sweep owns (:data:`rodwarp.experiments._sweep.SWEEP_OWNED`: --out, --alpha, ...)
+    is refused naming the sweep's own option, and a key given twice is refused rather than
+    the last value kept.
+    """
     import dataclasses
 
     from rodwarp.errors import RodwarpError
     from rodwarp.experiments import ProtocolParams
+    from rodwarp.experiments._sweep import SWEEP_OWNED
 
     types = {f.name: f.type for f in dataclasses.fields(ProtocolParams)}
-    out = {}
+    out, given = {}, {}
     for item in items:
         key, sep, text = item.partition("=")
         key = key.strip().replace("-", "_")
         if not sep or not key:
             raise RodwarpError(f"--set needs KEY=VALUE, got '{item}'; e.g. --set rod_model=rigid")
+        if key in SWEEP_OWNED:
+            raise RodwarpError(f"--set {key}: {SWEEP_OWNED[key]}")
         if key not in types:
             raise RodwarpError(f"--set {key}: no such simulate parameter; see `rodwarp simulate --help`")
-        kind = str(types[key])
         text = text.strip()
+        if key in given:
+            raise RodwarpError(f"--set {key} is given twice ({key}={given[key]} and {key}={text}); give each "
+                               f"parameter once")
+        given[key] = text
+        if key == "strains":  # its own message names an empty or unreadable item
+            out[key] = _parse_strains(text, "--set strains")
+            continue
+        kind = str(types[key])
         try:
             if "bool" in kind:
                 if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
@@ -412,13 +440,12 @@ def _overrides(items: list[str]) -> dict:
                 value = int(text)
             elif "float" in kind:
                 value = None if text.lower() == "none" and "None" in kind else float(text)
-            elif "tuple" in kind:  # 'X,Y,Z' (box) or 'E1,E2,...' (strains), as simulate's own options take them
-                value = _parse_strains(text) if key == "strains" else _parse_box(text)
+            elif "tuple" in kind:  # 'X,Y,Z' (box), as simulate's own option takes it
+                value = _parse_box(text)
             else:
                 value = text
         except ValueError:  # RodwarpError too: the box's own message names --box, not --set
-            what = ("comma-separated numbers" if key == "strains" else "three positive numbers 'X,Y,Z'") \
-                if "tuple" in kind else f"a valid {kind.replace(' | None', '')}"
+            what = "three positive numbers 'X,Y,Z'" if "tuple" in kind else f"a valid {kind.replace(' | None', '')}"
             raise RodwarpError(f"--set {key}={text}: not {what}") from None
         out[key] = value
     return out
@@ -429,6 +456,7 @@ def _overrides(items: list[str]) -> dict:
 @_friendly
 @_field_options(SweepSpec, _W, _SWEEP_OPTIONS, renamed=_SWEEP_RENAMED)
 def sweep(
+    ctx: typer.Context,
     alpha: str = _swp("alphas", default=_csv(_W["alphas"][0])),
     freq: str = _swp("freqs", default=_csv(_W["freqs"][0])),
     gravity: str = _swp("gravities", default=_csv(_W["gravities"][0])),
@@ -437,7 +465,9 @@ def sweep(
     save_every: float = _sim("save_every", help="Sampling interval of each point's metrics (s of simulated time)."),
     out: Path = typer.Option(..., help="Sweep directory (results.csv, points/, figures)."),
     scheduler: Optional[str] = typer.Option(None, help="Existing Dask scheduler tcp://HOST:8786 (default: a local cluster on 127.0.0.1)."),
-    workers: Optional[int] = typer.Option(None, help="Local worker processes (default: the number of cores)."),
+    workers: Optional[int] = typer.Option(None, help="Local worker processes, one point each: at most one per core "
+                                                     "and as many as memory holds (default: that many); they end "
+                                                     "with the sweep."),
     figures: bool = typer.Option(True, help="Draw the phase diagram at the end."),
     overwrite: bool = typer.Option(False, help="Replace the run --out holds. Without it a sweep adds its points to "
                                                "the folder's sweep of the same protocol (durations, amplitude, "
@@ -453,14 +483,18 @@ def sweep(
     from rodwarp.experiments import phase_diagram, run_sweep
 
     v.integer("--seeds", seeds, ge=1, le=10_000)
-    if workers is not None:
-        v.integer("--workers", workers, ge=1, le=1024)
+    if workers is not None:  # the upper bound (cores, memory) is the local cluster's: run_sweep
+        v.integer("--workers", workers, ge=1)
+    sets = _overrides(set_ or [])
+    if "save_every" in sets and _given(ctx, "save_every"):
+        raise RodwarpError(f"--save-every {save_every:g} and --set save_every={sets['save_every']:g} both given; "
+                           f"give --save-every once")
     spec = SweepSpec(alphas=_floats(alpha, "--alpha"), freqs=_floats(freq, "--freq"),
                      gravities=_floats(gravity, "--gravity"), static_loads=_floats(static_load, "--static-load"),
                      seeds=list(range(seeds)), **fields,
                      # only when changed: rows of sweeps run before this option still match their points
                      overrides={**({} if save_every == _P["save_every"][0] else {"save_every": save_every}),
-                                **_overrides(set_ or [])})
+                                **sets})
     with _failure_recorded(out):
         path = run_sweep(spec, out, scheduler=scheduler, workers=workers, progress=not quiet, overwrite=overwrite)
     import json
@@ -507,12 +541,23 @@ def phase_diagram_cmd(
         typer.echo(f"wrote {f}")
 
 
-def _parse_strains(text: str):
-    """--strains 'E1,E2,...' (empty: none); their range is checked with the other options."""
+def _parse_strains(text: str, name: str = "--strains"):
+    """--strains 'E1,E2,...' (empty: none); their range is checked with the other options.
+
+    An empty item (``0,,0.1``, a trailing comma) is refused, never dropped: the piston would
+    press at fewer strains than were written. ``name`` is the option in messages.
+    """
+    if not text.strip():
+        return ()
+    items = [v.strip() for v in text.split(",")]
+    if "" in items:
+        raise RodwarpError(f"{name} {text}: item {items.index('') + 1} of {len(items)} is empty; give "
+                           f"comma-separated strains without empty items, e.g. 0,0.05,0.1 ('' for none)")
     try:
-        return tuple(float(v) for v in text.split(",") if v.strip())
+        return tuple(float(v) for v in items)
     except ValueError:
-        raise RodwarpError(f"--strains must be comma-separated numbers 'E1,E2,...' (e.g. 0,0.05,0.1), got '{text}'")
+        raise RodwarpError(f"{name} must be comma-separated numbers 'E1,E2,...' (e.g. 0,0.05,0.1), "
+                           f"got '{text}'") from None
 
 
 def _parse_box(text: str):

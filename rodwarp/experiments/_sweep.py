@@ -15,13 +15,19 @@ Layout of a sweep directory ``OUT``::
 
 Running the same sweep again skips points whose row has ``status`` ``ok``; a failed point is
 recorded with its one-line error and the others go on. Results are plain CSV/JSON files.
+
+The local cluster has at most one worker per core this process may use and no more than memory
+holds (:func:`worker_limit`), and its worker processes end with the sweep however it ends
+(:func:`_die_with_sweep`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
+import logging
 import math
 import os
 import socket
@@ -34,8 +40,73 @@ from pathlib import Path
 from rodwarp.errors import RodwarpError
 from rodwarp.experiments._outputs import SWEEP_OUTPUTS
 from rodwarp.experiments._cluster import LOCAL_CLUSTER, _connect, _local_cluster  # noqa: F401 (tests import them here)
-from rodwarp.experiments._protocol import ProtocolParams
-from rodwarp.rodset.files import read_csv_rows, write_json, write_text
+
+#: environment variable that names the sweep process (its pid) to the worker processes of its
+#: local cluster (:func:`_die_with_sweep`)
+SWEEP_PID_ENV = "RODWARP_SWEEP_PID"
+#: Linux prctl(2) option that sets the signal a process gets when its parent ends
+_PR_SET_PDEATHSIG = 1
+
+
+def _ended(pid: int) -> bool:
+    """The process ``pid`` has ended: it is gone, or a zombie its parent has not reaped yet."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")
+    except (OSError, IndexError):
+        return True
+
+
+def _die_with_sweep() -> None:
+    """In a worker process of a sweep's local cluster: be killed (SIGKILL) when the sweep
+    process that started it ends, however it ends (``kill -9`` included).
+
+    :func:`_sweep_cluster` names the sweep in :data:`SWEEP_PID_ENV` while its cluster runs. A
+    process whose parent is that sweep asks Linux for a parent-death signal
+    (``prctl(PR_SET_PDEATHSIG, SIGKILL)``); one whose sweep has already ended (it was given to
+    another parent) exits at once. The variable is then removed from this process's
+    environment, so the processes it starts are not taken for workers. Anywhere else (the
+    sweep itself, a process without the variable, a system other than Linux) nothing happens.
+
+    Notes
+    -----
+    Linux sends the signal when the *thread* that forked the process ends; distributed forks
+    each worker from a thread of its own that lives as long as that worker.
+    """
+    owner = os.environ.get(SWEEP_PID_ENV, "")
+    if not owner.isdigit() or int(owner) == os.getpid() or not sys.platform.startswith("linux"):
+        return
+    owner = int(owner)
+    del os.environ[SWEEP_PID_ENV]
+    if os.getppid() != owner:
+        if _ended(owner):
+            os._exit(1)  # the sweep ended while this worker was starting: nothing would use it
+        return
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):  # no prctl: distributed's own watch of the parent remains
+        return
+    if os.getppid() != owner:  # the sweep ended before the signal was set
+        os._exit(1)
+
+
+# armed on import, before Warp and Dask load: a worker of `rodwarp sweep` imports this module
+# with its parent's main module, about a second before distributed's own watch of its parent
+# starts (many seconds when many workers start on few cores)
+_die_with_sweep()
+
+
+def dask_setup(worker=None) -> None:
+    """Dask's preload hook, run in each worker of a sweep's local cluster as it starts
+    (:func:`_sweep_cluster` preloads this module): :func:`_die_with_sweep` for a worker that
+    did not import this module itself (one forked from a process that had)."""
+    _die_with_sweep()
+
+from rodwarp.experiments._protocol import ProtocolParams  # noqa: E402 (after _die_with_sweep)
+from rodwarp.rodset.files import read_csv_rows, write_json, write_text  # noqa: E402
 
 #: parameters that define a point (besides the ProtocolParams overrides)
 GRID_KEYS = ("alpha", "freq", "gravity", "static_load", "seed")
@@ -44,8 +115,47 @@ FIXED_KEYS = ("amplitude", "entangle_duration", "duration")
 RESULT_KEYS = ("a_over_g", "F_tilde", "n_rods", "largest_cluster_fraction", "height_kept", "persistence",
                "rods_left", "contacts_per_rod", "cv_e", "mean_e", "std_e", "stable", "max_penetration_over_d",
                "device", "wall_s", "entangled_from", "worker", "status")
-#: ProtocolParams fields a sweep sets itself (not allowed in ``overrides``)
-_OWN = set(GRID_KEYS) | set(FIXED_KEYS) | {"device", "initial"}
+
+
+def _grid_owned(key: str, option: str, field_name: str, example: str) -> str:
+    return (f"{key} is set by the sweep itself, one value of its grid per point: give the sweep's {option} "
+            f"(SweepSpec.{field_name}), e.g. {option} {example}")
+
+
+def _fixed_owned(key: str) -> str:
+    option = "--" + key.replace("_", "-")
+    return f"{key} is set by the sweep itself, the same for every point: give the sweep's {option} (SweepSpec.{key})"
+
+
+#: a sweep starts each point from a random packing of the point's alpha and seed
+_RANDOM_PACKING = ("a sweep always starts each point from a random packing (of the point's alpha and seed), never "
+                   "from a rod set")
+_INPUT_ONLY = (f"it describes an --initial rod set and {_RANDOM_PACKING}; drop it (`rodwarp simulate --initial "
+               f"FILE` runs one rod set)")
+
+#: simulate options (``rodwarp simulate`` option names with underscores, ProtocolParams fields
+#: or the command's own) that a sweep owns or that mean nothing in one, given as an override
+#: (``--set KEY=VALUE``, ``SweepSpec.overrides``): why, and what to do instead
+SWEEP_OWNED = {
+    "alpha": _grid_owned("alpha", "--alpha", "alphas", "25,50,100"),
+    "freq": _grid_owned("freq", "--freq", "freqs", "1,10"),
+    "gravity": _grid_owned("gravity", "--gravity", "gravities", "0.5,10"),
+    "static_load": _grid_owned("static_load", "--static-load", "static_loads", "0,1"),
+    "seed": "seed is set by the sweep itself: --seeds N runs seeds 0 to N-1 at every point (SweepSpec.seeds)",
+    **{k: _fixed_owned(k) for k in FIXED_KEYS},
+    "device": "device is set by the sweep itself: give the sweep's --device (SweepSpec.device)",
+    "initial": f"{_RANDOM_PACKING}; to start from a rod set of your own, run `rodwarp simulate --initial FILE` "
+               f"for each point",
+    **{k: _INPUT_ONLY for k in ("initial_diameter", "diameter", "units", "entangle")},
+    "out": "a sweep writes each point into its own folder under the sweep's --out (points/<id>/); give --out "
+           "to the sweep",
+    "resume": "a sweep resumes by itself: run the same `rodwarp sweep` command again (finished points are "
+              "skipped, an interrupted point goes on from its checkpoint)",
+    "overwrite": "use the sweep's own --overwrite (it replaces the whole sweep folder)",
+    "quiet": "use the sweep's own --quiet",
+    "entangled_from": "a sweep shares the entangled packing of points that differ only in --freq by itself "
+                      "(--share-entangling, the default); a packing of another run cannot be given to a sweep",
+}
 
 
 def _grid(*values: float, help: str):
@@ -98,13 +208,13 @@ class SweepSpec:
             if not grid[name]:
                 raise RodwarpError(f"sweep: '{name}' is empty; give at least one value")
         grid["seeds"] = [int(s) for s in grid["seeds"]]
+        own = sorted(set(self.overrides) & set(SWEEP_OWNED))
+        if own:
+            raise RodwarpError(f"sweep: override {own[0]}: {SWEEP_OWNED[own[0]]}")
         known = {f.name for f in fields(ProtocolParams)}
         bad = sorted(set(self.overrides) - known)
         if bad:
             raise RodwarpError(f"sweep: unknown simulate parameter(s) {', '.join(bad)}")
-        own = sorted(set(self.overrides) & _OWN)
-        if own:
-            raise RodwarpError(f"sweep: {', '.join(own)} is set by the sweep itself, not by overrides")
         aknown = {f.name for f in fields(AnalyzeOptions)}
         bad = sorted(set(self.analyze) - aknown)
         if bad:
@@ -257,15 +367,26 @@ def run_point(point: dict, outdir: str, entangled_from: str | None = None, donor
     return row
 
 
-def check_points(pts: list[dict], *, local: bool) -> None:
+def check_points(pts: list[dict], *, local: bool) -> float:
     """Validate every point's simulate parameters and analyze options before any cluster
     starts; the first invalid point is refused with its id and the reason (one line).
 
-    ``local``: the points run on this machine, so the device must exist here too.
+    Parameters
+    ----------
+    pts : list of dict
+        The points (:func:`points`).
+    local : bool
+        The points run on this machine, so the device must exist here too.
+
+    Returns
+    -------
+    float
+        The largest point's memory estimate (bytes): what one worker running it needs.
     """
+    need = 0.0
     for p in pts:
         try:
-            _validate_point(p)
+            need = max(need, _validate_point(p))
         except RodwarpError as e:
             bad = sum(1 for q in pts if _invalid(q))
             raise RodwarpError(f"sweep point {p['id']} is invalid ({e}); invalid points: {bad} of {len(pts)}; "
@@ -274,6 +395,62 @@ def check_points(pts: list[dict], *, local: bool) -> None:
         from rodwarp import _warp
 
         _warp.resolve_device(pts[0]["device"])
+    return need
+
+
+def usable_cores() -> int:
+    """Cores this process may run on: its CPU affinity (``os.cpu_count()`` where that is unknown)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # not Linux
+        return os.cpu_count() or 1
+
+
+def worker_limit(point_bytes: float) -> tuple[int, str]:
+    """The most worker processes a local cluster may have on this machine, and what sets it.
+
+    One worker runs one point on one core (Warp's CPU kernels use one thread), so a worker per
+    usable core (:func:`usable_cores`) is the most that run at once; more only share the cores,
+    and each worker costs memory and about a second of start-up. Each worker also holds its
+    point's memory (the simulate estimate of :func:`check_points`), so no more than the
+    available memory holds (:func:`rodwarp.validation.available_memory`).
+
+    Parameters
+    ----------
+    point_bytes : float
+        Memory one point needs (bytes): the largest point's estimate.
+
+    Returns
+    -------
+    limit : int
+        The most workers (at least 1: a point that does not fit alone is refused by its own check).
+    reason : str
+        What sets it, for a refusal ("this machine's 2 cores", "the 3.2 GB of memory available ...").
+    """
+    from rodwarp.validation import available_memory, human_bytes
+
+    cores = usable_cores()
+    have = available_memory()
+    by_memory = int(have // point_bytes) if point_bytes > 0 and math.isfinite(have) else cores
+    if by_memory < cores:
+        return max(1, by_memory), (f"what the {human_bytes(have)} of memory available holds (each worker needs "
+                                   f"about {human_bytes(point_bytes)} for the sweep's largest point)")
+    return cores, f"this machine's {cores} cores (each worker runs one point on one core)"
+
+
+def local_workers(workers: int | None, point_bytes: float) -> int:
+    """The worker processes of a sweep's local cluster: ``workers``, or :func:`worker_limit`'s
+    limit when None; a count below 1 or above the limit is refused (one line naming the fix)."""
+    from rodwarp.validation import integer
+
+    limit, reason = worker_limit(point_bytes)
+    if workers is None:
+        return limit
+    workers = integer("--workers", workers, ge=1)
+    if workers > limit:
+        raise RodwarpError(f"--workers {workers} is more than {reason}; use --workers {limit} or fewer "
+                           f"(default: as many as the cores and memory allow)")
+    return workers
 
 
 def _point_params(point: dict) -> ProtocolParams:
@@ -291,9 +468,14 @@ def _point_analysis(point: dict):
     return AnalyzeOptions(**{**point.get("_analyze", {}), "figures": False})
 
 
-def _validate_point(point: dict) -> None:
-    _point_params(point).validate()
+def _validate_point(point: dict) -> float:
+    """Validate a point's parameters and analyze options; its memory estimate (bytes)."""
+    from rodwarp.experiments._checks import BYTES_PER_VERTEX
+    from rodwarp.validation import BASE_BYTES
+
+    checked = _point_params(point).validate()
     _point_analysis(point).validate()
+    return BASE_BYTES + BYTES_PER_VERTEX * checked.n_vertices
 
 
 def _invalid(p: dict) -> bool:
@@ -458,8 +640,10 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
         ``LocalCluster`` of ``workers`` single-threaded worker processes is started on
         127.0.0.1 with no dashboard, and closed at the end.
     workers : int, optional
-        Worker processes of the local cluster (default: the number of cores). Ignored with
-        ``scheduler``.
+        Worker processes of the local cluster: at most one per usable core and no more than
+        memory holds (:func:`worker_limit`; more is refused), and that many by default.
+        Ignored with ``scheduler``. The workers end with this process, however it ends
+        (:func:`_sweep_cluster`).
     progress : bool
         Show a progress bar (points done of total, time remaining).
     overwrite : bool
@@ -481,7 +665,9 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
 
     spec = spec.validate()
     pts = points(spec)
-    check_points(pts, local=not scheduler)
+    point_bytes = check_points(pts, local=not scheduler)
+    if not scheduler:
+        workers = local_workers(workers, point_bytes)
     out = Path(out)
     output_location(out, "--out")
     # the folder is checked before the scheduler is contacted: a refusal costs nothing
@@ -516,7 +702,7 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
 
     meta = {"spec": spec.to_dict(), "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
             "scheduler": scheduler or LOCAL_CLUSTER,
-            "workers": None if scheduler else (workers or os.cpu_count()),
+            "workers": None if scheduler else workers,
             "n_points": len(pts), "skipped": len(done), "submitted": len(todo),
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "finished": None, "failed": None,
             "versions": versions("dask", "distributed"), "results": "results.csv", "points": "points/"}
@@ -524,12 +710,7 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
     failed = 0
     t0 = time.perf_counter()
     if todo:
-        cluster = None
-        if scheduler:
-            client = _connect(scheduler)
-        else:
-            cluster, client = _local_cluster(workers or os.cpu_count() or 1)
-        try:
+        with (contextlib.closing(_connect(scheduler)) if scheduler else _sweep_cluster(workers)) as client:
             futs = _submit(client, spec, pts, todo, out)
             with progress_bar(progress, "points", remaining=True, note=True) as update:
                 n_done = len(done)
@@ -548,10 +729,6 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
                     flush()
                     n_done += 1
                     update("sweep", n_done, len(pts), note=f"{p['id']}: {row.get('status')}"[:80])
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
     else:
         flush()
     meta.update({"finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "failed": failed,
@@ -559,6 +736,56 @@ def run_sweep(spec: SweepSpec, out, scheduler: str | None = None, workers: int |
     write_json(out / "sweep.json", meta)
     run.complete(n_points=len(pts), failed=failed)
     return csv_path
+
+
+def _no_nanny_start_failure(record: logging.LogRecord) -> bool:
+    """A logging filter: False for asyncio's report of a nanny that failed to start (the
+    cluster's start was cut short), True for anything else."""
+    exc = record.exc_info[1] if record.exc_info else None
+    return not (isinstance(exc, RuntimeError) and str(exc).startswith("Nanny failed to start"))
+
+
+@contextlib.contextmanager
+def _sweep_cluster(n_workers: int):
+    """A client of a local cluster of ``n_workers`` workers (:func:`_local_cluster`) whose worker
+    processes end with this process; the client and cluster are closed on leaving.
+
+    While the cluster runs, :data:`SWEEP_PID_ENV` names this process to the workers it spawns
+    (restarted ones included), and each worker preloads this module: its
+    :func:`_die_with_sweep` asks Linux to kill the worker when this process ends, so a
+    ``kill -9`` of the sweep leaves no worker behind (distributed's own watch of the parent,
+    a pipe read by a thread, starts only once the worker has imported Dask).
+    """
+    import dask
+    import distributed  # noqa: F401 - its config defaults, which the dask.config.set below would drop on exit
+    from distributed.deploy.spec import SpecCluster
+
+    before = os.environ.get(SWEEP_PID_ENV)
+    os.environ[SWEEP_PID_ENV] = str(os.getpid())
+    try:
+        preload = [*dask.config.get("distributed.worker.preload", []), __name__]
+        others = set(SpecCluster._instances)
+        try:
+            with dask.config.set({"distributed.worker.preload": preload}):
+                cluster, client = _local_cluster(n_workers)
+        except BaseException:
+            # a start cut short (Ctrl-C) leaves a cluster whose workers are still starting:
+            # distributed's exit hook would fail to close it and asyncio would report its
+            # nannies' failed starts, each with a traceback; its workers end with this process
+            for half_started in set(SpecCluster._instances) - others:
+                half_started.shutdown_on_close = False
+            logging.getLogger("asyncio").addFilter(_no_nanny_start_failure)
+            raise
+        try:
+            yield client
+        finally:
+            client.close()
+            cluster.close()
+    finally:
+        if before is None:
+            os.environ.pop(SWEEP_PID_ENV, None)
+        else:
+            os.environ[SWEEP_PID_ENV] = before
 
 
 #: SweepSpec fields that choose the grid's points or how they are run, not what a point
