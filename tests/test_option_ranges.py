@@ -41,7 +41,8 @@ COMMANDS = {
 }
 #: the command's own options that are not dataclass fields, with their ranges
 OWN = {
-    ("sweep", "workers"): Range(ge=1, whole=True),
+    ("sweep", "workers"): Range(ge=1, whole=True),  # and at most the cores and memory: run_sweep's check
+    ("sweep", "seeds"): Range(ge=1, le=10_000, whole=True),
     ("phantom", "shape"): Range(ge=2, whole=True),
 }
 #: the options each simulate option needs to apply at all (else "only applies with ..." refuses it)
@@ -107,9 +108,8 @@ def _range(command: str, name: str) -> Range | None:
     from dataclasses import fields
 
     field = renamed.get(name, name)
-    if command == "sweep" and field in ("alphas", "freqs", "gravities", "static_loads"):
-        field = {"alphas": "alpha", "freqs": "freq", "gravities": "gravity", "static_loads": "static_load"}[field]
-        cls = ProtocolParams
+    if command == "sweep" and field not in {f.name for f in fields(cls)}:
+        cls = ProtocolParams  # a simulate option the sweep passes to every point (--save-every)
     return next((f.metadata.get("range") for f in fields(cls) if f.name == field), None)
 
 

@@ -43,7 +43,7 @@ def test_spec_rejects_bad_overrides():
 
 
 def test_run_point_records_failure(tmp_path):
-    p = points(_spec(alphas=[0.5], freqs=[1]))[0]  # alpha must be > 1
+    p = {**points(_spec(alphas=[20], freqs=[1]))[0], "alpha": 0.5}  # a point past the grid's check: alpha must be > 1
     row = run_point(p, str(tmp_path / p["id"]))
     assert row["status"].startswith("error:") and "alpha" in row["status"]
     assert row["alpha"] == 0.5 and row["worker"] and row["wall_s"] >= 0
@@ -82,11 +82,14 @@ def test_sweep_local_cluster_resume_and_failure(tmp_path):
     meta = json.loads((out / "sweep.json").read_text())
     assert meta["submitted"] == 0 and meta["skipped"] == 4
 
-    # a grid with an invalid point (alpha 1) is refused before any cluster starts: nothing run
+    # a grid with a value out of its range (alpha 1), or with an invalid point (a/g 7.9e4 at
+    # 1000 Hz), is refused before any cluster starts: nothing run
     from rodwarp.errors import RodwarpError
 
-    with pytest.raises(RodwarpError, match=r"sweep point alpha1_freq1_g0.5_F0_seed0 is invalid .*--alpha must be > 1"):
+    with pytest.raises(RodwarpError, match=r"--alpha must be > 1 and <= 10000, got 1"):
         run_sweep(_spec(alphas=[1, 20, 30], freqs=[1, 10]), out, workers=2, progress=False)
+    with pytest.raises(RodwarpError, match=r"sweep point alpha30_freq1000_g0.5_F0_seed0 is invalid .*a/g = 7.9e\+04.*invalid points: 2 of 4"):
+        run_sweep(_spec(alphas=[20, 30], freqs=[1, 1000]), out, workers=2, progress=False)
     assert read_results(path) == rows
     assert json.loads((out / "sweep.json").read_text())["skipped"] == 4
 

@@ -237,8 +237,9 @@ def test_input_rods_on_the_box_floor_and_alpha_from_the_input(tmp_path):
 # ------------------------------------------------------------------------------ sweep
 
 @pytest.mark.parametrize("args, fragment", [
-    (["--alpha", "0"], "sweep point alpha0_"),
-    (["--alpha", "20,0"], "invalid points: 1 of 2"),
+    (["--alpha", "0"], "--alpha must be > 1"),
+    (["--alpha", "20,0"], "--alpha must be > 1 and <= 10000, got 0"),
+    (["--alpha", "20", "--freq", "1,1000"], "invalid points: 1 of 2"),  # in range, but a/g 7.9e4 at 1000 Hz
     (["--freq", "nan"], "--freq values must be finite"),
     (["--gravity", "inf"], "--gravity values must be finite"),
     (["--static-load", "-1"], "--static-load must be >= 0"),

@@ -107,6 +107,7 @@ def dask_setup(worker=None) -> None:
 
 from rodwarp.experiments._protocol import ProtocolParams  # noqa: E402 (after _die_with_sweep)
 from rodwarp.rodset.files import read_csv_rows, write_json, write_text  # noqa: E402
+from rodwarp.validation import check_ranges  # noqa: E402
 
 #: parameters that define a point (besides the ProtocolParams overrides)
 GRID_KEYS = ("alpha", "freq", "gravity", "static_load", "seed")
@@ -158,14 +159,27 @@ SWEEP_OWNED = {
 }
 
 
-def _grid(*values: float, help: str):
-    """A :class:`SweepSpec` list field: its default values and its ``rodwarp sweep --help`` line."""
-    return field(default_factory=lambda: list(values), metadata={"help": help})
+def _protocol_range(name: str):
+    """The :class:`~rodwarp.validation.Range` of the :class:`ProtocolParams` field ``name``."""
+    return ProtocolParams.__dataclass_fields__[name].metadata.get("range")
+
+
+def _grid(*values: float, help: str, of: str | None = None, flag: str | None = None):
+    """A :class:`SweepSpec` list field: its default values, its ``rodwarp sweep --help`` line, and
+    the range of every item (that of the :class:`ProtocolParams` field ``of``, stated there once)."""
+    import dataclasses
+
+    meta = {"help": help}
+    if of is not None:
+        meta.update(range=dataclasses.replace(_protocol_range(of), each=True), flag=flag or f"--{of.replace('_', '-')}")
+    return field(default_factory=lambda: list(values), metadata=meta)
 
 
 def _as_protocol(name: str, help: str):
-    """A :class:`SweepSpec` field whose default is the :class:`ProtocolParams` one (stated once)."""
-    return field(default=ProtocolParams.__dataclass_fields__[name].default, metadata={"help": help})
+    """A :class:`SweepSpec` field whose default and range are the :class:`ProtocolParams` ones
+    (stated once)."""
+    return field(default=ProtocolParams.__dataclass_fields__[name].default,
+                 metadata={"help": help, "range": _protocol_range(name)})
 
 
 @dataclass(frozen=True)
@@ -179,11 +193,11 @@ class SweepSpec:
     The fields' defaults and help texts are those of ``rodwarp sweep``.
     """
 
-    alphas: list = _grid(25.0, 50.0, 100.0, 200.0, 300.0, help="Aspect ratios, comma-separated.")
-    freqs: list = _grid(1.0, 10.0, 100.0, help="Stability-test floor frequencies (Hz), comma-separated.")
-    gravities: list = _grid(0.5, help="Gravitational accelerations (m/s^2), comma-separated.")
-    static_loads: list = _grid(0.0, help="Static loads F~, comma-separated.")
-    seeds: list = _grid(0, help="Seeds per point (0 .. N-1).")
+    alphas: list = _grid(25.0, 50.0, 100.0, 200.0, 300.0, help="Aspect ratios, comma-separated.", of="alpha")
+    freqs: list = _grid(1.0, 10.0, 100.0, help="Stability-test floor frequencies (Hz), comma-separated.", of="freq")
+    gravities: list = _grid(0.5, help="Gravitational accelerations (m/s^2), comma-separated.", of="gravity")
+    static_loads: list = _grid(0.0, help="Static loads F~, comma-separated.", of="static_load")
+    seeds: list = _grid(0, help="Seeds per point (0 .. N-1).", of="seed", flag="seeds")
     entangle_duration: float = _as_protocol("entangle_duration", "Entangling duration (s).")
     duration: float = _as_protocol("duration", "Stability-test duration (s).")
     amplitude: float = _as_protocol("amplitude", "Floor vibration amplitude (m).")
@@ -208,7 +222,12 @@ class SweepSpec:
             if not grid[name]:
                 raise RodwarpError(f"sweep: '{name}' is empty; give at least one value")
         grid["seeds"] = [int(s) for s in grid["seeds"]]
+        check_ranges(replace(self, **grid))  # each grid item and value within its ProtocolParams range
         own = sorted(set(self.overrides) & set(SWEEP_OWNED))
+        for k, v in self.overrides.items():  # --save-every is an override of its own option
+            rng = _protocol_range(k) if k in ProtocolParams.__dataclass_fields__ and k not in SWEEP_OWNED else None
+            if rng is not None and v is not None:
+                rng.check("--save-every" if k == "save_every" else f"--set {k}", v)
         if own:
             raise RodwarpError(f"sweep: override {own[0]}: {SWEEP_OWNED[own[0]]}")
         known = {f.name for f in fields(ProtocolParams)}
