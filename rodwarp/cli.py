@@ -363,8 +363,10 @@ def segment(
     with _failure_recorded(outdir):
         s = run_segment(stack, out=outdir, progress=not quiet, overwrite=overwrite, **opts.run_kwargs())
     u = s["units"]
+    b = s.get("quality", {}).get("binarised")  # a two-level stack, segmented from its mask
+    mask = f"binarised stack (levels {b['levels'][0]}/{b['levels'][1]}, rods {b['rod_level']}), " if b else ""
     typer.echo(f"{s['n_rods']} {'filaments' if s.get('shape') == 'curved' else 'rods'}, {s['n_contacts']} contacts, "
-               f"diameter {s['diameter']:.4g} {u} ({s['diameter_voxels']:.2f} voxels), {s['wall_time_s']:.1f} s "
+               f"diameter {s['diameter']:.4g} {u} ({s['diameter_voxels']:.2f} voxels), {mask}{s['wall_time_s']:.1f} s "
                f"-> {s['out']}")
     for flag in s.get("quality", {}).get("flags", []):
         typer.echo(f"warning: {flag}", err=True)

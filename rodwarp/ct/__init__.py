@@ -19,6 +19,7 @@ re-exported here (scikit-image's layout); segmentation is split by stage, in the
 ``_cases``           realistic-scan cases with their truth (:func:`make_case`)
 ``_params``          :class:`SegmentParams`, :class:`SegmentOptions`, :class:`SegmentResult`
 ``_prepare``         0 - field-of-view mask, background trend, dark rods, anisotropic voxels
+``_binary``          0, 1, 4 - binarised stacks: two levels recognised, the rods' mask, its radii
 ``_levels``          1 - levels and binarisation (background, plateau, threshold, coarse radius)
 ``_seeds``           2 - seeds: straight pieces of the skeleton, junctions removed
 ``_tracing``         2 - cylinder fits and marching (``_bundles``: bundles of touching rods)

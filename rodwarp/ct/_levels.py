@@ -32,6 +32,7 @@ class _Levels:
     r0: float           # coarse rod radius (voxels)
     noise: float        # robust sigma of the background (raw)
     mixed: bool = False  # radii spread widely (the distance-transform ridge is broad)
+    binary: bool = False  # the volume is the rods' mask, 0 and 1 (a binarised stack: ``_binary``)
 
 
 def _otsu(values: np.ndarray) -> float:
@@ -52,12 +53,40 @@ MIXED_RIDGE_SPREAD = 0.3
 MIXED_RADIUS_CV = 0.1
 
 
+def _densest_blocks(reader: _Reader, bright: np.ndarray, step: int, block: int) -> list[np.ndarray]:
+    """The (up to) four blocks of edge ``block`` with the most foreground, read whole (float32).
+
+    ``bright`` is the foreground of the volume strided by ``step`` (the choice is the same in
+    any chunking)."""
+    shape = reader.shape
+    B = [min(block, s) for s in shape]
+    starts = []
+    for s, b in zip(shape, B):
+        k = int(math.ceil(s / b))
+        starts.append(sorted(set(int(round(x)) for x in np.linspace(0, s - b, k))))
+    cands = []
+    for z0 in starts[0]:
+        for y0 in starts[1]:
+            for x0 in starts[2]:
+                sl = bright[z0 // step:(z0 + B[0]) // step + 1, y0 // step:(y0 + B[1]) // step + 1,
+                            x0 // step:(x0 + B[2]) // step + 1]
+                cands.append((-float(sl.mean()) if sl.size else 0.0, z0, y0, x0))
+    cands.sort()
+    blocks = [c[1:] for c in cands[:4] if c[0] < 0]
+    return [reader.read((z0, y0, x0), (z0 + B[0], y0 + B[1], x0 + B[2])) for z0, y0, x0 in blocks]
+
+
+def _sample_step(shape) -> int:
+    """Stride of the sample that stage 1 reads (about 2 million voxels)."""
+    return max(1, int(math.ceil((float(np.prod(shape)) / 2.0e6) ** (1.0 / 3.0))))
+
+
 def _measure_levels(reader: _Reader, P: SegmentParams) -> _Levels:
     """Background and rod levels, the binarisation threshold and a coarse radius of a volume
     (the module docstring says how); raises a one-line error when no rods stand out."""
     shape = reader.shape
     n = float(np.prod(shape))
-    step = max(1, int(math.ceil((n / 2.0e6) ** (1.0 / 3.0))))
+    step = _sample_step(shape)
     sub = reader.strided(step)
     vmin, vmax = float(sub.min()), float(sub.max())
     if vmin == vmax:
@@ -84,24 +113,8 @@ def _measure_levels(reader: _Reader, P: SegmentParams) -> _Levels:
     if not bright.any():
         raise _fail(f"no rods found: no voxel brighter than the Otsu threshold {T:g}; {_HINT}")
 
-    # blocks with the most foreground (chosen from the strided sample: same in any chunking)
-    B = [min(P.stats_block, s) for s in shape]
-    starts = []
-    for s, b in zip(shape, B):
-        k = int(math.ceil(s / b))
-        starts.append(sorted(set(int(round(x)) for x in np.linspace(0, s - b, k))))
-    cands = []
-    for z0 in starts[0]:
-        for y0 in starts[1]:
-            for x0 in starts[2]:
-                sl = bright[z0 // step:(z0 + B[0]) // step + 1, y0 // step:(y0 + B[1]) // step + 1,
-                            x0 // step:(x0 + B[2]) // step + 1]
-                cands.append((-float(sl.mean()) if sl.size else 0.0, z0, y0, x0))
-    cands.sort()
-    blocks = [c[1:] for c in cands[:4] if c[0] < 0]
     data = []
-    for z0, y0, x0 in blocks:
-        raw = reader.read((z0, y0, x0), (z0 + B[0], y0 + B[1], x0 + B[2]))
+    for raw in _densest_blocks(reader, bright, step, P.stats_block):
         sm = ndimage.gaussian_filter(raw, P.smooth_sigma) if P.smooth_sigma > 0 else raw
         data.append((raw, sm))
 

@@ -21,6 +21,11 @@ module removes before any level is measured (:func:`prepare_volume`):
   (linear interpolation) onto an isotropic grid of the smallest voxel edge; coordinates of the
   result are in units of that edge, with voxel (0, 0, 0) at the same place.
 
+A **binarised** stack (exactly two grey levels: bool, 0/1, 0/255, any two values) has none of
+the first three: it is recognised first (:mod:`rodwarp.ct._binary`), replaced by the rods' mask
+(1.0 rods, 0.0 background; the brighter level is the rods unless ``dark=True``) and only
+resampled; a stack of one level or of a handful (a label image) is refused there.
+
 Corrections are per pixel of a slice (2-D gain, offset and mask maps), so they are applied
 lazily, chunk by chunk, to a volume that does not fit in memory; resampling loads the volume.
 
@@ -79,6 +84,9 @@ class Prepared:
         The background trend removed: amplitudes of the smooth part and of the rings.
     mask2d : ndarray (Y, X) bool or None
         Pixels of a slice inside the field of view (working grid).
+    binarised : dict or None
+        ``{"levels": [lo, hi], "rod_level": v, "rod_fraction": f}`` of a binarised stack, whose
+        ``volume`` is then the rods' mask (:meth:`rodwarp.ct._binary.Binarised.info`).
     """
 
     volume: object
@@ -89,11 +97,12 @@ class Prepared:
     trend: dict | None = None
     mask2d: np.ndarray | None = None
     notes: dict = field(default_factory=dict)
+    binarised: dict | None = None
 
     def info(self) -> dict:
         """What preparation did, as ``SegmentResult.quality`` lists it (a new dict each call)."""
         return {"spacing": self.spacing, "zoom": list(self.zoom), "dark_rods": self.dark, "fov": self.fov,
-                "background_trend": self.trend}
+                "background_trend": self.trend, "binarised": self.binarised}
 
 
 class _Corrected:
@@ -223,7 +232,8 @@ def prepare_volume(volume, voxel_size=None, *, dark=None, fov=None, background=N
     voxel_size : float or sequence of 3 floats, optional
         Voxel edge length (one value) or lengths along (z, y, x), any unit; default isotropic.
     dark : bool or None
-        Rods darker than the background: ``None`` detects it, ``True``/``False`` forces it.
+        Rods darker than the background: ``None`` detects it, ``True``/``False`` forces it (of
+        a binarised stack: the rods are its lower level; otherwise its higher).
     fov : bool or None
         Field-of-view mask: ``None`` detects it, ``False`` never masks.
     background : bool or None
@@ -233,7 +243,15 @@ def prepare_volume(volume, voxel_size=None, *, dark=None, fov=None, background=N
     Returns
     -------
     Prepared
+
+    Raises
+    ------
+    RodwarpError
+        One line: not 3-D, empty, NaN or inf values, or a stack of discrete levels segmentation
+        cannot read (:func:`rodwarp.ct._binary.read_binarised`).
     """
+    from rodwarp.ct._binary import mask_of, read_binarised
+
     dz, dy, dx = parse_voxel_size(voxel_size)
     shape = tuple(int(s) for s in volume.shape)
     if len(shape) != 3:
@@ -245,6 +263,10 @@ def prepare_volume(volume, voxel_size=None, *, dark=None, fov=None, background=N
     zs, sl = _sample_slices(volume)
     if not np.all(np.isfinite(sl)):
         raise _fail("volume contains NaN or inf values; replace them before segmenting")
+    binarised = read_binarised(volume, dark)
+    if binarised is not None:  # a mask: no field of view, trend or noise to correct, polarity known
+        out.volume, out.dark, out.binarised = mask_of(volume, binarised), binarised.rods_dark, binarised.info()
+        return _isotropic(out, (dz, dy, dx), None)
     inside = None
     centre = ((shape[1] - 1) / 2.0, (shape[2] - 1) / 2.0)
     fill = None
@@ -312,18 +334,32 @@ def prepare_volume(volume, voxel_size=None, *, dark=None, fov=None, background=N
     if gain is not None or off is not None or inside is not None or sign != 1.0:
         out.volume = _Corrected(volume, gain, off, inside, fill if fill is not None else 0.0, sign)
         out.mask2d = inside
+    out.notes = notes
+    return _isotropic(out, (dz, dy, dx), inside)
+
+
+def _isotropic(out: Prepared, d_zyx, inside) -> Prepared:
+    """``out`` with its volume resampled (linearly; a mask through its signed distance) onto an
+    isotropic grid of the smallest voxel edge ``d_zyx`` (z, y, x) when the edges differ, and its
+    field-of-view mask ``inside`` with it."""
+    dz, dy, dx = d_zyx
+    shape = tuple(int(s) for s in out.volume.shape)
     h = min(dz, dy, dx)
     if max(dz, dy, dx) > h * (1 + 1e-6):
         src = np.asarray(out.volume[:, :, :] if isinstance(out.volume, _Corrected) else out.volume, dtype=np.float32)
         d = np.array([dz, dy, dx]) / h
         new_shape = tuple(int(math.floor((n - 1) * f + 1e-9)) + 1 for n, f in zip(shape, d))
         # output voxel i sits at input coordinate i / f: voxel (0, 0, 0) stays in place
-        res = ndimage.affine_transform(src, 1.0 / d, output_shape=new_shape, order=1, mode="nearest")
+        if out.binarised is not None:
+            from rodwarp.ct._binary import resample_mask
+
+            res = resample_mask(src > 0.5, d, new_shape)
+        else:
+            res = ndimage.affine_transform(src, 1.0 / d, output_shape=new_shape, order=1, mode="nearest")
         out.volume = res.astype(np.float32, copy=False)
         out.zoom = tuple(float(v) for v in d)
         if inside is not None:
             out.mask2d = ndimage.affine_transform(inside.astype(np.float32), 1.0 / d[1:], output_shape=new_shape[1:],
                                                   order=0, mode="nearest") > 0.5
     out.spacing = float(h)
-    out.notes = notes
     return out

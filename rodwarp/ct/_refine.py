@@ -7,7 +7,13 @@ line; a blurred-disc fit of the radial profile gives the contrast and the blur, 
 intensity mass per unit length the radius; each end is fitted, sub-voxel, to the intensity
 along the axis with the profile of a blurred capsule (or flat) end.  Rounds repeat for the
 rods that still move; pieces that converge onto one rod are merged between rounds; rods too
-short, too faint or of the wrong thickness are rejected (:func:`_check_rod`).  This module must not import warp.
+short, too faint or of the wrong thickness are rejected (:func:`_check_rod`).
+
+A binarised stack (``st.binary``: the volume is the rods' mask) has no blur to fit: its plateau
+is 1 and its edge a one-voxel step (``_binary.MASK_EDGE_SIGMA``), and each rod's radius comes
+from the distance transforms of the mask (``_binary.surface_radius``), stored as the mass per
+unit length a rod of that radius holds, so that every later use of the mass reads it.
+This module must not import warp.
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rodwarp.ct._binary import MASK_EDGE_SIGMA, SurfaceDistance, surface_radius
 from rodwarp.ct._levels import MIXED_RADIUS_CV, _Levels
 from rodwarp.ct._params import SegmentParams
 from rodwarp.ct._pasting import _gap_filler, _merge_lines
@@ -96,6 +103,10 @@ class _Refiner:
         self.scale = 1.0 / (st.fg - st.bg)
         # pieces shorter than a rejectable rod do not take voxels from their neighbours
         self.min_len = P.min_length * r_glob
+        # a mask: signed distances to its surface give the radii; its edge is a voxel step
+        self.surface = _Reader(SurfaceDistance(reader.vol)) if st.binary else None
+        if st.binary:
+            self.sigma = MASK_EDGE_SIGMA
 
     def _voxels(self, rod: _Rod, ext: float, R: float):
         u = _unit(rod.p1 - rod.p0)
@@ -211,12 +222,28 @@ class _Refiner:
         t0 = (rod.p0 - c) @ u_new
         t1 = (rod.p1 - c) @ u_new
         rod.p0, rod.p1 = c + t0 * u_new, c + t1 * u_new
+        if self.surface is not None:
+            r_dt = self._surface_radius(xyz, own, c, u_new, t0, t1)
+            if np.isfinite(r_dt):  # (else the voxel count's mass stands: it estimates the same)
+                rod.mass = math.pi * self.C * r_dt * r_dt
+                rod.mass_r = r_dt
         if collect is not None:  # radial profile about the updated axis
             s2 = own & inside
             w2 = xyz[s2] - c
             tt = w2 @ u_new
             rn = np.sqrt(np.maximum(np.einsum("ij,ij->i", w2, w2) - tt * tt, 0.0))
             collect.append((rn, v[s2]))
+
+    def _surface_radius(self, xyz, own, c, u, t0, t1):
+        """Radius (voxels) of a rod of a mask from the voxels it owns near its surface, away from
+        its ends (its caps curve in), about the axis through ``c`` along ``u`` from ``t0`` to ``t1``."""
+        tt = (xyz - c) @ u
+        trim = min(self.r + 1.0, 0.25 * (t1 - t0))
+        sel = own & (tt >= t0 + trim) & (tt <= t1 - trim)
+        w = xyz[sel] - c
+        rho = np.sqrt(np.maximum(np.einsum("ij,ij->i", w, w) - tt[sel] ** 2, 0.0))
+        phi = self.surface.gather(xyz[sel][:, ::-1].astype(np.int64))
+        return surface_radius(phi, rho)
 
     def set_end_model(self, r, sigma, capsule):
         """Tabulate the disc-mean axial profile of a blurred rod end (plateau 1, s outward from
@@ -418,9 +445,9 @@ class RefineStats:
 
     Attributes
     ----------
-    radius_profile_fit : float
+    radius_profile_fit : float or None
         Global rod radius from the blurred-disc fit of the radial profile (voxels), before
-        the radius from the intensity mass per unit length replaces it.
+        the radius from the intensity mass per unit length replaces it; None for a mask.
     radius_cv : float
         Robust coefficient of variation (1.4826 MAD / median, dimensionless) of the rods' own radii
         from their mass per unit length; 0 with fewer than 3 rods.
@@ -462,7 +489,7 @@ def _refine(reader, st, P, lines, progress):
     rods = [_Rod(a, b, st.r0) for a, b in lines]
     ref = _Refiner(reader, st, P, st.r0)
     cap = P.end_model == "capsule"
-    ref.set_end_model(st.r0, 1.0, cap)
+    ref.set_end_model(st.r0, ref.sigma, cap)
     filled = _gap_filler(reader, st, st.r0)
     n_it = P.refine_iterations
     fit_it = 0
@@ -480,13 +507,14 @@ def _refine(reader, st, P, lines, progress):
         fit_now = it == fit_it
         if fit_now:
             active = set(range(len(rods)))
-        collect = [] if fit_now else None
+        collect = [] if fit_now and ref.surface is None else None
         for k in sorted(active):
             if rods[k].ok:
                 ref.refine_axis(rods, k, nbl[k], collect)
         if fit_now:
-            ref.contrast_fit(collect, r_given)
-            r_profile = ref.r
+            if ref.surface is None:  # (a mask has nothing to fit: contrast 1, a one-voxel edge)
+                ref.contrast_fit(collect, r_given)
+                r_profile = ref.r
             # the radius from the mass per unit length is unbiased by touching neighbours
             # (the nearest-surface partition trades equal leaks); the profile shape is not
             masses = [rod.mass for rod in rods if rod.ok and np.isfinite(rod.mass)]

@@ -5,7 +5,9 @@ Files written in the output directory (each atomically):
 ``rods.npz``       the rod set (rod-set format, physical units, contacts included)
 ``rods.csv``       ``rod,x,y,z,radius`` one row per vertex (physical units)
 ``contacts.csv``   ``rod_i,rod_j,x,y,z,gap`` one row per contact (physical units)
-``summary.json``   counts, diameter, voxel size, timings, quality figures, every parameter
+``summary.json``   counts, diameter, voxel size, timings, quality figures, every parameter;
+                   ``binarised``: the stack held two grey levels and was segmented from its
+                   mask (``quality.binarised`` names the levels and the rods' one)
 ``qa_slices.png``  three slices with the fitted centrelines (and their radius) drawn over the image
 ``qa_projection.png``  maximum-intensity projections along z and y with every rod and contact
 """
@@ -414,6 +416,8 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
         "input": str(stack),
         "shape_zyx": list(volume.shape),
         "dtype": str(volume.dtype),
+        # two grey levels: segmented from the mask (quality["binarised"] holds the levels)
+        "binarised": result.quality.get("binarised") is not None,
         "voxel_size_zyx": list(vs),
         "voxel_size_source": source,
         "parameters": asdict(p),

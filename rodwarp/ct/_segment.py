@@ -9,15 +9,18 @@ in ``SegmentResult.timings``):
 ====  ==============  ===================  ===================================================
   0   prepare         ``_prepare``         field-of-view mask, background trend (cupping,
                                            rings), dark rods negated, anisotropic voxels
-                                           resampled onto an isotropic grid
+                                           resampled onto an isotropic grid; a binarised
+                                           stack (two levels, ``_binary``) made the rods' mask
   1   stats           ``_levels``          levels and binarisation: background, plateau,
-                                           threshold, coarse radius, mixed radii
+                                           threshold, coarse radius, mixed radii (of a mask:
+                                           levels 0 and 1, ``_binary.mask_levels``)
   2   detect          ``_seeds``,          per chunk: skeleton seeds, cylinder fits and
                       ``_tracing``,        marching, rods side by side and bundles split
                       ``_bundles``
   3   merge           ``_pasting``         pieces of one rod pasted, duplicates made one
   4   refine          ``_refine``          axes, radii and ends against the raw greyscale
-                                           (the blurred-rod model of ``_profile``)
+                                           (the blurred-rod model of ``_profile``; of a mask,
+                                           radii from its distance transforms)
   5   contacts        ``_contacts``        contact candidates confirmed by the image
 ====  ==============  ===================  ===================================================
 
@@ -43,6 +46,7 @@ from typing import TYPE_CHECKING, Callable, NamedTuple
 import numpy as np
 
 from rodwarp._util import one_line_error as _fail
+from rodwarp.ct._binary import LIKELY_INVERTED_FRACTION, mask_levels
 from rodwarp.ct._contacts import confirm_contacts
 from rodwarp.ct._levels import _Levels, _measure_levels
 from rodwarp.ct._params import _HINT, SegmentParams, SegmentResult
@@ -113,12 +117,16 @@ def segment_volume(volume, params: SegmentParams | None = None,
         traced rod), ``rods_rejected`` (by reason), ``candidates``, ``merged``, ``seeds``,
         ``skeleton_junctions``, ``background``/``foreground`` levels, ``cnr`` (estimated),
         ``contrast_fit``, ``blur_sigma``, ``radius_spread`` (std of per-rod radii),
-        ``contacts_rejected_by_image``.
+        ``contacts_rejected_by_image``; ``binarised``: ``{"levels": [lo, hi], "rod_level": v,
+        "rod_fraction": f}`` when the volume held exactly two values (segmented from its mask),
+        else None.
 
     Raises
     ------
     RodwarpError
-        One line: not 3-D, empty, constant, non-finite, or no rods found.
+        One line: not 3-D, empty, constant, non-finite, a label image (a handful of distinct
+        values), a binarised stack whose rods' level is nearly empty or nearly full, or no
+        rods found.
     """
     P = params if params is not None else SegmentParams()
     if not isinstance(P, SegmentParams):
@@ -147,7 +155,7 @@ def segment_volume(volume, params: SegmentParams | None = None,
     timings["prepare"] = time.perf_counter() - tic
     tic = time.perf_counter()
     note("stats", 0, 1)
-    st = _measure_levels(reader, P)
+    st = mask_levels(reader, P) if prep.binarised is not None else _measure_levels(reader, P)
     note("stats", 1, 1)
     timings["stats"] = time.perf_counter() - tic
     noise = prep.notes.get("noise") or st.noise
@@ -391,6 +399,10 @@ def _flags(quality: dict, shape: str) -> list[str]:
     if nd and nr and nd > 0.1 * nr:
         flags.append(f"{nd} of {nr} traces are doubtful (confidence below {un['doubt_confidence']:g}): "
                      f"see filaments.csv and qa_confidence.png")
+    b = quality.get("binarised")
+    if b and b["rod_fraction"] > LIKELY_INVERTED_FRACTION:
+        flags.append(f"the rods' level {b['rod_level']} fills {100 * b['rod_fraction']:.0f}% of this binarised "
+                     f"stack: if the rods are the other level, pass --dark-rods or --bright-rods")
     cnr = quality.get("cnr")
     if cnr is not None and np.isfinite(cnr) and cnr < 1.5:
         flags.append(f"contrast-to-noise {cnr:.1f} is below 1.5: expect missed rods and false contacts")
