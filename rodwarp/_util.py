@@ -4,7 +4,10 @@
   (the CLI prints it as is, so a message must never spill over several lines);
 * :func:`json_safe` - any result (NumPy scalars and arrays, paths, NaN) as plain JSON values;
 * :func:`versions` and :func:`version_line` - the versions recorded in every summary;
-* :func:`progress_bar` - one progress bar per stage of a long computation (``rich``);
+* :func:`progress_bar` - one progress bar per stage of a long computation (``rich``, on
+  stderr);
+* :func:`note`, :func:`set_quiet` and :func:`slow_phase` - notes on stderr (silenced by
+  ``--quiet``), and a phase that says so within :data:`NOTE_AFTER_S` when it runs long;
 * :func:`option` and :func:`option_table` - a command's parameter dataclass field with its
   default and ``--help`` line, and the table the CLI's option generator reads;
 * :func:`lazy_exports` - the flat public face of a subpackage whose heavy parts (Warp,
@@ -20,13 +23,23 @@ import contextlib
 import importlib
 import math
 import platform
+import sys
+import time
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
 from rodwarp.errors import RodwarpError
 
-__all__ = ["one_line_error", "json_safe", "versions", "version_line", "progress_bar", "lazy_exports", "option",
-           "option_table"]
+__all__ = ["one_line_error", "json_safe", "versions", "version_line", "progress_bar", "note", "set_quiet", "quiet",
+           "slow_phase", "NOTE_AFTER_S", "lazy_exports", "option", "option_table"]
+
+#: a phase that has run this long (s) without output says what it is doing (a note and a bar on
+#: stderr), so that no command sits silent for longer
+NOTE_AFTER_S = 2.0
+#: the process's ``--quiet``, read by the notes of code that a command's options do not reach
+#: (the packing): quiet in a library call or a sweep's worker, and set by every command's
+#: ``--quiet`` option, off unless given (:func:`set_quiet`)
+_QUIET = True
 
 
 def one_line_error(msg: str) -> RodwarpError:
@@ -139,6 +152,9 @@ def progress_bar(enabled: bool = True, unit: str = "", *, seconds: bool = False,
                  note: bool = False) -> Iterator[Callable[..., None]]:
     """A progress display for a computation in stages; yields ``update(stage, done, total, note=None)``.
 
+    The bars go to stderr, like every note: stdout carries only a command's result line, so
+    ``rodwarp simulate ... > result.txt`` captures the result and nothing else.
+
     Parameters
     ----------
     enabled : bool
@@ -158,6 +174,7 @@ def progress_bar(enabled: bool = True, unit: str = "", *, seconds: bool = False,
     callable(stage, done, total=None, note=None)
         Each new ``stage`` name gets its own bar; ``total`` None means not known yet.
     """
+    from rich.console import Console
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                TimeRemainingColumn)
 
@@ -170,7 +187,9 @@ def progress_bar(enabled: bool = True, unit: str = "", *, seconds: bool = False,
         columns.append(TimeRemainingColumn())
     if note:
         columns.append(TextColumn("{task.fields[note]}"))
-    with Progress(*columns, disable=not enabled, transient=False) as bar:
+    # Console(stderr=True) looks sys.stderr up at each write, so a redirected stderr (a test's
+    # capture) receives the bars too
+    with Progress(*columns, console=Console(stderr=True), disable=not enabled, transient=False) as bar:
         tasks: dict[str, Any] = {}
 
         def update(stage: str, done: float, total: float | None = None, note: str | None = None) -> None:
@@ -180,6 +199,108 @@ def progress_bar(enabled: bool = True, unit: str = "", *, seconds: bool = False,
                 bar.update(tasks[stage], completed=done, total=total)
             else:
                 bar.update(tasks[stage], completed=done, total=total, note=note)
+
+        yield update
+
+
+def set_quiet(value: bool) -> bool:
+    """Set the process's ``--quiet`` (no notes, no bars from code the options do not reach).
+
+    Parameters
+    ----------
+    value : bool
+        True silences :func:`note` and :func:`slow_phase` where they are not told otherwise.
+
+    Returns
+    -------
+    bool
+        ``value``, so that this can be a command-line option's callback.
+    """
+    global _QUIET
+    _QUIET = bool(value)
+    return _QUIET
+
+
+def quiet() -> bool:
+    """Whether the process is quiet (:func:`set_quiet`): True in a library call, a command's
+    ``--quiet`` on the command line."""
+    return _QUIET
+
+
+def note(msg: str, *, enabled: bool | None = None) -> None:
+    """Print ``note: msg`` as one line on stderr, unless quiet.
+
+    Parameters
+    ----------
+    msg : str
+        What is happening or was decided (not a result: results go to stdout, from the CLI).
+    enabled : bool, optional
+        Print or not; None: unless the process is quiet (:func:`quiet`).
+    """
+    if enabled if enabled is not None else not _QUIET:
+        print(f"note: {' '.join(str(msg).split())}", file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def slow_phase(what: str, total: float | None = None, *, enabled: bool | None = None, unit: str = "",
+               after: float | None = None) -> Iterator[Callable[..., None]]:
+    """A phase that is silent while short and says what it is doing once it runs long.
+
+    Yields ``update(done, total=None)``. ``after`` seconds into the phase ``note: <what>...``
+    is printed on stderr (by a timer, so even while the phase is between two updates), and the
+    next update opens a progress bar over ``total`` (time elapsed and remaining); a phase that
+    ends sooner prints nothing, so a quick phase (a dozen rods) adds no output while a long one
+    (17,280 rods) speaks within ``after``.
+
+    Parameters
+    ----------
+    what : str
+        The phase, as the note and the bar name it (``"placing 17280 rods"``).
+    total : float, optional
+        What ``done`` counts up to (None: not known).
+    enabled : bool, optional
+        False: never print; None: unless the process is quiet (:func:`quiet`).
+    unit : str
+        What ``done`` counts (``"rods"``), shown after the counts.
+    after : float, optional
+        Seconds of silence allowed (default :data:`NOTE_AFTER_S`, read at each phase's start).
+
+    Yields
+    ------
+    callable(done, total=None)
+        Call it as the phase advances; the bar opens at the first call after the note.
+    """
+    import threading
+
+    enabled = (not _QUIET) if enabled is None else enabled
+    after = NOTE_AFTER_S if after is None else after
+    start = time.perf_counter()
+    said = threading.Event()
+    lock = threading.Lock()
+
+    def say() -> None:  # once, from the timer or from the first late update, whichever is first
+        with lock:
+            if not said.is_set():
+                note(f"{what}...", enabled=True)
+                said.set()
+
+    timer = threading.Timer(after, say)
+    timer.daemon = True
+    if enabled:
+        timer.start()
+    with contextlib.ExitStack() as stack:
+        stack.callback(timer.cancel)
+        bar: list[Callable[..., None]] = []  # the bar's update, once open
+
+        def update(done: float, total_now: float | None = None) -> None:
+            if not enabled:
+                return
+            if not bar:
+                if time.perf_counter() - start < after:
+                    return
+                say()
+                bar.append(stack.enter_context(progress_bar(True, unit, remaining=True)))
+            bar[0](what, done, total if total_now is None else total_now)
 
         yield update
 

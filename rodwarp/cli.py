@@ -19,7 +19,7 @@ from typing import Optional
 
 import typer
 
-from rodwarp._util import version_line
+from rodwarp._util import set_quiet, version_line
 from rodwarp.analysis import AnalyzeOptions, fields_help
 from rodwarp.ct import PhantomOptions, SegmentOptions, make_phantom
 from rodwarp.errors import RodwarpError, SimulationBlowUp
@@ -38,7 +38,7 @@ _SEGMENT_OPTIONS = ("voxel_size", "units", "diameter", "out", "shape", "dark_rod
 _PH = option_table(PhantomOptions)
 #: `rodwarp phantom`'s options in --help order: PhantomOptions fields, and the command's own
 _PHANTOM_OPTIONS = ("shape", "voxel_size", "units", "out", "blur", "cnr", "ring", "cupping", "streaks", "fov", "dark",
-                    "z_thickness", "n_rods", "radius", "aspect", "touching", "seed", "overwrite")
+                    "z_thickness", "n_rods", "radius", "aspect", "touching", "seed", "overwrite", "quiet")
 _P = option_table(ProtocolParams)
 _W = option_table(SweepSpec)
 #: `rodwarp sweep`'s options in --help order: SweepSpec fields, the grids under their option
@@ -73,6 +73,23 @@ def _csv(values) -> str:
     return ",".join(f"{v:g}" for v in values)
 
 
+def _flag(name: str, help: str, **kw):
+    """A flag that is off by default and has no useful negative form: ``--name`` alone in
+    ``--help`` (typer would add ``--no-name``, which only restates the default)."""
+    return typer.Option(False, f"--{name}", help=help, show_default=False, **kw)
+
+
+#: ``--quiet`` on every command that writes, in the same words
+QUIET_HELP = "No progress bar and no notes on stderr (the result line, warnings and errors still print)."
+
+
+def _quiet_option():
+    """``--quiet``, alike on every writing command. As the options are read its value is also
+    given to the code no option reaches (the packing's note), through
+    :func:`rodwarp._util.set_quiet`."""
+    return _flag("quiet", QUIET_HELP, callback=set_quiet)
+
+
 def _field_options(cls, table: dict, order: tuple[str, ...], renamed: dict | None = None):
     """Give a command that takes ``**fields`` one option per field of ``cls`` named in ``order``.
 
@@ -82,7 +99,8 @@ def _field_options(cls, table: dict, order: tuple[str, ...], renamed: dict | Non
     ``cls`` whose option takes its type from the dataclass and its default and help from
     ``table``, so none of them is restated here. ``renamed`` maps a field to the command's
     parameter that takes it under another name (``alphas`` as ``--alpha``). typer reads the
-    resulting signature.
+    resulting signature. A bool field that is off by default is a flag alone (``--keep-outside``,
+    :func:`_flag`); one that is on by default keeps its negative (``--figures/--no-figures``).
     """
     hints = typing.get_type_hints(cls)
     keyword = inspect.Parameter.KEYWORD_ONLY
@@ -104,8 +122,11 @@ def _field_options(cls, table: dict, order: tuple[str, ...], renamed: dict | Non
                 params.append(own[name].replace(kind=keyword))
             else:
                 default, help_text = table[name]
-                params.append(inspect.Parameter(name, keyword, default=typer.Option(default, help=help_text),
-                                                annotation=option_type(hints[name])))
+                if hints[name] is bool and default is False:
+                    option = _flag(name.replace("_", "-"), help_text)
+                else:
+                    option = typer.Option(default, help=help_text)
+                params.append(inspect.Parameter(name, keyword, default=option, annotation=option_type(hints[name])))
         fn.__signature__ = sig.replace(parameters=params)
         return fn
 
@@ -123,7 +144,31 @@ _SIMULATE_OPTIONS = ("protocol", "alpha", "freq", "amplitude", "gravity", "durat
                      "checkpoint_every", "fields_every", "resume", "overwrite", "entangle", "seed", "device", "out", "initial",
                      "units", "initial_diameter", "entangled_from", "quiet")
 
-app = typer.Typer(add_completion=False, no_args_is_help=False,
+def _flags_as_flags(params: list) -> list:
+    """``params`` with every flag's value placeholder blanked: typer's rich ``--help`` prints
+    the type of each option, ``<bool>`` too, which made ``--quiet <bool>`` (and ``--help
+    <bool>``) read as if they took a value. A flag takes none."""
+    for p in params:
+        if getattr(p, "is_flag", False) and p.metavar is None:
+            p.metavar = ""
+    return params
+
+
+class _Commands(typer.core.TyperGroup):
+    """The ``rodwarp`` group: every command's flags (``--help`` included, which typer adds
+    itself) are shown as flags (:func:`_flags_as_flags`)."""
+
+    def get_params(self, ctx):
+        return _flags_as_flags(super().get_params(ctx))
+
+    def get_command(self, ctx, cmd_name):
+        cmd = super().get_command(ctx, cmd_name)
+        if cmd is not None:
+            _flags_as_flags(cmd.get_params(ctx))
+        return cmd
+
+
+app = typer.Typer(cls=_Commands, add_completion=False, no_args_is_help=False,
                   help="Simulate and analyse packings of elastic rods (NVIDIA Warp).",
                   epilog="Example: rodwarp simulate --alpha 100 --freq 10, then rodwarp analyze "
                          "runs/alpha100_freq10_g0.5_seed0")
@@ -229,9 +274,9 @@ def simulate(
     ctx: typer.Context,
     box: str = _sim("box", default=_csv(_P["box"][0])),
     strains: str = _sim("strains", default=_csv(_P["strains"][0])),
-    resume: bool = typer.Option(False, help="Continue a killed run from its newest checkpoint in --out (only the "
-                                            "folder's own run, same parameters)."),
-    overwrite: bool = typer.Option(False, help="Replace the run that --out holds (its outputs are removed first)."),
+    resume: bool = _flag("resume", "Continue a killed run from its newest checkpoint in --out (only the folder's "
+                                   "own run, same parameters)."),
+    overwrite: bool = _flag("overwrite", "Replace the run that --out holds (its outputs are removed first)."),
     out: Optional[Path] = typer.Option(None, help="Output directory (default runs/alpha{A}_freq{F}_g{G}_seed{S}, "
                                                   "plus every other parameter that differs from its default)."),
     initial: Optional[Path] = _sim("initial"),
@@ -240,7 +285,7 @@ def simulate(
         None, help="Start the stability test from the entangled packing of this earlier run folder (its "
                    "entangled.npz): same parameters but for --freq, --amplitude and --duration; the result equals "
                    "a run of its own entangling, bit for bit on the CPU."),
-    quiet: bool = typer.Option(False, help="No progress bar."),
+    quiet: bool = _quiet_option(),
     **fields,
 ):
     """Random packing, entangling by vibration, then the vibration stability test."""
@@ -287,8 +332,8 @@ def analyze(
     input: Path = typer.Argument(..., help="simulate/segment output directory, rod-set file (.npz, .zarr, .csv) "
                                            "or precomputed fields (.zarr, .npz with e and n)."),
     out: Optional[Path] = typer.Option(None, help="Output directory (default analysis/ beside the input)."),
-    overwrite: bool = typer.Option(False, help="Write into --out even when it holds another kind of run."),
-    quiet: bool = typer.Option(False, help="No progress bar."),
+    overwrite: bool = _flag("overwrite", "Write into --out even when it holds another kind of run."),
+    quiet: bool = _quiet_option(),
     **fields,
 ):
     from rodwarp.analysis import analyze as run_analyze
@@ -321,10 +366,12 @@ def phantom(
                                          "(bundles of touching parallel rods), 'arcs' (gently curved rods), "
                                          "'wires' (a nest-like tangle of curved wires)."),
     shape: tuple[int, int, int] = typer.Option(..., help="Volume shape Z Y X (slices, rows, columns)."),
-    out: Path = typer.Option(..., help="Output TIFF (ground truth written beside it)."),
-    overwrite: bool = typer.Option(False, help="Replace --out even when it is not a rodwarp phantom, or lies in "
-                                               "another command's run folder (an earlier phantom is always "
-                                               "replaced)."),
+    out: Path = typer.Option(..., help="Output TIFF file, NAME.tif (a file, not a folder: the stack that "
+                                       "`rodwarp segment` reads); its ground truth is written beside it as "
+                                       "NAME_truth.json and NAME_truth.npz."),
+    overwrite: bool = _flag("overwrite", "Replace --out even when it is not a rodwarp phantom, or lies in another "
+                                         "command's run folder (an earlier phantom is always replaced)."),
+    quiet: bool = _quiet_option(),
     **fields,
 ):
     """Synthetic 16-bit CT of a rod set: partial volume, blur, noise and artefacts, with ground truth."""
@@ -337,7 +384,11 @@ def phantom(
     from rodwarp.ct._phantom_owner import check_phantom_out
 
     check_phantom_out(out, overwrite=overwrite)
-    rs = make_phantom(rods, shape, out, **opts)
+    from rodwarp._util import slow_phase
+
+    # no progress hook inside the rendering: a note once it has run NOTE_AFTER_S (large volumes)
+    with slow_phase(f"rendering the {' x '.join(str(n) for n in shape)} voxel phantom", enabled=not quiet):
+        rs = make_phantom(rods, shape, out, **opts)
     typer.echo(f"{rs.n_rods} rods, {len(rs.contacts) if rs.contacts is not None else 0} contacts -> {out}")
 
 
@@ -348,9 +399,9 @@ def segment(
     stack: Path = typer.Argument(..., help="Multi-page TIFF, a folder of slice TIFFs, or a zarr array."),
     out: Optional[Path] = typer.Option(None, help="Output directory (default segment/ beside the stack)."),
     dark_rods: Optional[bool] = typer.Option(None, "--dark-rods/--bright-rods", help=_SG["dark_rods"][1]),
-    overwrite: bool = typer.Option(False, help="Write into --out even when it holds another command's run (an "
-                                               "earlier segmentation there is always replaced)."),
-    quiet: bool = typer.Option(False, help="No progress bar."),
+    overwrite: bool = _flag("overwrite", "Write into --out even when it holds another command's run (an earlier "
+                                         "segmentation there is always replaced)."),
+    quiet: bool = _quiet_option(),
     **fields,
 ):
     """CT stack to rod centrelines and contacts (CPU)."""
@@ -518,12 +569,19 @@ def sweep(
         raise typer.Exit(4)
 
 
-@app.command("phase-diagram", epilog="Example: rodwarp phase-diagram runs/sweep")
+@app.command("phase-diagram", epilog="Example: rodwarp phase-diagram runs/sweep   (writes the figures and "
+                                      "alpha_star.csv into runs/sweep; --out DIR puts them elsewhere)")
 @_friendly
 def phase_diagram_cmd(
     sweep_dir: Path = typer.Argument(..., help="A `rodwarp sweep` output directory (with results.csv)."),
+    out: Optional[Path] = typer.Option(None, help="Output directory (default SWEEP_DIR, beside results.csv). "
+                                                  "Another folder becomes a phase-diagram folder of its own."),
+    overwrite: bool = _flag("overwrite", "Write into --out even when it holds another run (its outputs are removed "
+                                         "first); a phase diagram of the same sweep there is always replaced."),
+    quiet: bool = _quiet_option(),
 ):
     """Phase diagram of a sweep: cv_e against a/g (Fig. 4L), f against alpha and a/g, alpha*."""
+    from rodwarp._util import note
     from rodwarp.experiments import phase_diagram
     from rodwarp.rodset import rundir
 
@@ -535,12 +593,43 @@ def phase_diagram_cmd(
                            "`rodwarp sweep`")
     if not (sweep_dir / "results.csv").exists():
         raise RodwarpError(f"'{sweep_dir}' holds no results.csv; run `rodwarp sweep --out {sweep_dir}` first")
-    # failed points are left out of the diagram: say how many, so a thin diagram is explained
-    # the sweep's manifest says the diagram is incomplete until its last file is written
-    with rundir.writing_part(sweep_dir, "phase_diagram"):
-        written = phase_diagram(sweep_dir, note=lambda msg: typer.echo(f"note: {msg}"))
-    for f in written:
-        typer.echo(f"wrote {f}")
+    dest = sweep_dir if out is None or out.resolve() == sweep_dir.resolve() else out
+
+    def draw():
+        # failed points are left out of the diagram: a note says how many, so a thin diagram is explained
+        return phase_diagram(sweep_dir, note=lambda msg: note(msg, enabled=not quiet), dest=dest, progress=not quiet)
+
+    if dest is sweep_dir:
+        # the sweep's manifest says the diagram is incomplete until its last file is written
+        with rundir.writing_part(sweep_dir, "phase_diagram"):
+            written = draw()
+    else:
+        written = _phase_diagram_folder(sweep_dir, dest, overwrite, draw)
+    figures = sum(1 for p in written if p.suffix == ".png")
+    tables = ", ".join(p.name for p in written if p.suffix != ".png")
+    typer.echo(f"{figures} figures, {tables} -> {dest}")
+
+
+def _phase_diagram_folder(sweep_dir: Path, out: Path, overwrite: bool, draw) -> list:
+    """Run ``draw()`` (the phase diagram of ``sweep_dir``) into a folder ``out`` of its own.
+
+    ``out`` is taken as a ``phase-diagram`` run folder (docs/run-folders.md): an earlier
+    phase diagram of the same sweep there is replaced, anything else (another sweep's diagram,
+    another command's run, files of an earlier run) is refused unless ``overwrite``.
+    """
+    from rodwarp.experiments._outputs import PHASE_DIAGRAM_OUTPUTS
+    from rodwarp.rodset import rundir
+
+    source = str(sweep_dir.resolve())
+    old = rundir.read_manifest(out) if out.is_dir() else None
+    same_sweep = bool(old) and old.get("kind") == "phase-diagram" and \
+        (old.get("parameters") or {}).get("sweep") == source
+    run = rundir.claim(out, "phase-diagram", {"sweep": source}, PHASE_DIAGRAM_OUTPUTS, overwrite=overwrite,
+                       replace_same_kind=same_sweep)
+    with _failure_recorded(out):
+        written = draw()
+    run.complete()
+    return written
 
 
 def _parse_strains(text: str, name: str = "--strains"):

@@ -55,7 +55,7 @@ class AnalyzeOptions:
     outlier: str = option("q3", "Outlier bound: q3 = Q3 + 1.5 IQR (the paper's) or q1 = Q1 + 1.5 IQR.")
     connectivity: int = option(26, "Tangle connectivity: 26 (default) or 6.")
     bins: int = option(40, "Histogram bins.", range=Range(ge=2, le=100_000, whole=True))
-    device: str = option("cpu", "cpu, cuda or auto.")
+    device: str = option("auto", "auto, cpu or cuda (auto: a CUDA GPU when one is present, else the CPU).")
     figures: bool = option(True, "Write the PNG figures.")
 
     def validate(self) -> None:

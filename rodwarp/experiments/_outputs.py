@@ -10,9 +10,13 @@ SIMULATE_OUTPUTS = ("summary.json", "metrics.csv", "metrics.png", "trajectory.za
 #: what ``rodwarp sweep`` writes in its folder, with the files of ``rodwarp phase-diagram``
 #: (names with ``*`` are patterns of bare names: one figure per group of points)
 SWEEP_OUTPUTS = ("sweep.json", "results.csv", "points", "alpha_star.csv", "power_law.csv", "phase_*.png")
+#: what ``rodwarp phase-diagram --out DIR`` writes in a folder of its own (in the sweep's folder,
+#: its default, these files are the sweep's)
+PHASE_DIAGRAM_OUTPUTS = ("alpha_star.csv", "power_law.csv", "phase_*.png")
 
 # outputs only a simulation writes: an analysis never takes a folder holding them for its own
 register_command("simulate", SIMULATE_OUTPUTS, exclusive=("final.npz", "trajectory.zarr", "metrics.csv",
                                                           "checkpoints"), resumable=True,
                  hosts={"analysis": ("analyze",)})
 register_command("sweep", SWEEP_OUTPUTS, hosts={"points": ("simulate", "analyze")})
+register_command("phase-diagram", PHASE_DIAGRAM_OUTPUTS)

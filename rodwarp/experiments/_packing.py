@@ -4,6 +4,8 @@ Candidates (uniform centre, isotropic direction) are drawn in batches; a Warp ke
 through a hash grid over the segments of the rods already placed, whether each candidate
 comes closer than one diameter (surface gap < 0) to any of them; the host then accepts
 candidates in order, checking each against the candidates accepted earlier in the same batch.
+A placement that runs long (tens of thousands of rods take tens of seconds) says so on stderr
+within :data:`rodwarp._util.NOTE_AFTER_S` and shows a bar over the rods placed.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import numpy as np
 import warp as wp
 
 from rodwarp import _warp
+from rodwarp._util import slow_phase
 from rodwarp.errors import RodwarpError
 from rodwarp.kernels.packing import candidate_clearance
 from rodwarp.rodset import RodSet
@@ -38,6 +41,7 @@ def random_packing(
     max_attempts: int | None = None,
     device: str = "cpu",
     batch: int = 4096,
+    progress: bool | None = None,
 ) -> RodSet:
     """Place ``n_rods`` non-overlapping straight rods fully inside a box.
 
@@ -62,6 +66,13 @@ def random_packing(
         Give up after this many candidates, inside the box or not (default 20000 N + 1e5).
     device : str
         Warp device for the clearance kernel.
+    batch : int
+        Candidates drawn and tested at a time.
+    progress : bool, optional
+        Once the placement has run :data:`rodwarp._util.NOTE_AFTER_S`, print a note and a bar
+        over the rods placed on stderr; None: unless the process is quiet
+        (:func:`rodwarp._util.quiet`: a library call is, a command is unless ``--quiet``). A
+        quick placement prints nothing.
 
     Returns
     -------
@@ -84,14 +95,30 @@ def random_packing(
     h = length / (n_vertices - 1)
     max_attempts = max_attempts or 20000 * n_rods + 100000
     dev = _warp.resolve_device(device)
+    grid = wp.HashGrid(64, 64, 64, device=dev)
+    reach = h + diameter + clearance
+    with slow_phase(f"placing {n_rods} rods", n_rods, enabled=progress, unit="rods") as placed:
+        centers, dirs, attempts = _place(rng, n_rods, length, diameter, box, n_vertices=n_vertices,
+                                         clearance=clearance, cylinder=cylinder, max_attempts=max_attempts,
+                                         batch=batch, grid=grid, reach=reach, dev=dev, placed=placed)
+    rods = RodSet.from_straight(centers, dirs, length, r, n_vertices=n_vertices)
+    rods.box = np.stack([np.zeros(3), box])
+    rods.attrs.update({"generator": "random_sequential_addition", "seed": int(seed), "attempts": int(attempts)})
+    return rods
 
+
+def _place(rng, n_rods, length, diameter, box, *, n_vertices, clearance, cylinder, max_attempts, batch, grid,
+           reach, dev, placed):
+    """The random sequential addition of :func:`random_packing`: rod centres (N, 3) and unit
+    directions (N, 3) (m), and the candidates drawn; ``placed(n)`` is told the rods placed
+    before each batch."""
+    r = 0.5 * diameter
     placed_a = np.zeros((0, 3))  # segment starts of placed rods
     placed_b = np.zeros((0, 3))
     centers, dirs = [], []
     attempts = 0
-    grid = wp.HashGrid(64, 64, 64, device=dev)
-    reach = h + diameter + clearance
     while len(centers) < n_rods:
+        placed(len(centers))
         if attempts >= max_attempts:
             raise RodwarpError(
                 f"placed only {len(centers)} of {n_rods} rods after {attempts} attempts; "
@@ -129,12 +156,8 @@ def random_packing(
             dirs.append(d[k])
         pa, pb = _segments(np.array(centers), np.array(dirs), length, n_vertices)
         placed_a, placed_b = pa, pb
-    centers = np.array(centers)
-    dirs = np.array(dirs)
-    rods = RodSet.from_straight(centers, dirs, length, r, n_vertices=n_vertices)
-    rods.box = np.stack([np.zeros(3), box])
-    rods.attrs.update({"generator": "random_sequential_addition", "seed": int(seed), "attempts": int(attempts)})
-    return rods
+    placed(len(centers))
+    return np.array(centers), np.array(dirs), attempts
 
 
 def _segments(c, d, length, n_vertices):

@@ -221,8 +221,11 @@ def alpha_star(rows: list[dict], n_boot: int = 200, seed: int = 0) -> list[dict]
     return out
 
 
-def phase_diagram(out, note=None) -> list[Path]:
+def phase_diagram(out, note=None, dest=None, progress: bool | None = None) -> list[Path]:
     """Figures and the alpha* table of a sweep directory (reads ``out/results.csv``).
+
+    They are written into ``dest`` (default ``out``, the sweep's folder); the points' own files
+    are read from ``out`` either way.
 
     Writes ``phase_cv_e.png`` (Fig. 4L: sigma_e/mu_e against a/g, coloured by stability, with
     shaded stable/unstable regions), ``phase_f_alpha.png`` (Fig. 4H: f against alpha for each
@@ -241,13 +244,15 @@ def phase_diagram(out, note=None) -> list[Path]:
     and ``note`` (a callable of one string, optional) is told how many. A row that cannot be
     a measurement (a value that is not a finite number in range, two rows of one point, a
     file that is not a UTF-8 CSV with the needed columns) is refused with a one-line
-    :class:`~rodwarp.errors.RodwarpError` naming it (see :func:`_phase_rows`).
+    :class:`~rodwarp.errors.RodwarpError` naming it (see :func:`_phase_rows`), before anything
+    is drawn. Drawing a large sweep takes seconds: with ``progress`` (None: unless the process
+    is quiet, :func:`rodwarp._util.quiet`) a note on stderr says so once it has run
+    :data:`rodwarp._util.NOTE_AFTER_S`.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
+    from rodwarp._util import slow_phase
 
     out = Path(out)
+    dest = out if dest is None else Path(dest)
     rows, failed = _phase_rows(out)
     skipped = ""
     if failed:
@@ -260,30 +265,41 @@ def phase_diagram(out, note=None) -> list[Path]:
                            f"{' (' + skipped + ')' if skipped else ''}: nothing to plot")
     if skipped and note is not None:
         note(f"{out / 'results.csv'}: {skipped}")
-    written = [_cv_e_figure(rows, out / "phase_cv_e.png"), _f_alpha_figure(rows, out / "phase_f_alpha.png")]
+    with slow_phase(f"drawing the phase diagram of {len(rows)} points", enabled=progress):
+        return _draw(out, dest, rows)
+
+
+def _draw(out: Path, dest: Path, rows: list[dict]) -> list[Path]:
+    """The files of :func:`phase_diagram` from the checked ``ok`` rows, written into ``dest``
+    (the points' own files read from ``out``); returns their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+
+    written = [_cv_e_figure(rows, dest / "phase_cv_e.png"), _f_alpha_figure(rows, dest / "phase_f_alpha.png")]
     if any(r["height_kept"] is not None for r in rows):
-        written.append(_verdict_figure(rows, out / "phase_verdict_alpha.png"))
-    written.append(_f_ag_figure(rows, out / "phase_f_ag.png"))
+        written.append(_verdict_figure(rows, dest / "phase_verdict_alpha.png"))
+    written.append(_f_ag_figure(rows, dest / "phase_f_ag.png"))
     table = alpha_star(rows)
-    written.append(_write_table(table, out / "alpha_star.csv"))
-    written.append(_alpha_star_figure(rows, table, out / "phase_alpha_star.png"))
+    written.append(_write_table(table, dest / "alpha_star.csv"))
+    written.append(_alpha_star_figure(rows, table, dest / "phase_alpha_star.png"))
     if len({t["static_load"] for t in table}) > 1:
-        written.append(_alpha_star_load_figure(rows, table, out / "phase_alpha_star_load.png"))
+        written.append(_alpha_star_load_figure(rows, table, dest / "phase_alpha_star_load.png"))
     groups: dict = {}
     for r in rows:
         groups.setdefault((r["ag"], r["gravity"], r["static_load"]), []).append(r)
     fits = []
     for key, rs in sorted(groups.items()):
         tag = "" if len(groups) == 1 else f"_ag{key[0]:g}_g{key[1]:g}_F{key[2]:g}"
-        p = _timeseries_figure(out, key, rs, out / f"phase_timeseries{tag}.png")
+        p = _timeseries_figure(out, key, rs, dest / f"phase_timeseries{tag}.png")
         if p is not None:
             written.append(p)
-        p, f = _distributions_figure(out, key, rs, out / f"phase_distributions{tag}.png")
+        p, f = _distributions_figure(out, key, rs, dest / f"phase_distributions{tag}.png")
         if p is not None:
             written.append(p)
         fits += f
     if fits:
-        written.append(_write_table(fits, out / "power_law.csv"))
+        written.append(_write_table(fits, dest / "power_law.csv"))
     return written
 
 
