@@ -298,13 +298,21 @@ def simulate(
         explicit=_given(ctx, *(f.name for f in dataclasses.fields(ProtocolParams)), "box", "strains", "initial",
                         "initial_diameter"))
     params = checked.params  # with --initial: the input's alpha and length
-    if params.law == "imc" and params.rolling:
-        typer.echo("note: --rolling with --contact-law imc: DisMech's IMC friction acts on the centreline (no "
-                   "rolling); this run lets the rods spin, which the paper's model did not", err=True)
+    from rodwarp._warp import kernel_cache_dir, usable_cache_dir
+
+    usable_cache_dir(kernel_cache_dir())  # an unusable RODWARP_KERNEL_CACHE is refused before --out is taken
+    if entangled_from is not None:  # refused before any note about the run
+        from rodwarp.experiments._protocol import check_branch_protocol
+
+        check_branch_protocol(params)
+    from rodwarp._util import note
     from rodwarp.experiments._protocols import plugin
 
+    if params.law == "imc" and params.rolling:  # a departure from the paper's model: said even with --quiet
+        typer.echo("warning: --rolling with --contact-law imc: DisMech's IMC friction acts on the centreline (no "
+                   "rolling); this run lets the rods spin, which the paper's model did not", err=True)
     for why in (plugin(params.protocol).notes(params) if plugin(params.protocol) else []):
-        typer.echo(f"note: {why}", err=True)
+        note(why, enabled=not quiet)
     outdir = out or Path("runs") / default_run_name(params)
     with _failure_recorded(outdir):
         summary = run_protocol(checked, outdir, progress=not quiet, resume=resume, overwrite=overwrite,
@@ -522,10 +530,10 @@ def sweep(
                                                      "and as many as memory holds (default: that many); they end "
                                                      "with the sweep."),
     figures: bool = typer.Option(True, help="Draw the phase diagram at the end."),
-    overwrite: bool = typer.Option(False, help="Replace the run --out holds. Without it a sweep adds its points to "
-                                               "the folder's sweep of the same protocol (durations, amplitude, "
-                                               "--set values) and refuses any other."),
-    quiet: bool = typer.Option(False, help="No progress bar."),
+    overwrite: bool = _flag("overwrite", "Replace the run --out holds. Without it a sweep adds its points to "
+                                         "the folder's sweep of the same protocol (durations, amplitude, "
+                                         "--set values) and refuses any other."),
+    quiet: bool = _quiet_option(),
     set_: Optional[list[str]] = typer.Option(None, "--set", help="Any other simulate parameter for every point, "
                                              "KEY=VALUE (repeatable; the names of `rodwarp simulate`'s options "
                                              "with underscores), e.g. --set rod_model=rigid --set rolling=false."),
@@ -548,6 +556,7 @@ def sweep(
                      # only when changed: rows of sweeps run before this option still match their points
                      overrides={**({} if save_every == _P["save_every"][0] else {"save_every": save_every}),
                                 **sets})
+    spec = spec.validate()  # every value in range before any folder or cluster
     with _failure_recorded(out):
         path = run_sweep(spec, out, scheduler=scheduler, workers=workers, progress=not quiet, overwrite=overwrite)
     import json
@@ -557,11 +566,13 @@ def sweep(
     if figures and failed < total:
         from rodwarp.rodset.rundir import writing_part
 
+        from rodwarp._util import note
+
         with writing_part(out, "phase_diagram"):
-            written = phase_diagram(out, note=lambda msg: typer.echo(f"note: {msg}"))
-        for f in written:
-            typer.echo(f"wrote {f}")
-    typer.echo(f"results -> {path}")
+            written = phase_diagram(out, note=lambda msg: note(msg, enabled=not quiet))
+    else:
+        written = []
+    typer.echo(f"{total - failed} of {total} points ok, {len(written)} figures -> {path}")
     if failed:
         first = meta.get("first_failure") or ""
         typer.echo(f"error: {failed} of {total} sweep points failed (their status is in {path}); "

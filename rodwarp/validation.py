@@ -117,6 +117,8 @@ class Range:
         The value is a whole number (a count, a seed).
     each : bool
         The value is a sequence whose every item must lie in the range (``--box``, ``--strains``).
+    choices : tuple
+        The only values allowed, where the range is a short list (``--connectivity 6`` or ``26``).
     """
 
     gt: float | None = None
@@ -127,6 +129,7 @@ class Range:
     hint: str = ""
     whole: bool = False
     each: bool = False
+    choices: tuple = ()
 
     def check(self, name: str, value):
         """``value`` if it lies in the range, else a one-line error naming ``name``."""
@@ -139,6 +142,12 @@ class Range:
         return self._check_one(name, value)
 
     def _check_one(self, name: str, v):
+        if self.choices:
+            x = integer(name, v) if self.whole else number(name, v)
+            if x not in self.choices:
+                fail(f"{name} must be {' or '.join(_fmt(c) for c in self.choices)}, got {_fmt(x)}"
+                     + (f"; {self.hint}" if self.hint else ""))
+            return x
         if self.whole:
             i = integer(name, v, hint=self.hint)
             number(name, i, gt=self.gt, ge=self.ge, lt=self.lt, le=self.le, unit=self.unit, hint=self.hint)
@@ -156,6 +165,8 @@ class Range:
     def text(self) -> str:
         """The range as help text, e.g. ``> 0 and <= 100 m``."""
         u = f" {self.unit}" if self.unit else ""
+        if self.choices:
+            return " or ".join(_fmt(c) for c in self.choices) + u
         parts = [f"{op} {_fmt(b)}" for op, b in ((">", self.gt), (">=", self.ge), ("<", self.lt), ("<=", self.le))
                  if b is not None]
         return (" and ".join(parts) + u) if parts else "any finite value"

@@ -184,7 +184,7 @@ def test_imc_run_records_its_law_and_locks_the_spin_unless_asked(capsys, tmp_pat
     assert s["rolling"] is False  # DisMech's friction acts on the centreline
     capsys.readouterr()
     assert main(["simulate", *TINY, "--contact-law", "imc", "--rolling", "--out", str(tmp_path / "b")]) == 0
-    assert "note: --rolling with --contact-law imc" in capsys.readouterr().err
+    assert "warning: --rolling with --contact-law imc" in capsys.readouterr().err
     assert json.loads((tmp_path / "b" / "summary.json").read_text())["rolling"] is True
     assert main(["simulate", *TINY, "--out", str(tmp_path / "c")]) == 0
     s = json.loads((tmp_path / "c" / "summary.json").read_text())

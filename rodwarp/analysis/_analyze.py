@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rodwarp._util import option, progress_bar, versions
+from rodwarp._util import option, progress_bar, slow_phase, versions
 from rodwarp.analysis._fieldset import Fields
 from rodwarp.analysis._outputs import ANALYZE_OUTPUTS
 from rodwarp.errors import RodwarpError
@@ -47,13 +47,16 @@ class AnalyzeOptions:
                                     range=Range(gt=0, le=1e12, hint="lengths are in the input's units"))
     length: float | None = option(None, "Rod length l for the default R (default the mean rod length).",
                                   range=Range(gt=0, le=1e12, hint="lengths are in the input's units"))
-    units: str | None = option(None, "Length unit of a CSV (m, mm, um, voxel); converts npz/zarr rod sets.")
+    units: str | None = option(None, "Length unit of a CSV (m, mm, um, voxel; default m: a CSV does not "
+                                          "record its unit); converts npz/zarr rod sets, which record their own.")
     keep_outside: bool = option(False, "Keep voxels whose ball leaves the domain (masked as NaN by default).")
     contact_tolerance: float | None = option(None, "Surface gap counted as contact when contacts are detected "
                                                    "(default d / 10).",
                                                    range=Range(ge=0, le=1e12, hint="a surface gap in the input's units"))
     outlier: str = option("q3", "Outlier bound: q3 = Q3 + 1.5 IQR (the paper's) or q1 = Q1 + 1.5 IQR.")
-    connectivity: int = option(26, "Tangle connectivity: 26 (default) or 6.")
+    connectivity: int = option(26, "Tangle connectivity: 26 (default) or 6.",
+                                   range=Range(choices=(6, 26), whole=True, hint="voxels sharing a face (6) or a "
+                                                                                 "corner (26)"))
     bins: int = option(40, "Histogram bins.", range=Range(ge=2, le=100_000, whole=True))
     device: str = option("auto", "auto, cpu or cuda (auto: a CUDA GPU when one is present, else the CPU).")
     figures: bool = option(True, "Write the PNG figures.")
@@ -226,8 +229,23 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
     if not fields.valid.any():
         raise RodwarpError("no voxel of the grid lies inside the packing (every ball is empty or leaves "
                            "the domain); lower --radius/--spacing or pass --keep-outside")
-    stats = field_statistics(fields, method=opts.outlier, connectivity=opts.connectivity, bins=opts.bins,
-                             contact_cluster_fraction=cluster)
+    n_steps = 2 + (5 if opts.figures else 0)  # statistics, tangles, then each figure
+    with slow_phase("statistics, tangles and figures", n_steps, enabled=progress, unit="steps") as step:
+        stats = field_statistics(fields, method=opts.outlier, connectivity=opts.connectivity, bins=opts.bins,
+                                 contact_cluster_fraction=cluster)
+        step(1)
+        summary = _summary_with_figures(fields, stats, src, kind, opts, out, step)
+    summary["analysis_wall_s"] = time.perf_counter() - t0
+    write_json(out / "summary.json", summary, finite=True)
+    run.complete()
+    return summary
+
+
+def _summary_with_figures(fields: Fields, stats: dict, src, kind: str, opts: AnalyzeOptions, out: Path,
+                          step) -> dict:
+    """summary.json's contents, and the figures (``step(k)`` after each, for the slow-phase note)."""
+    from rodwarp.analysis._stats import find_tangles
+
     summary = {
         "input": str(src),
         "input_kind": kind,
@@ -248,15 +266,17 @@ def analyze(path, out=None, opts: AnalyzeOptions | None = None, *, progress: boo
 
         labels, _ = find_tangles(fields.e, fields.valid, stats["e_lb"], connectivity=opts.connectivity,
                                  spacing=fields.spacing, system_size=fields.system_size)
-        figs = [fieldplots.plot_histograms(fields, stats, out / "histograms.png"),
-                fieldplots.plot_slices(fields, out / "slices.png"),
-                fieldplots.plot_zprofiles(stats, out / "zprofiles.png"),
-                fieldplots.plot_tangles(fields, labels, stats, out / "tangles.png"),
-                fieldplots.plot_distributions(fields, stats, out / "distributions.png")]
+        step(2)
+        draws = [lambda: fieldplots.plot_histograms(fields, stats, out / "histograms.png"),
+                 lambda: fieldplots.plot_slices(fields, out / "slices.png"),
+                 lambda: fieldplots.plot_zprofiles(stats, out / "zprofiles.png"),
+                 lambda: fieldplots.plot_tangles(fields, labels, stats, out / "tangles.png"),
+                 lambda: fieldplots.plot_distributions(fields, stats, out / "distributions.png")]
+        figs = []
+        for k, draw in enumerate(draws):
+            figs.append(draw())
+            step(3 + k)
         summary["figures"] = [Path(f).name for f in figs]
-    summary["analysis_wall_s"] = time.perf_counter() - t0
-    write_json(out / "summary.json", summary, finite=True)
-    run.complete()
     return summary
 
 

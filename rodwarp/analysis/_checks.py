@@ -18,8 +18,6 @@ def check_analyze(o) -> None:
         fail(f"--units must be one of {', '.join(UNITS)}, got '{o.units}'")
     if o.outlier not in ("q3", "q1"):
         fail(f"--outlier must be q3 (Q3 + 1.5 IQR, the paper's) or q1, got '{o.outlier}'")
-    if o.connectivity not in (6, 26):
-        fail(f"--connectivity must be 6 or 26, got {o.connectivity}")
     device_name("--device", o.device)
 
 

@@ -6,11 +6,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from rodwarp.ct._phantom import SCENES as PHANTOM_SCENES
-from rodwarp.validation import BASE_BYTES, disk_fits, fail, integer, memory_fits, number, output_location
+from rodwarp.validation import BASE_BYTES, Range, check_ranges, disk_fits, fail, memory_fits, output_location
 
 #: bytes per voxel of `rodwarp phantom`: the float64 occupancy, the blurred copy, the noise and
 #: the 16-bit output
 PHANTOM_BYTES_PER_VOXEL = 34
+#: each of the volume's three sizes (voxels); memory and disk bound their product
+SHAPE_RANGE = Range(ge=2, le=100_000, whole=True, hint="three sizes >= 2 (Z Y X)")
 
 
 def check_phantom(*, rods, shape, voxel_size, out, blur, cnr, ring, cupping, streaks, n_rods, radius, aspect,
@@ -21,30 +23,20 @@ def check_phantom(*, rods, shape, voxel_size, out, blur, cnr, ring, cupping, str
     ``streaks`` at most 1 contrast, ``|cupping|`` below 1); a scene's ``radius`` must be at
     least 0.5 voxel. The rods' scale against the voxel and the volume is checked once they are
     loaded (:func:`rodwarp.ct.make_phantom`)."""
+    from rodwarp.ct._phantom import PhantomOptions
+
     if len(shape) != 3:
         fail(f"--shape must be three sizes Z Y X, got {shape}")
     for axis, n in zip("ZYX", shape):
-        integer(f"--shape {axis}", n, ge=2, hint="three sizes >= 2 (Z Y X)")
-    number("--voxel-size", voxel_size, gt=0)
-    number("--blur", blur, ge=0, unit="voxels")
-    number("--cnr", cnr, gt=0)
-    # beyond one contrast the artefact outshines the rods and clips at 0 or 65535
-    number("--ring", ring, ge=0, le=1, hint="a fraction of the rod/background contrast")
-    number("--cupping", cupping, gt=-1, lt=1, hint="a relative intensity drop (negative: a bright rim)")
-    if fov is not None:
-        number("--fov", fov, gt=0, unit="voxels")
-    integer("--z-thickness", z_thickness, ge=1, le=100)
-    number("--streaks", streaks, ge=0, le=1, hint="a fraction of the rod/background contrast")
+        SHAPE_RANGE.check(f"--shape {axis}", n)
+    # every option within the range stated beside it (PhantomOptions)
+    check_ranges(PhantomOptions(voxel_size=voxel_size, units=units, blur=blur, cnr=cnr, ring=ring, cupping=cupping,
+                                streaks=streaks, fov=fov, dark=dark, z_thickness=z_thickness, n_rods=n_rods,
+                                radius=radius, aspect=aspect, touching=touching, seed=seed))
     if units is not None and units not in ("m", "mm", "um", "voxel"):
         fail(f"--units must be m, mm, um or voxel (the unit of a CSV rod set and of --voxel-size), got '{units}'")
-    integer("--seed", seed, ge=0, le=2**63 - 1)
     if rods in PHANTOM_SCENES:
-        integer("--n-rods", n_rods, ge=1, le=10_000_000)
-        # a rod thinner than a voxel renders as noise
-        number("--radius", radius, ge=0.5, unit="voxels", hint="a rod must be at least a voxel thick to show")
         if rods == "random":
-            number("--aspect", aspect, gt=1)
-            number("--touching", touching, ge=0, le=1)
             length = 2 * radius * aspect
             if length > max(shape):
                 fail(f"'random' rods of --radius {radius:g} and --aspect {aspect:g} are {length:g} voxels long, "
@@ -75,10 +67,9 @@ def check_segment(*, stack, voxel_size, units, diameter, out, chunk, contact_tol
         parse_voxel_size_text(voxel_size)  # the one parser: one value or three (z,y,x), positive and finite
     if units is not None and units not in UNITS:
         fail(f"--units must be one of {', '.join(UNITS)}, got '{units}'")
-    number("--min-fill", min_fill, gt=0, le=1)
-    if diameter is not None:
-        number("--diameter", diameter, gt=0, hint=f"in --units {units}")
-    if chunk is not None:
-        integer("--chunk", chunk, ge=16, hint="an edge of at least 16 voxels")
-    number("--contact-tolerance", contact_tolerance, ge=0, unit="voxels")
+    from rodwarp.ct._params import SegmentOptions
+
+    # every option within the range stated beside it (SegmentOptions)
+    check_ranges(SegmentOptions(units=units, diameter=diameter, min_fill=min_fill, chunk=chunk,
+                                contact_tolerance=contact_tolerance))
     output_location(Path(out), "--out")

@@ -14,6 +14,7 @@ import numpy as np
 from rodwarp._util import one_line_error as _fail
 from rodwarp._util import option
 from rodwarp.rodset import Contacts, RodSet
+from rodwarp.validation import Range
 
 __all__ = ["SegmentParams", "SegmentResult"]
 
@@ -205,14 +206,18 @@ class SegmentOptions:
                                           "Default: the file's metadata (ImageJ/OME-TIFF, OME-Zarr).")
     units: str | None = option(None, "Unit of --voxel-size, --diameter and the outputs (m, mm, um, voxel); default mm, "
                                      "or the metadata's.")
-    diameter: float | None = option(None, "Rod diameter in --units (estimated when absent).")
+    diameter: float | None = option(None, "Rod diameter in --units (estimated when absent).",
+                                    range=Range(gt=0, le=1e12, hint="in --units"))
     shape: str = option(SegmentParams.shape, "straight (rods), curved (filaments as polylines) or auto.")
     dark_rods: bool | None = option(None, "Rods darker / brighter than the background (default: detected).")
     min_fill: float = option(SegmentParams.min_fill, "Reject rods whose axis plateau is below this share of what a "
-                                                     "rod of their radius shows under the measured blur.")
-    chunk: int | None = option(None, "Process in overlapping chunks of this edge (voxels), for big volumes.")
+                                                     "rod of their radius shows under the measured blur.",
+                                range=Range(gt=0, le=1, hint="a share of the plateau a rod shows"))
+    chunk: int | None = option(None, "Process in overlapping chunks of this edge (voxels), for big volumes.",
+                               range=Range(ge=16, le=100_000, whole=True, hint="an edge of at least 16 voxels"))
     contact_tolerance: float = option(SegmentParams.contact_tolerance, "Largest surface gap counted as contact "
-                                                                       "(voxels).")
+                                                                       "(voxels).",
+                                      range=Range(ge=0, le=1000, unit="voxels"))
     figures: bool = option(True, "Write the QA PNGs.")
 
     def validate(self, stack, out) -> None:

@@ -25,6 +25,7 @@ from rodwarp._util import json_safe
 from rodwarp._util import one_line_error as _fail
 from rodwarp.ct._phantom_render import _to_voxels, capsule_volume, occupancy, render_phantom  # noqa: F401
 from rodwarp.rodset import UNITS, Contacts, RodSet
+from rodwarp.validation import Range
 
 __all__ = ["render_phantom", "occupancy", "phantom_truth", "write_phantom", "truth_paths", "make_phantom",
            "PhantomOptions",
@@ -156,8 +157,10 @@ def write_phantom(path_tif, volume: np.ndarray, rods: RodSet, contacts: Contacts
 SCENES = ("random", "bundles", "arcs", "wires")
 
 
-def _opt(default, help: str):
-    return field(default=default, metadata={"help": help})
+def _opt(default, help: str, range: Range | None = None):
+    """A :class:`PhantomOptions` field: its default, its ``--help`` line and the
+    :class:`~rodwarp.validation.Range` of values it takes (:func:`rodwarp.ct.check_phantom`)."""
+    return field(default=default, metadata={"help": help, "range": range})
 
 
 @dataclass(frozen=True)
@@ -167,24 +170,37 @@ class PhantomOptions:
 
     voxel_size: float = _opt(1.0, "Voxel edge length in the rods' units (--units; 1 for voxel-unit rods). The TIFF "
                                   "and the truth JSON record it in that unit; the rods must be at least a voxel "
-                                  "thick and fit --shape.")
+                                  "thick and fit --shape.",
+          range=Range(gt=0, le=1e12, hint="in the rods' units (--units)"))
     units: str | None = _opt(None, "Unit of a CSV rod set (m, mm, um, voxel; default m) and of --voxel-size; "
                                    "converts npz/zarr rod sets.")
-    blur: float = _opt(1.0, "Gaussian point-spread sigma (voxels).")
-    cnr: float = _opt(10.0, "Contrast-to-noise ratio (foreground - background) / noise sigma.")
-    ring: float = _opt(0.0, "Ring artefact amplitude (fraction of the contrast, 0 to 1).")
+    blur: float = _opt(1.0, "Gaussian point-spread sigma (voxels).",
+          range=Range(ge=0, le=100, unit="voxels"))
+    cnr: float = _opt(10.0, "Contrast-to-noise ratio (foreground - background) / noise sigma.",
+          range=Range(gt=0, le=1e6))
+    ring: float = _opt(0.0, "Ring artefact amplitude (fraction of the contrast, 0 to 1).",
+          range=Range(ge=0, le=1, hint="a fraction of the rod/background contrast; beyond 1 it clips at 0 or 65535"))
     cupping: float = _opt(0.0, "Cupping: relative intensity drop at the slice edge (negative: a bright rim, as "
-                               "beam hardening shows).")
-    streaks: float = _opt(0.0, "Metal streak amplitude (fraction of the contrast, 0 to 1).")
-    fov: float | None = _opt(None, "Field of view: radius (voxels) of the reconstruction circle; 0 outside it.")
+                               "beam hardening shows).",
+          range=Range(gt=-1, lt=1, hint="a relative intensity drop (negative: a bright rim)"))
+    streaks: float = _opt(0.0, "Metal streak amplitude (fraction of the contrast, 0 to 1).",
+          range=Range(ge=0, le=1, hint="a fraction of the rod/background contrast; beyond 1 it clips at 0 or 65535"))
+    fov: float | None = _opt(None, "Field of view: radius (voxels) of the reconstruction circle; 0 outside it.",
+          range=Range(gt=0, le=1e6, unit="voxels"))
     dark: bool = _opt(False, "Dark rods on a bright background (grey values swapped).")
     z_thickness: int = _opt(1, "Slices this many times thicker than the voxels are wide (anisotropic voxels; the "
-                               "TIFF records the spacing).")
-    n_rods: int = _opt(100, "'random', 'arcs', 'wires': number of rods; 'bundles': of bundles.")
-    radius: float = _opt(3.0, "Scenes: rod radius (voxels, at least 0.5).")
-    aspect: float = _opt(30.0, "'random': aspect ratio length / diameter.")
-    touching: float = _opt(0.5, "'random': fraction of rods touching another.")
-    seed: int = _opt(0, "Seed of the noise and of the scenes.")
+                               "TIFF records the spacing).",
+          range=Range(ge=1, le=100, whole=True))
+    n_rods: int = _opt(100, "'random', 'arcs', 'wires': number of rods; 'bundles': of bundles.",
+          range=Range(ge=1, le=10_000_000, whole=True))
+    radius: float = _opt(3.0, "Scenes: rod radius (voxels, at least 0.5).",
+          range=Range(ge=0.5, le=1e4, unit="voxels", hint="a rod must be at least a voxel thick to show"))
+    aspect: float = _opt(30.0, "'random': aspect ratio length / diameter.",
+          range=Range(gt=1, le=1e4))
+    touching: float = _opt(0.5, "'random': fraction of rods touching another.",
+          range=Range(ge=0, le=1))
+    seed: int = _opt(0, "Seed of the noise and of the scenes.",
+          range=Range(ge=0, le=2**63 - 1, whole=True))
 
 
 def make_phantom(rods: str, shape, out, **options) -> RodSet:

@@ -379,7 +379,7 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     vs = parse_voxel_size_text(voxel_size)
     outdir = Path(out) if out is not None else default_out(stack)
     # the folder's owner is checked before the (long) work: a refusal costs nothing and touches nothing
-    rundir.check(outdir, "segment", {}, SEGMENT_OUTPUTS, overwrite=overwrite, replace_same_kind=True)
+    rundir.check(outdir, "segment", {}, SEGMENT_OUTPUTS, overwrite=overwrite, replace_same_kind=True, inputs=[stack])
     volume = open_volume_lazy(stack)
     source = "--voxel-size"
     if vs is None:
@@ -431,9 +431,12 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     # and a kill while the outputs are written leaves this folder marked incomplete
     run = rundir.claim(outdir, "segment", {"input": str(stack.resolve()), "voxel_size_zyx": list(vs), "units": units,
                                            "voxel_size_source": source, **asdict(p)},
-                       SEGMENT_OUTPUTS, overwrite=overwrite, replace_same_kind=True)
-    s = write_outputs(outdir, result, volume, voxel_size=spacing, units=units, summary=summary, figures=figures,
-                      grid_scale=grid)
+                       SEGMENT_OUTPUTS, overwrite=overwrite, replace_same_kind=True, inputs=[stack])
+    from rodwarp._util import slow_phase
+
+    with slow_phase("writing the rods, contacts and QA figures", enabled=progress):  # the figures take seconds
+        s = write_outputs(outdir, result, volume, voxel_size=spacing, units=units, summary=summary, figures=figures,
+                          grid_scale=grid)
     s["wall_time_s"] = time.perf_counter() - t0
     write_json(outdir / "summary.json", s)
     run.complete()
