@@ -177,7 +177,7 @@ def test_every_writing_command_takes_quiet_out_and_overwrite(command):
     assert {"--quiet", "--out", "--overwrite"} <= _options(_help(command))
 
 
-@pytest.mark.parametrize("command", ["simulate", "analyze", "phantom", "segment", "phase-diagram"])
+@pytest.mark.parametrize("command", WRITING)
 def test_a_flag_off_by_default_has_no_negative_form(command):
     negatives = {"--no-quiet", "--no-overwrite", "--no-resume", "--no-keep-outside", "--no-entangle", "--no-dark"}
     assert not negatives & _options(_help(command))
