@@ -1,4 +1,4 @@
-"""Run every bad-input case (issues 15 and 29) through the real command line and tabulate what a
+"""Run every bad-input case (issues 15, 29 and 47) through the real command line and tabulate what a
 user sees: command, exit code, the lines on stderr, whether anything outside the case's output
 changed, and whether the outcome is the one expected. Writes ``benchmarks/results/bad_inputs.md``.
 
@@ -12,6 +12,11 @@ analysis's default ``analysis/``, a phantom's TIFF and truth files) is reported.
 when it gives the expected exit code (2 for bad input: exactly one ``error:`` line on stderr)
 with no traceback and nothing outside its output touched.
 Cases that need a small tmpfs (full disk, read-only) are skipped where mounting is not allowed.
+Issue 47 adds binarised stacks (each two-level encoding of a phantom segmented and scored
+against its truth: rod F1 >= 0.95) and misuses of the Python API (each in a fresh interpreter:
+a TypeError or ValueError naming the argument, nothing else on stderr).
+
+    python scripts/bad_inputs.py --only 47     # one issue's cases (written to --out)
 """
 
 from __future__ import annotations
@@ -442,6 +447,18 @@ CASES_47: list[tuple] = [
      '--strains 0,,0.1: item 2 of 3 is empty'),
     ('silent', 'sweep --save-every with --set save_every', 'sweep --alpha 20 --freq 1 --device cpu --quiet --out $TMP/sw47 --save-every 0.02 --set save_every=0.01', 2,
      '--save-every 0.02 and --set save_every=0.01 both given'),
+    ('binarised', 'a constant stack', 'segment $TMP/const.tif --voxel-size 1 --units voxel --quiet --out $TMP/sc1', 2,
+     'volume is constant'),
+    ('binarised', 'a label image of 4 phases', 'segment $TMP/labels.tif --voxel-size 1 --units voxel --quiet --out $TMP/sc2', 2,
+     'label image'),
+    ('binarised', 'a posterised stack of 8 values', 'segment $TMP/post8.tif --voxel-size 1 --units voxel --quiet --out $TMP/sc3', 2,
+     'only 8 distinct values'),
+    ('binarised', "a mask whose rods' level is a speck", 'segment $TMP/speck.tif --voxel-size 1 --units voxel --quiet --out $TMP/sc4', 2,
+     'holds only 8 voxels'),
+    ('binarised', 'an inverted mask read as bright rods', 'segment $TMP/inv.tif --voxel-size 1 --units voxel --quiet --out $TMP/sc5', 2,
+     'pass --dark-rods'),
+    ('binarised', '--dark-rods on a bright-rod mask', 'segment $TMP/fg.tif --voxel-size 1 --units voxel --quiet --dark-rods --out $TMP/sc6', 2,
+     'pass --bright-rods'),
     ("messages", "1e300 coordinates, analyze", "analyze $TMP/big.csv --quiet --out $TMP/c1", 2,
      "points hold 1e+300 m (first at vertex 1), too large to be a length in 'm'"),
     ("messages", "1e300 coordinates, simulate", "simulate --initial $TMP/big.csv --quiet --out $TMP/c2", 2,
@@ -484,6 +501,46 @@ def api_case(call: str, cwd: Path):
     return kinds.split(","), msg, noisy
 
 
+#: the two-level encodings a binarised stack is shared in: mask -> stack
+BINARISED = {
+    "bool": lambda m: m,
+    "uint8 0/1": lambda m: m.astype(np.uint8),
+    "uint8 0/255": lambda m: (m * 255).astype(np.uint8),
+    "uint16 100/3000": lambda m: np.where(m, 3000, 100).astype(np.uint16),
+    "float32 -1/1": lambda m: np.where(m, 1.0, -1.0).astype(np.float32),
+}
+
+
+def binarised_cases(d: Path) -> list[tuple]:
+    """The 4-rod phantom (p.tif), thresholded at its half level and saved in every two-level
+    encoding, segmented through the command line and scored against the phantom's truth (the
+    grey scan's score beside them): rows of the report."""
+    import tifffile
+
+    from rodwarp.ct import match_rods
+    from rodwarp.rodset import load
+
+    grey = tifffile.imread(d / "p.tif")
+    truth = load(d / "p_truth.npz")
+    mask = grey > 0.5 * (20000 + 50000)  # the phantom's background and rod levels: the half level
+    out = []
+    for name, encode in {"grey scan (reference)": None, **BINARISED}.items():
+        tif = d / "p.tif" if encode is None else d / f"bin_{name.replace(' ', '_').replace('/', '_')}.tif"
+        if encode is not None:
+            tifffile.imwrite(tif, encode(mask))
+        seg = d / f"seg_{tif.stem}"
+        args = f"segment {tif} --voxel-size 1 --units voxel --quiet --no-figures --out {seg}"
+        rc, msg, n_err, tb, wall = rodwarp(args, d)
+        f1 = match_rods(load(seg / "rods.npz"), truth).f1 if rc == 0 else float("nan")
+        said = encode is None or "binarised stack" in msg
+        ok = rc == 0 and not tb and f1 >= 0.95 and said
+        out.append(("47 binarised", f"{name}: rod F1 {f1:.2f} of the phantom's truth",
+                    ("rodwarp " + args).replace(str(d), "$TMP"), rc, n_err, "yes", "pass" if ok else "FAIL",
+                    msg.replace(str(d), "$TMP"), wall))
+        print(f"{'pass' if ok else 'FAIL'}  {name}: F1 {f1:.2f}\n          {msg[:150]}", flush=True)
+    return out
+
+
 def make_inputs_47(d: Path) -> None:
     """The inputs of :data:`CASES_47`: a finished run to overwrite from inside, and a lab run
     left unfinished (as a kill leaves it) to resume with the paper's options."""
@@ -500,6 +557,15 @@ def make_inputs_47(d: Path) -> None:
     (d / "ok.csv").write_text("rod,x,y,z,radius\n0,0,0,0,0.001\n0,0.1,0,0,0.001\n1,0,0.01,0,0.001\n"
                               "1,0.1,0.01,0,0.001\n")
     (d / "cachefile").write_text("not a folder")
+    import tifffile
+
+    for name, arr in (("const", np.full((16, 32, 32), 255, np.uint8)),
+                      ("labels", (np.indices((24, 24, 24)).sum(0) // 18).astype(np.uint8)),
+                      ("post8", (np.arange(32**3).reshape(32, 32, 32) % 8).astype(np.uint8)),
+                      ("speck", np.pad(np.ones((2, 2, 2), np.uint8), 15)),
+                      ("inv", np.pad(np.zeros((4, 4, 40), np.uint8), 12, constant_values=1)),
+                      ("fg", np.pad(np.ones((4, 4, 40), np.uint8), 12))):
+        tifffile.imwrite(d / f"{name}.tif", arr)
 
 
 def _write_csv(path: Path, rods, radius: bool = True) -> None:
@@ -703,6 +769,7 @@ def main(argv=None) -> int:
             wall))
         print(f"{'pass' if ok else 'FAIL'} {rc:>3}  {wall:5.1f}s  {shown}\n          {msg[:160]}", flush=True)
     if not args.only or "47".startswith(args.only) or args.only.startswith("47"):
+        rows += binarised_cases(d)
         for what, call, kind, says in API_47:
             t = time.perf_counter()
             kinds, msg, noisy = api_case(call, d)
@@ -737,7 +804,8 @@ def main(argv=None) -> int:
              f"({version_line()}; {platform.node()}, {_cpu_model()}); every command "
              "ran in a fresh process ($TMP is a scratch folder). Exit codes: 0 done, 2 bad input or location, 4 a "
              "sweep with failed points. *class*: the issue and class the case comes from (15: issue 15; 1-9: the "
-             "classes of issue 29). *stderr*: lines on stderr. *outside*: every file of $TMP outside the case's "
+             "classes of issue 29; 47 and its finding: issue 47, where *binarised* rows give the rod F1 against "
+             "the phantom's truth and *API* rows a Python call, its error type and message). *stderr*: lines on stderr. *outside*: every file of $TMP outside the case's "
              "own output is unchanged. *result*: the expected exit code (2 with exactly one `error:` line for bad "
              "input, naming the case's own reason for the cases of issue 29), no traceback, no library or "
              "pickle advice, nothing outside touched.", "",
