@@ -572,7 +572,8 @@ def sweep(
             written = phase_diagram(out, note=lambda msg: note(msg, enabled=not quiet))
     else:
         written = []
-    typer.echo(f"{total - failed} of {total} points ok, {len(written)} figures -> {path}")
+    figures_drawn = sum(str(f).endswith(".png") for f in written)  # written also holds the diagram's CSVs
+    typer.echo(f"{total - failed} of {total} points ok, {figures_drawn} figures -> {path}")
     if failed:
         first = meta.get("first_failure") or ""
         typer.echo(f"error: {failed} of {total} sweep points failed (their status is in {path}); "
