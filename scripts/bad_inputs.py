@@ -517,7 +517,7 @@ def first_note_case(d: Path) -> tuple:
     the run is stopped once the note is read)."""
     import select
 
-    args = f"simulate --protocol lab --alpha 20 --fill-height 40 --device cpu --out {d}/fh40"
+    args = f"simulate --protocol lab --alpha 20 --fill-height 40 --save-every 0.025 --device cpu --out {d}/fh40"
     t = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-m", "rodwarp.cli", *shlex.split(args)], cwd=d, text=True,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
