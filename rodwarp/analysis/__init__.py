@@ -14,6 +14,7 @@ One private module per job, their public names re-exported here (scikit-image's 
 ``_fieldset``      :class:`Fields` - the container and ``fields.zarr``
 ``_acn``           :func:`gauss_linking`, :func:`linking_number`, :func:`average_crossing_number`
 ``_stats``         :func:`field_statistics`, :func:`outlier_bound`, :func:`find_tangles`, ...
+``_tail``          :func:`tail_fit` - is the upper tail a power law? (Clauset et al. 2009)
 ``_figures``       :func:`plot_histograms`, :func:`plot_slices`, :func:`plot_zprofiles`, ...
 ``_analyze``       :func:`analyze` - the ``rodwarp analyze`` pipeline, input to files
 ``_checks``        :func:`check_analyze` - the command's options, before any work
@@ -40,6 +41,7 @@ _WHERE = {
     "field_statistics": "_stats", "outlier_bound": "_stats", "find_tangles": "_stats", "histogram": "_stats",
     "power_law_fit": "_stats", "power_law_density": "_stats", "log_histogram": "_stats",
     "z_profiles": "_stats",
+    "tail_fit": "_tail", "TailFit": "_tail",
     # figures
     "plot_histograms": "_figures", "plot_slices": "_figures", "plot_zprofiles": "_figures",
     "plot_tangles": "_figures",
