@@ -30,7 +30,7 @@ from rodwarp.experiments import ProtocolParams, SweepSpec, option_table
 _AN = option_table(AnalyzeOptions)
 #: `rodwarp analyze`'s options in --help order: AnalyzeOptions fields, and the command's own
 _ANALYZE_OPTIONS = ("out", "radius", "spacing", "diameter", "length", "units", "keep_outside", "contact_tolerance",
-                    "outlier", "connectivity", "bins", "device", "figures", "overwrite", "quiet")
+                    "outlier", "connectivity", "bins", "convention", "device", "figures", "overwrite", "quiet")
 _SG = option_table(SegmentOptions)
 #: `rodwarp segment`'s options in --help order: SegmentOptions fields, and the command's own
 _SEGMENT_OPTIONS = ("voxel_size", "units", "diameter", "out", "shape", "dark_rods", "min_fill", "chunk",

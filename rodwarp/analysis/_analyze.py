@@ -60,6 +60,9 @@ class AnalyzeOptions:
     bins: int = option(40, "Histogram bins.", range=Range(ge=2, le=100_000, whole=True))
     device: str = option("auto", "auto, cpu or cuda (auto: a CUDA GPU when one is present, else the CPU).")
     figures: bool = option(True, "Write the PNG figures.")
+    convention: str = option("text", "Field rules: text (the paper's definitions: exact clipping, each rod pair "
+                                     "once) or authors (the authors' MATLAB routine behind the published fields: "
+                                     "unclipped edges, rod pairs twice; phi not computed); docs/fields.md.")
 
     def validate(self) -> None:
         """Raise :class:`RodwarpError` (one line) for any option that is not finite, out of
@@ -254,6 +257,7 @@ def _summary_with_figures(fields: Fields, stats: dict, src, kind: str, opts: Ana
         "units": fields.units,
         "grid_shape_zyx": list(fields.shape),
         "axis_order": "z,y,x",
+        "convention": opts.convention if kind == "rods" else fields.attrs.get("convention", "as read"),
         **{k: v for k, v in fields.attrs.items() if k not in ("source",)},
         "options": asdict(opts),
         **stats,
@@ -285,9 +289,11 @@ def _fields_with_progress(rods: RodSet, contacts, opts: AnalyzeOptions, progress
     from rodwarp.analysis._fields import compute_fields
 
     # a first run compiles the field kernels: say so before the bar, not after a silent wait
-    _warp.load_kernels(_warp.resolve_device(opts.device), ("acn", "fields"), progress=progress)
+    if opts.convention == "text":  # the authors' convention is NumPy
+        _warp.load_kernels(_warp.resolve_device(opts.device), ("acn", "fields"), progress=progress)
     with progress_bar(progress, unit="voxels") as update:
         return compute_fields(rods, radius=opts.radius, spacing=opts.spacing, diameter=opts.diameter,
                               length=opts.length, keep_outside=opts.keep_outside,
                               contact_tolerance=opts.contact_tolerance, contacts=contacts,
-                              device=opts.device, progress=lambda done, total: update("fields", done, total))
+                              device=opts.device, progress=lambda done, total: update("fields", done, total),
+                              convention=opts.convention)

@@ -18,6 +18,9 @@ def check_analyze(o) -> None:
         fail(f"--units must be one of {', '.join(UNITS)}, got '{o.units}'")
     if o.outlier not in ("q3", "q1"):
         fail(f"--outlier must be q3 (Q3 + 1.5 IQR, the paper's) or q1, got '{o.outlier}'")
+    if o.convention not in ("text", "authors"):
+        fail(f"--convention must be text (the paper's definitions) or authors (the authors' MATLAB routine), "
+             f"got '{o.convention}'")
     device_name("--device", o.device)
 
 

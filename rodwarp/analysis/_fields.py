@@ -233,7 +233,7 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
                    diameter: float | None = None, length: float | None = None, domain=None,
                    keep_outside: bool = False, contacts: Contacts | None = None,
                    contact_tolerance: float | None = None, device: str | None = "cpu",
-                   progress: Callable[[int, int], None] | None = None) -> Fields:
+                   progress: Callable[[int, int], None] | None = None, convention: str = "text") -> Fields:
     """Every registered local field (phi, S, c, e, n, ...) of a rod set on a voxel grid (Warp kernels).
 
     Parameters
@@ -250,6 +250,10 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
         Warp device (``cpu``, ``cuda``, ``auto``).
     progress : callable(done, total), optional
         Called after each batch with voxels done and voxels to do.
+    convention : str
+        ``"text"`` (default): the definitions of the paper's text (exact clipping, each rod pair
+        once), Warp kernels.  ``"authors"``: the rules of the authors' MATLAB routine
+        (:mod:`rodwarp.analysis._authors`, NumPy; its own grid, ``phi`` NaN, ``device`` unused).
 
     Returns
     -------
@@ -271,6 +275,16 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
     if progress is not None and not callable(progress):
         raise RodwarpTypeError(f"progress must be a callable progress(done, total) or None, got "
                                f"{type(progress).__name__}")
+    from rodwarp.analysis._authors import CONVENTIONS, compute_authors_fields
+
+    if convention not in CONVENTIONS:
+        raise RodwarpError(f"convention must be one of {', '.join(CONVENTIONS)}, got {convention!r}")
+    if convention == "authors":
+        if contacts is None:
+            contacts, source = resolve_contacts(rods, p.contact_tolerance)
+        else:
+            source = "given"
+        return compute_authors_fields(rods, p, contacts, source, progress=progress)
     dev = _warp.resolve_device(device)
     from rodwarp.kernels import fields as k
 
@@ -371,7 +385,7 @@ def compute_fields(rods: RodSet, *, radius: float | None = None, spacing: float 
     # every row of the registry, read now (not at import): the row is the one place a field is defined
     arrays = {spec.name: scatter(spec.kernel(measures)) for spec in _registry.FIELDS}
     attrs = {
-        "diameter": p.diameter, "length": p.length, "domain": p.domain.tolist(),
+        "convention": "text", "diameter": p.diameter, "length": p.length, "domain": p.domain.tolist(),
         "keep_outside": p.keep_outside, "rho": measures.rho, "Z": measures.Z,
         "c_normalisation": measures.contact_normalisation,
         "n_rods": rods.n_rods, "n_segments": int(len(seg_rod)), "n_contacts": len(contacts),
