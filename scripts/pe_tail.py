@@ -116,9 +116,11 @@ def _row(label: str, kind: str, e: np.ndarray, boot: int, seed: int, extra: dict
             {k: wide[k] for k in ("gamma", "xmin", "xmax", "decades", "n_range", "accepted")}}
 
 
-def _fmt_p(p: float) -> str:
+def _fmt_p(p: float, n_boot: int | None = None) -> str:
     if not np.isfinite(p):
         return "-"
+    if n_boot and p == 0.0:  # no bootstrap sample as far off: p is below the resolution 1 / n_boot
+        return f"< {1.0 / n_boot:.2g}"
     return "< 1e-15" if p < 1e-15 else (f"{p:.2g}" if p < 0.01 else f"{p:.2f}")
 
 
@@ -150,7 +152,7 @@ def _markdown(rec: dict) -> str:
         lim = " (limit)" if f["xmin_at_limit"] else ""
         lines.append(
             f"| {r['label']} | {f['n']} | {f['xmin']:.3g}{lim} | {r['e_p95']:.3g} | {f['alpha']:.2f} +- "
-            f"{f['alpha_se']:.2f} | {f['n_tail']} | {f['decades']:.2f} | {f['ks']:.3f} | {_fmt_p(f['gof_p'])} | "
+            f"{f['alpha_se']:.2f} | {f['n_tail']} | {f['decades']:.2f} | {f['ks']:.3f} | {_fmt_p(f['gof_p'], f['n_boot'])} | "
             f"{f['lognormal']['R_norm']:+.1f} ({_fmt_p(f['lognormal']['p'])}) | "
             f"{f['exponential']['R_norm']:+.1f} ({_fmt_p(f['exponential']['p'])}) | {f['verdict']} |")
     lines += ["", "## The widest-range fit (`power_law_fit`) on the same data, for contrast", "",
