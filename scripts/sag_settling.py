@@ -9,9 +9,9 @@ as elastic rods and varies one factor at a time:
 * the rod model (rigid capsules; elastic with 3 vertices, the resolution rule's choice);
 * Gauss-Seidel sweeps (``--iterations`` 10, the default, and 30);
 * the step (``--dt 2.5e-4`` s, about half the adaptive step of the pour);
-* the resolution (``--vertices`` 3, 5, 10);
+* the resolution (``--vertices`` 3, 5, 10; and 2, an elastic rod of one edge, which cannot bend);
 * the bending stiffness (``--young`` 1e13 Pa, 50 times steel: sag 6e-4 d, far below the rule's
-  0.01 d, so an elastic rod that barely bends);
+  0.01 d, so an elastic rod that barely bends; 2e12 Pa, 10 times steel; 2e10 Pa, a tenth);
 * the spin (``--no-rolling``).
 
 Scene (bench_resolution's, without the shaking): the lab protocol at alpha 200, l = 50 mm,
@@ -65,6 +65,13 @@ CONFIGS = [
     ("elastic 3 v, dt 2.5e-4 s", [*ELASTIC, "--dt", "2.5e-4"], (0,)),
     ("elastic 5 v", ["--rod-model", "elastic", "--vertices", "5"], (0,)),
     ("elastic 10 v", ["--rod-model", "elastic", "--vertices", "10"], (0,)),
+    # one edge: an elastic rod that cannot bend (lumped end masses, spin per edge), against the capsule
+    ("elastic 2 v", ["--rod-model", "elastic", "--vertices", "2"], (0, 1)),
+    # the bending stiffness between: 10 times steel, and a tenth of it
+    ("elastic 3 v, E 2e12 Pa", [*ELASTIC, "--young", "2e12"], (0,)),
+    ("elastic 3 v, E 2e10 Pa", [*ELASTIC, "--young", "2e10"], (0,)),
+    # the stiff rods' sweeps: does their height at 10 sweeps hold when the solve is nearer converged?
+    ("elastic 3 v, E 1e13 Pa, 30 sweeps", [*ELASTIC, "--young", "1e13", "--iterations", "30"], (0,)),
 ]
 
 

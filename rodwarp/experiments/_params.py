@@ -403,7 +403,11 @@ def rod_resolution(params: ProtocolParams, sag_over_d: float | None = None) -> d
 
 
 def _sag_over_d(params: ProtocolParams) -> float:
-    """Self-weight sag of a simply supported rod, 5 q l^4 / (384 E I), in diameters."""
+    """Self-weight sag of a simply supported rod, 5 q l^4 / (384 E I), in diameters: the midspan
+    deflection of a rod resting on its two ends under its own weight q = rho A g_eff (static load
+    included). The one sag every rule and doc uses (not a cantilever's q l^4 / (8 E I), 9.6 times
+    as much): 0.032 d for the laboratory's alpha-200 steel rods (l 50 mm, d 0.25 mm, g 9.81 m/s^2;
+    tests/test_sag.py)."""
     d = params.diameter
     r = d / 2
     q = params.density * math.pi * r**2 * params.effective_gravity
