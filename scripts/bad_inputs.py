@@ -386,6 +386,8 @@ EXTRA: list[tuple] = [
 ]
 
 
+#: a tiny sweep the sweep cases of issue 47 add their options to
+_SWEEP47 = "sweep --alpha 20 --freq 1 --device cpu --quiet --out $TMP/sw47"
 #: issue 47's findings, each through the real command line: (finding, what, arguments with $TMP,
 #: expected exit code, what the message must say); inputs from :func:`make_inputs_47`
 CASES_47: list[tuple] = [
@@ -419,36 +421,36 @@ CASES_47: list[tuple] = [
     ("folders", "analyze R --out R/checkpoints", "analyze $TMP/base --quiet --out $TMP/base/checkpoints", 2,
      "checkpoints, an output of another run"),
     ("folders", "analyze R (its analysis/ inside R: allowed)", "analyze $TMP/base --quiet --no-figures", 0, ""),
-    ('runaway', 'sweep --workers 1000 on this machine', 'sweep --alpha 20 --freq 1 --device cpu --quiet --out $TMP/sw47 --workers 1000', 2,
+    ("runaway", "sweep --workers 1000 on this machine", f"{_SWEEP47} --workers 1000", 2,
      "--workers 1000 is more than this machine's"),
-    ('runaway', 'sweep --workers 0', 'sweep --alpha 20 --freq 1 --device cpu --quiet --out $TMP/sw47 --workers 0', 2,
-     '--workers must be >= 1, got 0'),
-    ('messages', 'sweep --set out=...', 'sweep --alpha 20 --freq 1 --device cpu --quiet --out $TMP/sw47 --set out=$TMP/x', 2,
+    ("runaway", "sweep --workers 0", f"{_SWEEP47} --workers 0", 2,
+     "--workers must be >= 1, got 0"),
+    ("messages", "sweep --set out=...", f"{_SWEEP47} --set out=$TMP/x", 2,
      "--set out: a sweep writes each point into its own folder under the sweep's --out"),
-    ('messages', 'sweep --set resume=...', 'sweep --alpha 20 --freq 1 --device cpu --quiet --out $TMP/sw47 --set resume=true', 2,
-     '--set resume: a sweep resumes by itself'),
-    ('messages', 'sweep --set overwrite=...', 'sweep --alpha 20 --freq 1 --device cpu --quiet --out $TMP/sw47 --set overwrite=true', 2,
+    ("messages", "sweep --set resume=...", f"{_SWEEP47} --set resume=true", 2,
+     "--set resume: a sweep resumes by itself"),
+    ("messages", "sweep --set overwrite=...", f"{_SWEEP47} --set overwrite=true", 2,
      "--set overwrite: use the sweep's own --overwrite"),
-    ('messages', 'sweep --set quiet=...', 'sweep --alpha 20 --freq 1 --device cpu --quiet --out $TMP/sw47 --set quiet=true', 2,
+    ("messages", "sweep --set quiet=...", f"{_SWEEP47} --set quiet=true", 2,
      "--set quiet: use the sweep's own --quiet"),
-    ('messages', 'sweep --set entangled_from=...', 'sweep --alpha 20 --freq 1 --device cpu --quiet --out $TMP/sw47 --set entangled_from=$TMP/base', 2,
-     '--set entangled_from: a sweep shares the entangled packing'),
-    ('messages', 'sweep --set initial=...', 'sweep --alpha 20 --freq 1 --device cpu --quiet --out $TMP/sw47 --set initial=$TMP/alpha50.npz', 2,
-     '--set initial: a sweep always starts each point from a random packing'),
-    ('silent', 'sweep --set n_rods=12 --set n_rods=13', 'sweep --alpha 20 --freq 1 --device cpu --quiet --out $TMP/sw47 --set n_rods=12 --set n_rods=13', 2,
-     '--set n_rods is given twice (n_rods=12 and n_rods=13)'),
-    ('silent', 'sweep --alpha 25,,50', 'sweep --alpha 25,,50 --freq 1 --out $TMP/sw47', 2,
-     '--alpha 25,,50: item 2 of 3 is empty'),
-    ('silent', 'sweep --alpha 25,50, (trailing comma)', 'sweep --alpha 25,50, --freq 1 --out $TMP/sw47', 2,
-     '--alpha 25,50,: item 3 of 3 is empty'),
-    ('silent', 'sweep --alpha 25,50,25 (a value twice)', 'sweep --alpha 25,50,25 --freq 1 --out $TMP/sw47', 2,
-     '--alpha 25,50,25: 25 is given twice'),
-    ('silent', 'simulate --strains 0,,0.1', 'simulate --protocol lab --strains 0,,0.1 --quiet --out $TMP/lab47', 2,
-     '--strains 0,,0.1: item 2 of 3 is empty'),
-    ('silent', 'sweep --save-every with --set save_every', 'sweep --alpha 20 --freq 1 --device cpu --quiet --out $TMP/sw47 --save-every 0.02 --set save_every=0.01', 2,
-     '--save-every 0.02 and --set save_every=0.01 both given'),
-    ('binarised', 'a constant stack', 'segment $TMP/const.tif --voxel-size 1 --units voxel --quiet --out $TMP/sc1', 2,
-     'volume is constant'),
+    ("messages", "sweep --set entangled_from=...", f"{_SWEEP47} --set entangled_from=$TMP/base", 2,
+     "--set entangled_from: a sweep shares the entangled packing"),
+    ("messages", "sweep --set initial=...", f"{_SWEEP47} --set initial=$TMP/alpha50.npz", 2,
+     "--set initial: a sweep always starts each point from a random packing"),
+    ("silent", "sweep --set n_rods=12 --set n_rods=13", f"{_SWEEP47} --set n_rods=12 --set n_rods=13", 2,
+     "--set n_rods is given twice (n_rods=12 and n_rods=13)"),
+    ("silent", "sweep --alpha 25,,50", "sweep --alpha 25,,50 --freq 1 --out $TMP/sw47", 2,
+     "--alpha 25,,50: item 2 of 3 is empty"),
+    ("silent", "sweep --alpha 25,50, (trailing comma)", "sweep --alpha 25,50, --freq 1 --out $TMP/sw47", 2,
+     "--alpha 25,50,: item 3 of 3 is empty"),
+    ("silent", "sweep --alpha 25,50,25 (a value twice)", "sweep --alpha 25,50,25 --freq 1 --out $TMP/sw47", 2,
+     "--alpha 25,50,25: 25 is given twice"),
+    ("silent", "simulate --strains 0,,0.1", "simulate --protocol lab --strains 0,,0.1 --quiet --out $TMP/lab47", 2,
+     "--strains 0,,0.1: item 2 of 3 is empty"),
+    ("silent", "sweep --save-every with --set save_every", f"{_SWEEP47} --save-every 0.02 --set save_every=0.01", 2,
+     "--save-every 0.02 and --set save_every=0.01 both given"),
+    ("binarised", "a constant stack", "segment $TMP/const.tif --voxel-size 1 --units voxel --quiet --out $TMP/sc1", 2,
+     "volume is constant"),
     ('binarised', 'a label image of 4 phases', 'segment $TMP/labels.tif --voxel-size 1 --units voxel --quiet --out $TMP/sc2', 2,
      'label image'),
     ('binarised', 'a posterised stack of 8 values', 'segment $TMP/post8.tif --voxel-size 1 --units voxel --quiet --out $TMP/sc3', 2,
@@ -501,16 +503,6 @@ def api_case(call: str, cwd: Path):
     return kinds.split(","), msg, noisy
 
 
-#: the two-level encodings a binarised stack is shared in: mask -> stack
-BINARISED = {
-    "bool": lambda m: m,
-    "uint8 0/1": lambda m: m.astype(np.uint8),
-    "uint8 0/255": lambda m: (m * 255).astype(np.uint8),
-    "uint16 100/3000": lambda m: np.where(m, 3000, 100).astype(np.uint16),
-    "float32 -1/1": lambda m: np.where(m, 1.0, -1.0).astype(np.float32),
-}
-
-
 def first_note_case(d: Path) -> tuple:
     """``--fill-height 40`` places 17,280 rods (about a minute here): the time from the command's
     start to its first line on stderr, which must be the placement's note (the row of the report;
@@ -549,12 +541,13 @@ def binarised_cases(d: Path) -> list[tuple]:
 
     from rodwarp.ct import match_rods
     from rodwarp.rodset import load
+    from rodwarp.testing.binarised import ENCODINGS
 
     grey = tifffile.imread(d / "p.tif")
     truth = load(d / "p_truth.npz")
     mask = grey > 0.5 * (20000 + 50000)  # the phantom's background and rod levels: the half level
     out = []
-    for name, encode in {"grey scan (reference)": None, **BINARISED}.items():
+    for name, encode in {"grey scan (reference)": None, **ENCODINGS}.items():
         tif = d / "p.tif" if encode is None else d / f"bin_{name.replace(' ', '_').replace('/', '_')}.tif"
         if encode is not None:
             tifffile.imwrite(tif, encode(mask))

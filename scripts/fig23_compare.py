@@ -12,7 +12,8 @@ Figures (benchmarks/results/): ``fig2_pS_pc.png`` (p(S) and p(c), Fig. 2), ``fig
 ``fig3_zprofiles.png`` (phi(z), S(z), c(z), e(z) against z / l, the change near z ~ l / 2 of
 Fig. 3J-M and S14); the numbers in ``fig23.md`` and ``fig23.json``.
 
-    python scripts/fig23_compare.py [--runs runs/excitation] [--work runs/fig23] [--convention text]
+    python scripts/fig23_compare.py --paper-fields DIR [--runs runs/excitation] [--work runs/fig23]
+                                    [--convention authors|text] [--edge 2]
 
 The simulated packings come from ``python scripts/excitation_experiments.py run`` (their run
 folders, ``main_alpha{A}_seed0``); an alpha without its run is left out and said so.
@@ -104,7 +105,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", default=str(ROOT / "runs" / "excitation"))
     ap.add_argument("--work", default=str(ROOT / "runs" / "fig23"))
-    ap.add_argument("--paper-fields", default=str(ROOT.parent / "shared" / "data" / "paper-fields"))
+    ap.add_argument("--paper-fields", required=True, help="folder of the authors' alpha*_epsilon*.npz fields")
     ap.add_argument("--convention", default="authors", help="the fields' convention for the simulated packings "
                     "(authors: the published CT fields' own, like for like; text: the paper's definitions)")
     ap.add_argument("--edge", type=float, default=2.0, help="edge length (rod diameters) the simulated rods are "
@@ -240,7 +241,9 @@ def write_tables(data: dict, out: Path, args, missing: list) -> None:
                          f"{_g(r['median_S'])} | {_g(r['median_c'])} | {_g(r['mean_e'])} | {_g(r['cv_e'])} | "
                          f"{r['n_tangles']} | {', '.join(_g(ext.get(k)) for k in 'xyz')} | {r['percolates']} |")
     meta = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "versions": version_line(),
-            "cpu": cpu_model(), "command": "python scripts/fig23_compare.py " + " ".join(sys.argv[1:]),
+            "cpu": cpu_model(), "command": "python scripts/fig23_compare.py " + " ".join(
+                Path(a).name if i and sys.argv[i - 1] == "--paper-fields" else a for i, a in enumerate(sys.argv)
+                if i),
             "convention_sim": args.convention, "missing_alphas": missing,
             "packings": {a: {"n_rods": d["n_rods"], "t_release_s": d["t_release"]} for a, d in data.items()},
             "rows": rows}

@@ -13,6 +13,8 @@ from rodwarp.ct._binary import MAX_LABEL_LEVELS, SurfaceDistance, read_binarised
 from rodwarp.ct._segment import _flags
 from rodwarp.cli import app
 from rodwarp.errors import RodwarpError
+from rodwarp.testing.binarised import ENCODINGS
+from rodwarp.testing.binarised import LEVELS as ENCODING_LEVELS
 
 runner = CliRunner()
 
@@ -21,16 +23,8 @@ runner = CliRunner()
 BACKGROUND, FOREGROUND = 20000.0, 50000.0
 HALF = 0.5 * (BACKGROUND + FOREGROUND)
 
-#: the two-level encodings a binarised stack is shared in: mask -> stack
-VARIANTS = {
-    "bool": lambda m: m,
-    "uint8 0/1": lambda m: m.astype(np.uint8),
-    "uint8 0/255": lambda m: (m * 255).astype(np.uint8),
-    "uint16 100/3000": lambda m: np.where(m, 3000, 100).astype(np.uint16),
-    "float32 -1/1": lambda m: np.where(m, 1.0, -1.0).astype(np.float32),
-}
-LEVELS = {"bool": [0, 1], "uint8 0/1": [0, 1], "uint8 0/255": [0, 255], "uint16 100/3000": [100, 3000],
-          "float32 -1/1": [-1, 1]}
+#: the two-level encodings a binarised stack is shared in: mask -> stack, and their levels
+VARIANTS, LEVELS = ENCODINGS, ENCODING_LEVELS
 
 
 def _phantom(shape, n_rods, seed, blur=1.0, touching=0.5, radius=2.5, aspect=8.0):

@@ -96,6 +96,19 @@ def whole(name: str, value, *, ge=None, le=None, hint: str = "") -> int:
     return integer(name, value, ge=ge, le=le, hint=hint)
 
 
+def _three_numbers(name: str, value, what: str) -> np.ndarray:
+    """``value`` as three float64 numbers, else a TypeError naming ``name`` (``what`` says what
+    the three numbers are: a unit, or a direction)."""
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = None
+    if a is None or a.shape != (3,) or isinstance(value, (str, bytes)):
+        raise RodwarpTypeError(f"{name} must be 3 numbers (x, y, z), {what}, got {type(value).__name__} "
+                               f"{_short(value)}")
+    return a
+
+
 def vector(name: str, value, *, unit: str, limit: float) -> np.ndarray:
     """Three finite numbers (x, y, z), each of magnitude at most ``limit``, as a (3,) float64 array.
 
@@ -117,13 +130,7 @@ def vector(name: str, value, *, unit: str, limit: float) -> np.ndarray:
     RodwarpError
         A component NaN or infinite, or the vector longer than ``limit``.
     """
-    try:
-        a = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        a = None
-    if a is None or a.shape != (3,) or isinstance(value, (str, bytes)):
-        raise RodwarpTypeError(f"{name} must be 3 numbers (x, y, z) in {unit}, got {type(value).__name__} "
-                               f"{_short(value)}")
+    a = _three_numbers(name, value, f"in {unit}")
     for axis, c in zip("xyz", a):
         number(f"{name} {axis}", float(c), ge=-limit, le=limit, unit=unit)
     norm = float(np.linalg.norm(a))
@@ -144,13 +151,7 @@ def direction(name: str, value) -> np.ndarray:
     """
     from rodwarp.validation import fail
 
-    try:
-        a = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        a = None
-    if a is None or a.shape != (3,) or isinstance(value, (str, bytes)):
-        raise RodwarpTypeError(f"{name} must be 3 numbers (x, y, z), a direction of any length, got "
-                        f"{type(value).__name__} {_short(value)}")
+    a = _three_numbers(name, value, "a direction of any length")
     big = float(np.max(np.abs(a)))
     if not np.all(np.isfinite(a)) or not big > 0:
         fail(f"{name} must be a direction: 3 finite numbers, not all zero, got {a.tolist()}")

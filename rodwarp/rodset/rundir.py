@@ -185,8 +185,7 @@ def _differences(was: dict, now: dict, diff: list[str]) -> str:
     first = [k for k in ("protocol", "kind") if k in diff]
     if first:
         k = first[0]
-        return (f"it holds a --{k} {_show(was.get(k)).strip(chr(34))} run, this command asks for --{k} "
-                f"{_show(now.get(k)).strip(chr(34))}")
+        return f"it holds a --{k} {was.get(k)} run, this command asks for --{k} {now.get(k)}"
     return "; ".join(f"{k} {_show(was.get(k))} there, {_show(now.get(k))} here" for k in diff[:4])
 
 

@@ -6,6 +6,8 @@ yourself"; examples/check_fields.py). rodwarp itself never uses it.
   fields (clipping, Gauss integral, phi, S, n, contacts), written from the formulas alone and
   sharing no code with :mod:`rodwarp.analysis` or :mod:`rodwarp.kernels`: the tests' oracle,
   the benchmarks' speed peer, and a user's check of the Warp fields on another device;
+* :mod:`rodwarp.testing.binarised` - the encodings a binarised CT stack is shared in (bool,
+  0/1, 0/255, any two values), for the segmentation's checks of binarised input;
 * :mod:`rodwarp.testing.scenes` - small mechanics scenes with analytic answers (cantilevers,
   inclines, ladders, log cabins) for the engine's tests and benchmarks.
 
