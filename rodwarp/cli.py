@@ -138,7 +138,7 @@ _SIMULATE_OPTIONS = ("protocol", "alpha", "freq", "amplitude", "gravity", "durat
                      "entangle_freq", "entangle_amplitude", "static_load", "n_rods", "length", "vertices", "box",
                      "container_radius", "fill_height", "container_diameter", "container_height", "tube_diameter",
                      "pour_duration", "strains", "press_duration",
-                     "lift_duration", "mu", "young",
+                     "lift_duration", "mu", "wall_mu", "young",
                      "density", "dt", "iterations", "step_safety", "steps_per_period", "rod_model", "rolling", "contact_law",
                      "imc_delta", "imc_nu", "imc_stiffness", "save_every",
                      "checkpoint_every", "fields_every", "resume", "overwrite", "entangle", "seed", "device", "out", "initial",

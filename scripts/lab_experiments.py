@@ -50,6 +50,21 @@ SETS = {
     "press": dict(alphas=(38, 66, 76, 100), seeds=(0, 1),
                   args=["--strains", "0,0.05,0.1,0.15", "--press-duration", "0.5", "--duration", "0",
                         "--lift-duration", "0.2", "--save-every", "0.05", "--checkpoint-every", "1"]),
+    # causes of the CT differences (issue 48): the piston and the cylinder's wall frictionless
+    "press-frictionless": dict(alphas=(38, 100), seeds=(0, 1),
+                               args=["--strains", "0,0.05,0.1,0.15", "--press-duration", "0.5", "--duration", "0",
+                                     "--lift-duration", "0.2", "--save-every", "0.05", "--checkpoint-every", "1",
+                                     "--wall-mu", "0"]),
+    # the CT's own container and fill (Materials and Methods, "Packing preparation" and "X-ray
+    # Computerized Tomography imaging": 150 mm across, rods added to about 100 mm)
+    "press-ct": dict(alphas=(100, 66, 76), seeds=(0,), container_m=0.075, fill_to_m=0.1,
+                     args=["--strains", "0,0.05,0.1,0.15", "--press-duration", "0.5", "--duration", "0",
+                           "--lift-duration", "0.2", "--save-every", "0.05", "--checkpoint-every", "0.5"]),
+    # the pile's size at alpha 38, whose CT pile (150 mm across, 100 mm tall at l = 25 mm) would need
+    # 30 000 rods: twice the press set's radius and height (6566 rods)
+    "press-wide": dict(alphas=(38,), seeds=(0,), container_l=2.0, fill_l=2.0,
+                       args=["--strains", "0,0.05,0.1,0.15", "--press-duration", "0.5", "--duration", "0",
+                             "--lift-duration", "0.2", "--save-every", "0.05", "--checkpoint-every", "0.5"]),
     # container size: the shaking of alpha 38 and 66 in a cylinder 1.5 times as wide
     "container": dict(alphas=(38, 66), seeds=(0, 1),
                       args=["--container-radius", "1.5", "--duration", "10", "--lift-duration", "1",
@@ -71,8 +86,13 @@ def _name(kind: str, alpha: int, seed: int) -> str:
 
 
 def _command(kind: str, alpha: int, seed: int, folder: Path) -> list[str]:
-    fill = SETS[kind].get("fill_to_m")
+    spec = SETS[kind]
+    fill = spec.get("fill_to_m")
     extra = ["--fill-height", f"{fill / RODS[alpha]:g}"] if fill else []
+    if spec.get("container_m"):
+        extra += ["--container-radius", f"{spec['container_m'] / RODS[alpha]:g}"]
+    if spec.get("container_l"):
+        extra += ["--container-radius", f"{spec['container_l']:g}", "--fill-height", f"{spec['fill_l']:g}"]
     return ["rodwarp", "simulate", *LAB, "--alpha", str(alpha), "--length", str(RODS[alpha]), "--seed", str(seed),
             *SETS[kind]["args"], *extra, "--out", str(folder)]
 

@@ -111,6 +111,32 @@ def test_the_piston_reaches_each_strain_and_holds_it(tmp_path):
     # the piston is out before and after pressing
     assert all(r["piston_height"] == "" for r in rows if r["stage"] in (POUR, LIFT))
     assert json.loads((tmp_path / "run" / "summary.json").read_text())["lab"]["strains"] == res
+    # each pressed packing is kept, rods and contacts, to be analysed again: the rods under the
+    # piston it was pressed by, and the contacts those rods make
+    from rodwarp.rodset import load
+    from rodwarp.rodset import detect_contacts
+
+    for e in res:
+        rods = load(tmp_path / "run" / e["rods"])
+        assert e["rods"] == f"rods_{e['stage']}.npz"
+        assert rods.n_rods == 40 and rods.units == "m" and rods.contacts is not None
+        assert rods.attrs["strain"] == e["strain"] and rods.attrs["piston_height_m"] == e["piston_height"]
+        assert rods.points[:, 2].max() <= e["piston_height"] + 0.02 * p.diameter
+        assert len(rods.contacts) == pytest.approx(len(detect_contacts(rods)), abs=0.1 * len(rods.contacts) + 2)
+
+
+def test_wall_mu_sets_the_cylinder_and_the_piston_only():
+    from rodwarp.experiments._lab import lab_packing, lab_walls
+    from rodwarp.sim import ModelBuilder
+
+    p = ProtocolParams(**LAB, n_rods=5, wall_mu=0.0, mu=0.3)
+    rods = lab_packing(p, "cpu")
+    b = ModelBuilder(rods, mu=p.mu)
+    lab_walls(b, p, rods)
+    mus = {w.name: w.mu for w in b.walls}
+    assert mus == {FLOOR: None, TUBE: 0.0, PISTON: 0.0}  # the plate takes the model's mu (0.3)
+    lab_walls(b2 := ModelBuilder(rods, mu=p.mu), ProtocolParams(**LAB, n_rods=5), rods)
+    assert {w.name: w.mu for w in b2.walls} == {FLOOR: None, TUBE: None, PISTON: None}
 
 
 def test_the_shaken_plate_moves_as_asked():
@@ -203,6 +229,7 @@ def test_too_few_samples_per_cycle_for_the_landed_height_are_flagged():
     (dict(protocol="lab", container_radius=0.3), "--container-radius"),
     (dict(protocol="lab", duration=0.0, lift_duration=0.0), "without a test"),
     (dict(protocol="bench"), "--protocol must be one of paper, lab, excitation"),
+    (dict(wall_mu=0.0), r"--wall-mu does not apply with --protocol paper \(only with --protocol lab\)"),
 ])
 def test_lab_options_are_refused_where_they_do_not_apply(kw, message):
     with pytest.raises(RodwarpError, match=message):

@@ -15,6 +15,7 @@ One private module per job, their public names re-exported here (scikit-image's 
 ``_acn``           :func:`gauss_linking`, :func:`linking_number`, :func:`average_crossing_number`
 ``_stats``         :func:`field_statistics`, :func:`outlier_bound`, :func:`find_tangles`, ...
 ``_tail``          :func:`tail_fit` - is the upper tail a power law? (Clauset et al. 2009)
+``_regions``       :func:`packing_regions` - a packing's core and rim; :func:`pair_entanglement`
 ``_figures``       :func:`plot_histograms`, :func:`plot_slices`, :func:`plot_zprofiles`, ...
 ``_analyze``       :func:`analyze` - the ``rodwarp analyze`` pipeline, input to files
 ``_checks``        :func:`check_analyze` - the command's options, before any work
@@ -42,6 +43,7 @@ _WHERE = {
     "power_law_fit": "_stats", "power_law_density": "_stats", "log_histogram": "_stats",
     "z_profiles": "_stats",
     "tail_fit": "_tail", "TailFit": "_tail",
+    "packing_regions": "_regions", "PackingRegions": "_regions", "pair_entanglement": "_regions",
     # figures
     "plot_histograms": "_figures", "plot_slices": "_figures", "plot_zprofiles": "_figures",
     "plot_tangles": "_figures",

@@ -233,7 +233,8 @@ def _check_imc_stiffness(p) -> None:
 
 
 #: the laboratory protocol's own options, and the paper protocol's that it does not use
-LAB_FIELDS = ("container_radius", "fill_height", "pour_duration", "strains", "press_duration", "lift_duration")
+LAB_FIELDS = ("container_radius", "fill_height", "pour_duration", "strains", "press_duration", "lift_duration",
+              "wall_mu")
 PAPER_ONLY_FIELDS = ("box", "entangle_duration", "entangle_freq", "entangle_amplitude", "initial", "entangle")
 #: the options each protocol takes beyond the shared ones (the rest are refused when given)
 PROTOCOL_FIELDS = {

@@ -52,15 +52,18 @@ def lab_packing(params, device, label: str = "cylinder"):
 def lab_walls(builder, params, rods) -> tuple[np.ndarray, np.ndarray]:
     """Add the lab's walls to ``builder``: the plate (``floor``, z = 0, shaken), the cylinder
     (``tube``, radius ``container_radius`` l about the z axis) and the ``piston`` (the
-    half-space below it, PISTON_CLEARANCE l above the rods, pressing down). Returns the
+    half-space below it, PISTON_CLEARANCE l above the rods, pressing down); the tube and the
+    piston take ``params.wall_mu`` when given. Returns the
     scene's box (lo, hi) for the figures (m)."""
     from rodwarp.sim.walls import Cylinder, Plane
 
     rc = params.container_radius * params.length
     top = float(rods.bounding_box()[1][2]) + PISTON_CLEARANCE * params.length
     builder.add_wall(Plane.make((0.0, 0.0, 1.0), 0.0, moving=True, name=FLOOR))
-    builder.add_wall(Cylinder.make((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), rc, name=TUBE))
-    builder.add_wall(Plane.make((0.0, 0.0, -1.0), -top, moving=True, name=PISTON))
+    # --wall-mu: the container's wall and the piston alone (None: the model's mu); the plate
+    # carries the pile and keeps the rods' mu
+    builder.add_wall(Cylinder.make((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), rc, name=TUBE, mu=params.wall_mu))
+    builder.add_wall(Plane.make((0.0, 0.0, -1.0), -top, moving=True, name=PISTON, mu=params.wall_mu))
     return np.array([-rc, -rc, 0.0]), np.array([rc, rc, top])
 
 

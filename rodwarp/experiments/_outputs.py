@@ -6,7 +6,7 @@ from rodwarp.rodset.rundir import register_command
 #: what ``rodwarp simulate`` writes in its folder (``analysis`` is a later analyze run of it)
 SIMULATE_OUTPUTS = ("summary.json", "metrics.csv", "metrics.png", "trajectory.zarr", "trajectory.pvd", "vtk",
                     "initial.npz", "entangled.npz", "entangled_from.json", "final.npz", "snapshots.png",
-                    "checkpoints", "analysis", "fields_press*.npz")
+                    "checkpoints", "analysis", "fields_press*.npz", "rods_press*.npz")
 #: what ``rodwarp sweep`` writes in its folder, with the files of ``rodwarp phase-diagram``
 #: (names with ``*`` are patterns of bare names: one figure per group of points)
 SWEEP_OUTPUTS = ("sweep.json", "results.csv", "points", "alpha_star.csv", "power_law.csv", "phase_*.png")

@@ -130,6 +130,9 @@ class ProtocolParams:
           range=Range(ge=0, le=1000, unit="s", hint="0 shakes right after the lift"))
     mu: float = _param(0.2, "Friction coefficient (rod-rod and walls).",
           range=Range(ge=0, le=MAX_MU, hint="friction coefficients of real materials are below about 2 (steel on steel 0.2 to 0.8, rubber up to about 2)"))
+    wall_mu: float | None = _param(None, "lab: friction coefficient of the cylinder's wall and the piston "
+                                         "(default --mu; the plate keeps --mu).", "muw",
+          range=Range(ge=0, le=MAX_MU, hint="0 makes the container's wall and the piston frictionless"))
     young: float = _param(200e9, "Young's modulus (Pa).", "E",
           range=Range(ge=1e3, le=1e13, unit="Pa", hint="from soft gels (1 kPa) to diamond (1.2e12 Pa)"))
     density: float = _param(7850.0, "Density (kg/m^3).", "rho",

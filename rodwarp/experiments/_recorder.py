@@ -164,7 +164,8 @@ class Recorder:
 
     def strain_result(self, stage, state, points, control, params, height0: float) -> dict:
         """At the end of a piston stage: the strain reached, the rest it came to, and the fields
-        of the pressed packing (written to ``fields_<stage>.npz``; statistics returned)."""
+        of the pressed packing (written to ``fields_<stage>.npz``, its rods and contacts to
+        ``rods_<stage>.npz``; statistics returned)."""
         from rodwarp.experiments._lab import packing_top, piston_height, strain_fields
         from rodwarp.sim import rod_contacts
 
@@ -175,6 +176,13 @@ class Recorder:
         name = f"fields_{stage.name}.npz"
         if f is not None:
             f.save(self.outdir / name)
+        # the pressed packing itself (rods and contacts, m): its fields can be recomputed under
+        # any convention, grid or region (scripts/ct_like_for_like.py)
+        pressed = self.rods.with_points(x)
+        pressed.contacts = c
+        pressed.attrs.update({"stage": stage.name, "strain": float(stage.strain[1]),
+                              "piston_height_m": float(top), "time_s": float(state.time)})
+        pressed.save(self.outdir / f"rods_{stage.name}.npz")
         speed = np.linalg.norm(state.velocities(), axis=1)
         num = lambda v: None if v is None else float(v)  # noqa: E731
         return {"stage": stage.name, "strain": float(stage.strain[1]), "height0": float(height0),
@@ -182,7 +190,7 @@ class Recorder:
                 "packing_top": packing_top(self.model, x),
                 "max_speed": float(speed.max()), "kinetic_energy": float(self.solver.energy(state)["kinetic"]),
                 "contacts_per_rod": contacts_per_rod(self.model.n_rods, c),
-                "fields": name if f is not None else None, **{k: num(v) if not isinstance(v, str) else v
+                "fields": name if f is not None else None, "rods": f"rods_{stage.name}.npz", **{k: num(v) if not isinstance(v, str) else v
                                                               for k, v in stats.items()}}
 
     def snapshot(self, title: str, x: np.ndarray) -> None:

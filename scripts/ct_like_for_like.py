@@ -1,0 +1,432 @@
+"""The fields of the lab's pressed packings against the authors' CT fields, like for like.
+
+Both sides go through one rule set (docs/experiments.md, "The fields against the authors' CT, like
+for like"):
+
+- the authors' convention (``rodwarp analyze --convention authors``, docs/fields.md) for n, e, e2,
+  S and c, on their grid (centres from R to the extent less R, steps of h = R / 2), R = sqrt(d l);
+  the simulated rods resampled to edges of ``--edge`` diameters (the CT centrelines' edge length
+  is not published: e2 / e, which grows with the edge length, is reported on both sides as the
+  check);
+- phi: the CT's as published; the simulation's the exact clipped volume (the text convention),
+  on the same centres;
+- the same region rule (:func:`rodwarp.analysis.packing_regions`): each packing's own axis,
+  radius and height from its n field; the core within 0.55 of its radius, between 15% and 70%
+  of its height; the rim the rest of that band;
+- e per rod pair ball by ball (:func:`rodwarp.analysis.pair_entanglement`), its median and mean
+  over the balls with two rods or more.
+
+The simulated packings are ``rodwarp simulate --protocol lab --strains 0,0.05,0.1,0.15`` runs
+(``scripts/lab_experiments.py run --set press``, ``press-frictionless``, ``press-ct``,
+``press-wide``), which write the pressed rods at each strain (``rods_press<E>.npz``).
+
+    python scripts/ct_like_for_like.py --runs RUNS_DIR --paper-fields DIR [--edge 4] [--cache DIR]
+
+Writes ``benchmarks/results/ct_like_for_like.{json,md}`` and ``ct_like_for_like.png``. Each
+packing's analysis is cached (``--cache``, default ``RUNS_DIR/../ct_like_for_like_cache``), so a
+rerun only computes what is new.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+OUT = ROOT / "benchmarks" / "results"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+ALPHAS = (38, 66, 76, 100)
+STRAINS = (0.0, 0.05, 0.1, 0.15)
+#: the sets of scripts/lab_experiments.py compared here, and what each one changes
+SETS = {"press": "cylinder Rc = l, filled to 1 l; walls mu 0.2",
+        "press-frictionless": "as press, the cylinder's wall and the piston frictionless",
+        "press-ct": "the CT's container (150 mm across) filled to 100 mm",
+        "press-wide": "cylinder Rc = 2 l, filled to 2 l (alpha 38)"}
+#: the CT's voxel (m): Materials and Methods, "X-ray Computerized Tomography imaging"
+VOXEL_M = 78.22e-6
+#: tracing noise tried on the simulated centrelines, in CT voxels (the straightness control)
+NOISE_VOXELS = (0.5, 1.0, 2.0)
+#: edge lengths (d) of the sensitivity check
+EDGES = (2.0, 4.0, 8.0)
+REGIONS = ("core", "rim")
+
+
+def region_stats(fields: dict, mask: np.ndarray) -> dict:
+    """The statistics of one region: balls, mean n, phi, S (mean, median), c, e, cv_e, e per pair
+    (median, mean; balls of two rods or more), e2 / e (median; balls with e > 0)."""
+    from rodwarp.analysis import pair_entanglement
+
+    e = fields["e"][mask]
+    n = fields["n"][mask]
+    pe = pair_entanglement(e, n)
+    pe = pe[np.isfinite(pe)]
+    pos = e > 0
+    out = {"balls": int(mask.sum()), "n": float(n.mean()), "phi": float(np.nanmean(fields["phi"][mask])),
+           "S": float(fields["S"][mask].mean()), "S_median": float(np.median(fields["S"][mask])),
+           "c": float(fields["c"][mask].mean()), "e": float(e.mean()),
+           "cv_e": float(e.std() / e.mean()) if e.mean() > 0 else float("nan"),
+           "e_pair_median": float(np.median(pe)) if len(pe) else float("nan"),
+           "e_pair_mean": float(pe.mean()) if len(pe) else float("nan"),
+           "e2_over_e": float(np.median(fields["e2"][mask][pos] / e[pos])) if pos.any() else float("nan")}
+    if "e_text" in fields:
+        et = fields["e_text"][mask]
+        pt = pair_entanglement(et, fields["n_text"][mask])
+        pt = pt[np.isfinite(pt)]
+        out.update({"e_text": float(et.mean()), "cv_e_text": float(et.std() / et.mean()) if et.mean() > 0 else
+                    float("nan"), "e_pair_text_median": float(np.median(pt)) if len(pt) else float("nan")})
+    return out
+
+
+def regional(fields: dict) -> dict:
+    """Regions (:func:`rodwarp.analysis.packing_regions`) and their statistics."""
+    from rodwarp.analysis import packing_regions
+
+    reg = packing_regions(fields["n"], fields["x"], fields["y"], fields["z"])
+    out = {"geometry": reg.as_dict()}
+    for name in REGIONS:
+        out[name] = region_stats(fields, getattr(reg, name))
+    return out
+
+
+# ----------------------------------------------------------------------------- the CT side
+
+
+def ct_fields(data: Path, alpha: int, strain: float) -> dict | None:
+    """The authors' published fields of one packing (lengths in m)."""
+    f = data / f"alpha{alpha}_epsilon{int(round(strain * 100)):02d}.npz"
+    if not f.is_file():
+        return None
+    d = np.load(f)
+    out = {k: np.asarray(d[k], dtype=np.float64) for k in ("n", "e", "e2", "s", "c", "phi")}
+    out["S"] = out.pop("s")
+    for k in ("x", "y", "z"):
+        out[k] = np.asarray(d["c" + k], dtype=np.float64) * VOXEL_M
+    out["R"] = float(d["R"]) * VOXEL_M
+    return out
+
+
+# ----------------------------------------------------------------------------- the simulated side
+
+
+def resampled(rods, edge_d: float, noise_m: float = 0.0, seed: int = 0):
+    """``rods`` resampled to edges of about ``edge_d`` diameters, interior vertices moved by an
+    isotropic Gaussian of ``noise_m`` per axis when given (a traced centreline's noise)."""
+    from fig23_compare import resampled as _resampled
+
+    out = _resampled(rods, edge_d)
+    if noise_m > 0:
+        rng = np.random.default_rng(seed)
+        pts = out.points.copy()
+        o = out.offsets
+        inner = np.ones(len(pts), bool)
+        inner[o[:-1]] = False
+        inner[o[1:] - 1] = False
+        pts[inner] += rng.normal(0.0, noise_m, size=(int(inner.sum()), 3))
+        out = out.with_points(pts)
+    return out
+
+
+def sim_fields(rods, container_m: float, edge_d: float, noise_m: float = 0.0, text: bool = True) -> dict:
+    """The pressed packing's fields on the authors' grid over the cylinder's box, from the plate
+    to the piston (m): n, e, e2, S, c by the authors' rules; phi (and e, n) by the text's."""
+    from rodwarp.analysis import compute_fields
+    from rodwarp.analysis._authors import authors_field_arrays, authors_grid
+
+    d = 2.0 * float(rods.radii[0])
+    length = float(np.median(np.linalg.norm(rods.points[rods.offsets[1:] - 1] - rods.points[rods.offsets[:-1]],
+                                            axis=1)))
+    R = float(np.sqrt(d * length))
+    h = R / 2.0
+    top = float(rods.attrs["piston_height_m"])
+    dom = np.array([[-container_m, -container_m, 0.0], [container_m, container_m, top]])
+    x, y, z = authors_grid(dom, R, h)
+    rs = resampled(rods, edge_d, noise_m)
+    s0, s1, rod = rs.segments()
+    a = authors_field_arrays(s0, s1, rod, np.asarray(rods.contacts.point, np.float64), x, y, z, R)
+    out = {"n": a["n"], "e": a["e"], "e2": a["e2"], "S": a["S"], "c": a["c"], "x": x, "y": y, "z": z, "R": R,
+           "phi": np.full(a["e"].shape, np.nan)}
+    if text:
+        # the text's grid is centred in its domain: a domain R beyond the authors' first and last
+        # centres puts two of its centres (R = 2 h) before theirs, on theirs
+        tdom = np.array([[x[0] - R, y[0] - R, z[0] - R], [x[-1] + R, y[-1] + R, z[-1] + R]])
+        f = compute_fields(rods, radius=R, spacing=h, domain=tdom, keep_outside=True, contacts=rods.contacts,
+                           device="cpu")
+        idx = []
+        for mine, theirs in ((f.x, x), (f.y, y), (f.z, z)):
+            i = np.searchsorted(mine, theirs[0] - 1e-9 * R)
+            if not (len(mine) >= i + len(theirs) and np.allclose(mine[i:i + len(theirs)], theirs, atol=1e-9 * R)):
+                raise RuntimeError("the text grid does not hold the authors' centres")
+            idx.append(slice(i, i + len(theirs)))
+        sub = (idx[2], idx[1], idx[0])
+        out["phi"] = np.asarray(f.phi)[sub]
+        out["e_text"] = np.asarray(f.e)[sub]
+        out["n_text"] = np.asarray(f.n)[sub]
+    return out
+
+
+def run_info(folder: Path) -> dict:
+    s = json.loads((folder / "summary.json").read_text())
+    p = s["parameters"]
+    return {"run": folder.name, "alpha": int(round(s["alpha"])), "seed": int(s["seed"]), "n_rods": int(s["n_rods"]),
+            "length_m": float(s["length"]), "container_m": float(p["container_radius"]) * float(s["length"]),
+            "wall_mu": p.get("wall_mu"), "mu": p["mu"], "rod_model": s["rod_model"],
+            "contact_law": s["contact_law"]["name"], "strains": s["lab"]["strains"]}
+
+
+def cached(cache: Path, key: str, compute) -> dict:
+    """``compute()`` once: its result kept as JSON under ``cache/key.json`` (written atomically)."""
+    f = cache / f"{key}.json"
+    if f.is_file():
+        return json.loads(f.read_text())
+    out = compute()
+    cache.mkdir(parents=True, exist_ok=True)
+    tmp = f.with_suffix(".tmp")
+    tmp.write_text(json.dumps(out))
+    tmp.replace(f)
+    return out
+
+
+def analyse_runs(runs: Path, cache: Path, edge: float, log) -> list[dict]:
+    """Every finished pressed run under ``runs``: its regions' statistics at each strain."""
+    import rodwarp
+
+    rows = []
+    for folder in sorted(p for p in runs.iterdir() if p.is_dir()):
+        kind = folder.name.split("_alpha")[0]
+        if kind not in SETS or not (folder / "summary.json").is_file():
+            continue
+        info = run_info(folder)
+        for st in info["strains"]:
+            src = folder / st.get("rods", f"rods_{st['stage']}.npz")
+            if not src.is_file():
+                continue
+
+            def compute(src=src, info=info):
+                t0 = time.perf_counter()
+                f = sim_fields(rodwarp.load(src), info["container_m"], edge)
+                out = regional(f)
+                out["wall_s"] = time.perf_counter() - t0
+                return out
+
+            key = f"{folder.name}_{st['stage']}_edge{edge:g}"
+            log(f"{key}")
+            res = cached(cache, key, compute)
+            rows.append({**{k: v for k, v in info.items() if k != "strains"}, "set": kind,
+                         "strain": float(st["strain"]), "strain_reached": float(st["strain_reached"]), **res})
+    return rows
+
+
+def controls(runs: Path, cache: Path, edge: float, log) -> dict:
+    """The edge-length sensitivity and the tracing-noise control on the press set's seed-0 poured
+    packings (strain 0)."""
+    import rodwarp
+
+    out = {"edges": [], "noise": []}
+    for alpha in ALPHAS:
+        folder = runs / f"press_alpha{alpha}_seed0"
+        src = folder / "rods_press0.npz"
+        if not src.is_file():
+            continue
+        info = run_info(folder)
+        rods = rodwarp.load(src)
+        for e in EDGES:
+            key = f"{folder.name}_press0_edge{e:g}"
+            log(key)
+            res = cached(cache, key, lambda e=e: regional(sim_fields(rods, info["container_m"], e)))
+            out["edges"].append({"alpha": alpha, "edge_d": e, **{r: res[r] for r in REGIONS}})
+        for nv in NOISE_VOXELS:
+            key = f"{folder.name}_press0_edge{edge:g}_noise{nv:g}"
+            log(key)
+            res = cached(cache, key, lambda nv=nv: regional(sim_fields(rods, info["container_m"], edge,
+                                                                       noise_m=nv * VOXEL_M, text=False)))
+            out["noise"].append({"alpha": alpha, "noise_voxels": nv, "noise_d": nv * VOXEL_M * alpha /
+                                 info["length_m"], **{r: res[r] for r in REGIONS}})
+    return out
+
+
+# ----------------------------------------------------------------------------- report
+
+COLS = (("n", "n", 1), ("phi", "phi", 3), ("S", "S", 2), ("c", "c", 2), ("e", "e", 1),
+        ("cv_e", "cv_e", 2), ("e_pair_median", "e/pair", 3), ("e2_over_e", "e2/e", 2))
+
+
+def _f(v, nd):
+    if v is None or (isinstance(v, float) and not np.isfinite(v)):
+        return "-"
+    return f"{v:.{nd}f}"
+
+
+def seed_mean(rows: list[dict], kind: str, alpha: int, strain: float, region: str) -> dict | None:
+    sel = [r for r in rows if r["set"] == kind and r["alpha"] == alpha and abs(r["strain"] - strain) < 1e-9]
+    if not sel:
+        return None
+    keys = sel[0][region].keys()
+    out = {k: float(np.mean([r[region][k] for r in sel])) for k in keys}
+    out["seeds"] = len(sel)
+    out["spread"] = {k: float(np.ptp([r[region][k] for r in sel])) for k in ("cv_e", "e_pair_median", "n")}
+    return out
+
+
+def write_md(path: Path, rec: dict) -> None:
+    rows, ct = rec["sim"], rec["ct"]
+    L = ["# The fields of the lab's pressed packings against the authors' CT, like for like", "",
+         f"Written by `scripts/ct_like_for_like.py` on {rec['date']} ({rec['machine']}; rodwarp "
+         f"{rec['versions']['rodwarp']}, Warp {rec['versions']['warp']}). Command: `{rec['command']}`.", "",
+         "Both sides: the authors' convention (docs/fields.md) for n, e, e2, S and c on their grid "
+         f"(R = sqrt(d l), h = R / 2); the simulated rods resampled to edges of {rec['edge_d']:g} d; phi the CT's "
+         "as published and the simulation's exact clipped volume; the region rule of "
+         "`rodwarp.analysis.packing_regions` (each packing's own axis, radius and height from its n field; "
+         "core r < 0.55 of its radius, 15-70% of its height; rim the rest of that band); e per rod pair = "
+         "median over balls of e / (n (n - 1) / 2) (the authors' e counts every pair twice). The simulated "
+         "packings: `rodwarp simulate --protocol lab`, steel, real gravity, the exact contact law (Signorini, "
+         "Coulomb mu 0.2), rigid rods (the sag rule at alpha 38-100), seed means.", ""]
+    L += ["## The packings", "", "| set | what it changes | alphas | rods | seeds |", "|---|---|---|---|---|"]
+    for kind, what in SETS.items():
+        sel = [r for r in rows if r["set"] == kind and r["strain"] == 0]
+        if sel:
+            al = sorted({r["alpha"] for r in sel})
+            L.append(f"| {kind} | {what} | {', '.join(map(str, al))} | "
+                     f"{', '.join(str(next(r['n_rods'] for r in sel if r['alpha'] == a)) for a in al)} | "
+                     f"{len({r['seed'] for r in sel})} |")
+    L += ["", "Each packing's region geometry (m): radius, bottom and top of its body, at strain 0.", "",
+          "| packing | radius | bottom | top | core balls | rim balls |", "|---|---|---|---|---|---|"]
+    for a in ALPHAS:
+        c = ct.get(f"{a}_0")
+        if c:
+            g = c["geometry"]
+            L.append(f"| CT alpha {a} | {g['radius']:.4f} | {g['bottom']:.4f} | {g['top']:.4f} | {g['core_balls']} | "
+                     f"{g['rim_balls']} |")
+    for r in rows:
+        if r["strain"] == 0 and r["seed"] == 0:
+            g = r["geometry"]
+            L.append(f"| {r['run']} | {g['radius']:.4f} | {g['bottom']:.4f} | {g['top']:.4f} | {g['core_balls']} | "
+                     f"{g['rim_balls']} |")
+    for kind in SETS:
+        if not any(r["set"] == kind for r in rows):
+            continue
+        L += ["", f"## CT against `{kind}` ({SETS[kind]})", "",
+              "Each cell: CT / simulated (seed mean). e/pair: median over balls.", "",
+              "| alpha | strain | region | " + " | ".join(c[1] for c in COLS) + " |",
+              "|---|---|---|" + "---|" * len(COLS)]
+        for a in ALPHAS:
+            for s in STRAINS:
+                for region in REGIONS:
+                    sm = seed_mean(rows, kind, a, s, region)
+                    c = ct.get(f"{a}_{s:g}")
+                    if sm is None:
+                        continue
+                    cr = c[region] if c else {}
+                    cells = [f"{_f(cr.get(k), nd)} / {_f(sm.get(k), nd)}" for k, _, nd in COLS]
+                    L.append(f"| {a} | {s:g} | {region} | " + " | ".join(cells) + " |")
+    ctl = rec.get("controls", {})
+    if ctl.get("edges"):
+        L += ["", "## The edge length (press, seed 0, strain 0, core)", "",
+              "The authors' e depends on the centrelines' edge length; the CT's is not published. e2 / e "
+              "grows with it and is the check.", "",
+              "| alpha | edge (d) | n | e | cv_e | e/pair | e2/e | CT e2/e |", "|---|---|---|---|---|---|---|---|"]
+        for r in ctl["edges"]:
+            c = ct.get(f"{r['alpha']}_0", {}).get("core", {})
+            k = r["core"]
+            L.append(f"| {r['alpha']} | {r['edge_d']:g} | {k['n']:.1f} | {k['e']:.1f} | {k['cv_e']:.2f} | "
+                     f"{k['e_pair_median']:.3f} | {k['e2_over_e']:.2f} | {_f(c.get('e2_over_e'), 2)} |")
+    if ctl.get("noise"):
+        L += ["", f"## Tracing noise (press, seed 0, strain 0, edges {rec['edge_d']:g} d)", "",
+              "Interior vertices moved by a Gaussian of sigma per axis, in CT voxels (78.22 um): a crooked "
+              "traced centreline, or a rod not quite straight.", "",
+              "| alpha | sigma (voxels) | sigma (d) | core cv_e | core e/pair | rim cv_e | rim e/pair | core e2/e |",
+              "|---|---|---|---|---|---|---|---|"]
+        for r in ctl["noise"]:
+            L.append(f"| {r['alpha']} | {r['noise_voxels']:g} | {r['noise_d']:.2f} | {r['core']['cv_e']:.2f} | "
+                     f"{r['core']['e_pair_median']:.3f} | {r['rim']['cv_e']:.2f} | {r['rim']['e_pair_median']:.3f} | "
+                     f"{r['core']['e2_over_e']:.2f} |")
+    path.write_text("\n".join(L) + "\n")
+
+
+def write_figure(path: Path, rec: dict) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows, ct = rec["sim"], rec["ct"]
+    kinds = [k for k in SETS if any(r["set"] == k for r in rows)]
+    fig, axes = plt.subplots(2, 4, figsize=(16, 7), sharex=True)
+    styles = {"press": "o-", "press-frictionless": "s--", "press-ct": "^-.", "press-wide": "v:"}
+    for j, a in enumerate(ALPHAS):
+        for i, (key, label) in enumerate((("cv_e", "cv_e"), ("e_pair_median", "e per rod pair (median)"))):
+            ax = axes[i, j]
+            for region, col in (("core", "C0"), ("rim", "C3")):
+                xs = [s for s in STRAINS if f"{a}_{s:g}" in ct]
+                ax.plot(xs, [ct[f"{a}_{s:g}"][region][key] for s in xs], "k" + ("-" if region == "core" else "--"),
+                        lw=2, label=f"CT {region}")
+                for kind in kinds:
+                    pts = [(s, seed_mean(rows, kind, a, s, region)) for s in STRAINS]
+                    pts = [(s, m[key]) for s, m in pts if m]
+                    if pts:
+                        ax.plot(*zip(*pts), styles[kind], color=col, ms=4, alpha=0.8,
+                                label=f"{kind} {region}")
+            ax.set_title(f"alpha {a}")
+            if j == 0:
+                ax.set_ylabel(label)
+            if i == 1:
+                ax.set_xlabel("strain")
+    axes[0, 0].legend(fontsize=6)
+    fig.suptitle("Pressed packings against the authors' CT: authors' convention, each packing's core and rim")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", required=True, help="folder of scripts/lab_experiments.py runs")
+    ap.add_argument("--paper-fields", required=True, help="folder of the authors' fields (alpha*_epsilon*.npz)")
+    ap.add_argument("--edge", type=float, default=4.0, help="simulated edge length, rod diameters (default 4)")
+    ap.add_argument("--cache", default=None, help="cache folder (default RUNS/../ct_like_for_like_cache)")
+    ap.add_argument("--no-controls", action="store_true", help="leave out the edge and noise controls")
+    ap.add_argument("--out", default=str(OUT), help="results folder (default benchmarks/results)")
+    args = ap.parse_args(argv)
+    runs, data = Path(args.runs), Path(args.paper_fields)
+    for p, what in ((runs, "--runs"), (data, "--paper-fields")):
+        if not p.is_dir():
+            print(f"error: {what} {p} is not a folder; give an existing one", file=sys.stderr)
+            return 2
+    if not (args.edge > 0):
+        print(f"error: --edge must be > 0 rod diameters, got {args.edge}", file=sys.stderr)
+        return 2
+    cache = Path(args.cache) if args.cache else runs.parent / "ct_like_for_like_cache"
+    log = lambda m: print(f"{datetime.now(timezone.utc):%H:%M:%S} {m}", file=sys.stderr, flush=True)  # noqa: E731
+    import rodwarp
+    import warp as wp
+
+    ct = {}
+    for a in ALPHAS:
+        for s in STRAINS:
+            f = ct_fields(data, a, s)
+            if f is not None:
+                ct[f"{a}_{s:g}"] = regional(f)
+    sim = analyse_runs(runs, cache, args.edge, log)
+    rec = {"command": "python scripts/ct_like_for_like.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+           "date": f"{datetime.now(timezone.utc):%Y-%m-%d}", "machine": f"{platform.processor() or platform.machine()}, "
+           f"{__import__('os').cpu_count()} cores", "versions": {"rodwarp": rodwarp.__version__, "warp": wp.__version__,
+                                                                "numpy": np.__version__},
+           "edge_d": args.edge, "ct": ct, "sim": sim,
+           "controls": {} if args.no_controls else controls(runs, cache, args.edge, log)}
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "ct_like_for_like.json").write_text(json.dumps(rec, indent=1))
+    write_md(out / "ct_like_for_like.md", rec)
+    write_figure(out / "ct_like_for_like.png", rec)
+    print(f"wrote {out / 'ct_like_for_like.md'} ({len(sim)} simulated packings)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
