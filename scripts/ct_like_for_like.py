@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
+import os
 import sys
 import time
 from datetime import datetime, timezone
@@ -41,7 +41,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "benchmarks" / "results"
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 ALPHAS = (38, 66, 76, 100)
 STRAINS = (0.0, 0.05, 0.1, 0.15)
@@ -85,14 +84,47 @@ def region_stats(fields: dict, mask: np.ndarray) -> dict:
     return out
 
 
+#: Fig. 2's histogram bins: S (the authors' S lies in [-1/2, 1]) and c over the packing's mean c
+S_BINS = np.linspace(-0.5, 1.0, 61)
+C_BINS = np.linspace(0.0, 4.0, 41)
+
+
+def figure_data(fields: dict) -> dict:
+    """Fig. 2-3's quantities of one packing over its occupied balls (n > 0, as the authors'
+    statistics count them): p(S) and p(c / mean c), the tangles (balls above e_lb = Q3 + 1.5 IQR,
+    26-connected) and the z-profiles of phi, S, c / mean c, e and n (means over each layer's
+    occupied balls; z in m above the plate)."""
+    from rodwarp.analysis import find_tangles, outlier_bound
+
+    occ = fields["n"] > 0
+    S, c, e = fields["S"][occ], fields["c"][occ], fields["e"][occ]
+    cm = float(c.mean()) if c.size else float("nan")
+    h = float(fields["x"][1] - fields["x"][0])
+    lb = outlier_bound(e)["e_lb"]
+    _, tangles = find_tangles(np.where(occ, fields["e"], np.nan), occ, lb, spacing=h)
+    big = tangles[0] if tangles else None
+    prof = {}
+    count = np.maximum(occ.sum(axis=(1, 2)), 1)
+    for name in ("phi", "S", "c", "e", "n"):
+        v = np.where(occ, np.nan_to_num(fields[name], nan=0.0), 0.0)
+        prof[name] = (v.sum(axis=(1, 2)) / count / (cm if name == "c" else 1.0)).tolist()
+    return {"p_S": np.histogram(S, bins=S_BINS, density=True)[0].tolist(),
+            "p_c": np.histogram(c / cm, bins=C_BINS, density=True)[0].tolist(),
+            "median_S": float(np.median(S)), "mean_c": cm, "e_lb": float(lb), "n_tangles": len(tangles),
+            "largest_xi_over_L": big["xi_over_L"] if big else None, "percolates": bool(big and big["percolates"]),
+            "z": [float(v) for v in fields["z"]], "profiles": prof,
+            "cv_e_all": float(e.std() / e.mean()), "mean_e_all": float(e.mean()), "balls": int(occ.sum())}
+
+
 def regional(fields: dict) -> dict:
-    """Regions (:func:`rodwarp.analysis.packing_regions`) and their statistics."""
+    """Regions (:func:`rodwarp.analysis.packing_regions`), their statistics, and Fig. 2-3's data."""
     from rodwarp.analysis import packing_regions
 
     reg = packing_regions(fields["n"], fields["x"], fields["y"], fields["z"])
     out = {"geometry": reg.as_dict()}
     for name in REGIONS:
         out[name] = region_stats(fields, getattr(reg, name))
+    out["fig"] = figure_data(fields)
     return out
 
 
@@ -118,10 +150,20 @@ def ct_fields(data: Path, alpha: int, strain: float) -> dict | None:
 
 def resampled(rods, edge_d: float, noise_m: float = 0.0, seed: int = 0):
     """``rods`` resampled to edges of about ``edge_d`` diameters, interior vertices moved by an
-    isotropic Gaussian of ``noise_m`` per axis when given (a traced centreline's noise)."""
-    from fig23_compare import resampled as _resampled
+    isotropic Gaussian of ``noise_m`` per axis when given (a traced centreline's noise).
 
-    out = _resampled(rods, edge_d)
+    The authors' rules keep whole edges by their first vertex, so their fields depend on the edge
+    length (docs/fields.md); rigid rods are stored as one edge each, which no ball would keep."""
+    from rodwarp.rodset import RodSet
+
+    polys = []
+    for i in range(rods.n_rods):
+        pts = rods.points[rods.offsets[i]:rods.offsets[i + 1]]
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+        k = max(2, int(round(arc[-1] / (edge_d * 2 * rods.radii[i]))) + 1)
+        t = np.linspace(0.0, arc[-1], k)
+        polys.append(np.stack([np.interp(t, arc, pts[:, j]) for j in range(3)], axis=1))
+    out = RodSet.from_polylines(polys, radii=rods.radii, units=rods.units)
     if noise_m > 0:
         rng = np.random.default_rng(seed)
         pts = out.points.copy()
@@ -252,6 +294,46 @@ def controls(runs: Path, cache: Path, edge: float, log) -> dict:
     return out
 
 
+def structureless(runs: Path, cache: Path, edge: float, alphas, seeds, log) -> list[dict]:
+    """The floor of cv_e a packing without structure gives: the press set's rods (N, l, d) placed
+    by random sequential addition, uniform and isotropic, in the same cylinder up to the poured
+    packing's top (seed 0, strain 0), through the same fields and regions."""
+    import rodwarp
+    from rodwarp.experiments._packing import random_packing
+    from rodwarp.rodset import detect_contacts
+
+    out = []
+    for alpha in alphas:
+        folder = runs / f"press_alpha{alpha}_seed0"
+        src = folder / "rods_press0.npz"
+        if not src.is_file():
+            continue
+        info = run_info(folder)
+        ref = rodwarp.load(src)
+        top = float(ref.attrs["piston_height_m"])
+        rc, l = info["container_m"], info["length_m"]
+        for seed in seeds:
+            key = f"rsa_alpha{alpha}_seed{seed}_edge{edge:g}"
+            log(key)
+
+            def compute(seed=seed):
+                t0 = time.perf_counter()
+                rods = random_packing(info["n_rods"], l, l / alpha, (2 * rc, 2 * rc, top), cylinder=rc, seed=seed,
+                                      progress=False)
+                placed = time.perf_counter() - t0
+                rods = rods.with_points(rods.points - np.array([rc, rc, 0.0]))
+                rods.contacts = detect_contacts(rods)
+                rods.attrs["piston_height_m"] = top
+                res = regional(sim_fields(rods, rc, edge))
+                res.update({"place_s": placed, "wall_s": time.perf_counter() - t0})
+                return res
+
+            res = cached(cache, key, compute)
+            out.append({"alpha": alpha, "seed": seed, "n_rods": info["n_rods"], **{r: res[r] for r in REGIONS},
+                        "cv_e_all": res["fig"]["cv_e_all"]})
+    return out
+
+
 # ----------------------------------------------------------------------------- report
 
 COLS = (("n", "n", 1), ("phi", "phi", 3), ("S", "S", 2), ("c", "c", 2), ("e", "e", 1),
@@ -347,6 +429,21 @@ def write_md(path: Path, rec: dict) -> None:
             L.append(f"| {r['alpha']} | {r['noise_voxels']:g} | {r['noise_d']:.2f} | {r['core']['cv_e']:.2f} | "
                      f"{r['core']['e_pair_median']:.3f} | {r['rim']['cv_e']:.2f} | {r['rim']['e_pair_median']:.3f} | "
                      f"{r['core']['e2_over_e']:.2f} |")
+    if ctl.get("structureless"):
+        L += ["", "## A packing without structure (random sequential addition)", "",
+              "The press set's rods placed uniformly and isotropically, without overlaps, in the same cylinder up "
+              "to the poured packing's top (seed 0, strain 0), through the same fields and regions: the cv_e that "
+              "finite balls give without any clumping.", "",
+              "| alpha | seeds | rods | core n | core cv_e | rim cv_e | all balls cv_e | core e/pair |",
+              "|---|---|---|---|---|---|---|---|"]
+        for a in ALPHAS:
+            sel = [r for r in ctl["structureless"] if r["alpha"] == a]
+            if sel:
+                m = lambda f: float(np.mean([f(r) for r in sel]))  # noqa: E731
+                L.append(f"| {a} | {len(sel)} | {sel[0]['n_rods']} | {m(lambda r: r['core']['n']):.1f} | "
+                         f"{m(lambda r: r['core']['cv_e']):.2f} (worst {max(r['core']['cv_e'] for r in sel):.2f}) | "
+                         f"{m(lambda r: r['rim']['cv_e']):.2f} | {m(lambda r: r['cv_e_all']):.2f} | "
+                         f"{m(lambda r: r['core']['e_pair_median']):.3f} |")
     path.write_text("\n".join(L) + "\n")
 
 
@@ -384,6 +481,107 @@ def write_figure(path: Path, rec: dict) -> None:
     plt.close(fig)
 
 
+def _fig_rows(rec: dict, kind: str = "press") -> dict:
+    """alpha -> {"ct": fig data, "sim": [fig data of each seed]} at strain 0."""
+    out = {}
+    for a in ALPHAS:
+        c = rec["ct"].get(f"{a}_0")
+        sims = [r["fig"] for r in rec["sim"] if r["set"] == kind and r["alpha"] == a and r["strain"] == 0]
+        if c and sims:
+            out[a] = {"ct": c["fig"], "sim": sims, "length_m": next(r["length_m"] for r in rec["sim"]
+                                                                      if r["set"] == kind and r["alpha"] == a)}
+    return out
+
+
+def write_fig23(out: Path, rec: dict) -> None:
+    """Fig. 2 (p(S), p(c)) and Fig. 3F-M (tangles, percolation, z-profiles) of the CT and of the
+    press set's poured packings (strain 0), both in the authors' convention; fig23.md and .json."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = _fig_rows(rec)
+    if not data:
+        return
+    colours = dict(zip(ALPHAS, ("tab:blue", "tab:orange", "tab:green", "tab:red")))
+    sc = 0.5 * (S_BINS[1:] + S_BINS[:-1])
+    cc = 0.5 * (C_BINS[1:] + C_BINS[:-1])
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    for a, d in data.items():
+        axes[0].plot(sc, d["ct"]["p_S"], "-", color=colours[a], label=f"alpha {a} CT")
+        axes[0].plot(sc, np.mean([s["p_S"] for s in d["sim"]], axis=0), "--", color=colours[a], label=f"alpha {a} sim")
+        axes[1].plot(cc, d["ct"]["p_c"], "-", color=colours[a])
+        axes[1].plot(cc, np.mean([s["p_c"] for s in d["sim"]], axis=0), "--", color=colours[a])
+    axes[0].set_xlabel("S (authors': eigenvalue of largest magnitude)")
+    axes[1].set_xlabel("c / mean c")
+    for ax, t in zip(axes, ("p(S)", "p(c)")):
+        ax.set_title(f"{t}: CT (solid) and simulated (dashed), strain 0, every occupied ball", fontsize=8)
+    axes[0].legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    fig.savefig(out / "fig2_pS_pc.png", dpi=120)
+    plt.close(fig)
+
+    al = sorted(data)
+    fig, axes = plt.subplots(1, 3, figsize=(11, 3.4))
+    for src, marker in (("ct", "o"), ("sim", "s")):
+        get = (lambda d: [d["ct"]]) if src == "ct" else (lambda d: d["sim"])
+        n_t = [np.mean([f["n_tangles"] for f in get(data[a])]) for a in al]
+        ext = [np.mean([max((f["largest_xi_over_L"] or {"x": 0}).values()) for f in get(data[a])]) for a in al]
+        perc = [np.mean([f["percolates"] for f in get(data[a])]) for a in al]
+        lab = "CT" if src == "ct" else "simulated (seed mean)"
+        for ax, v in zip(axes, (n_t, ext, perc)):
+            ax.plot(al, v, marker, ls="-", label=lab)
+    for ax, t in zip(axes, ("tangles (e > e_lb, 26-connected)", "largest tangle: max xi / L",
+                            "largest tangle percolates (share)")):
+        ax.set_xlabel("alpha")
+        ax.set_title(t, fontsize=9)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "fig3_tangles.png", dpi=120)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(1, 4, figsize=(14, 3.6))
+    for ax, name, lab in zip(axes, ("phi", "S", "c", "e"), ("phi", "S", "c / mean c", "e")):
+        for a, d in data.items():
+            zl = np.asarray(d["ct"]["z"]) / d["length_m"]
+            ax.plot(zl, d["ct"]["profiles"][name], "-", color=colours[a], label=f"alpha {a} CT")
+            s0 = d["sim"][0]
+            ax.plot(np.asarray(s0["z"]) / d["length_m"], s0["profiles"][name], "--", color=colours[a],
+                    label=f"alpha {a} sim")
+        ax.axvline(0.5, color="grey", lw=0.8)
+        ax.set_xlabel("z / l")
+        ax.set_title(f"{lab}(z), occupied balls", fontsize=9)
+    axes[0].legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    fig.savefig(out / "fig3_zprofiles.png", dpi=120)
+    plt.close(fig)
+
+    L = ["# Fig. 2-3: the lab's poured packings beside the CT, like for like", "",
+         f"Written by `scripts/ct_like_for_like.py` on {rec['date']} ({rec['machine']}). Both sides in the "
+         f"authors' convention (the simulated rods resampled to edges of {rec['edge_d']:g} d), over every "
+         "occupied ball (n > 0) as the authors' statistics count them. Simulated: the `press` set's packings "
+         "at strain 0 (poured into the lab's cylinder, the piston resting on them; "
+         "docs/experiments.md), seed means where a column has several seeds; z-profiles and p(S), p(c) "
+         "from seed 0 and the seed mean respectively. c is shown over its packing's mean: the authors' "
+         "normalisation of c does not carry over (ct_like_for_like.md).", "",
+         "| alpha | packing | median S | mean e | cv_e | e_lb | tangles | largest tangle max xi/L | percolates |",
+         "|---|---|---|---|---|---|---|---|---|"]
+    for a in al:
+        for src in ("ct", "sim"):
+            fs = [data[a]["ct"]] if src == "ct" else data[a]["sim"]
+            m = lambda k: float(np.mean([f[k] for f in fs]))  # noqa: E731
+            ext = np.mean([max((f["largest_xi_over_L"] or {"x": 0}).values()) for f in fs])
+            L.append(f"| {a} | {'CT, strain 0' if src == 'ct' else f'simulated ({len(fs)} seeds)'} | "
+                     f"{m('median_S'):.2f} | {m('mean_e_all'):.1f} | {m('cv_e_all'):.2f} | {m('e_lb'):.0f} | "
+                     f"{m('n_tangles'):.1f} | {ext:.2f} | {m('percolates'):.2f} |")
+    L += ["", "Figures: [fig2_pS_pc.png](fig2_pS_pc.png), [fig3_tangles.png](fig3_tangles.png), "
+          "[fig3_zprofiles.png](fig3_zprofiles.png)."]
+    (out / "fig23.md").write_text("\n".join(L) + "\n")
+    (out / "fig23.json").write_text(json.dumps({"command": rec["command"], "date": rec["date"],
+                                                "machine": rec["machine"], "versions": rec["versions"],
+                                                "edge_d": rec["edge_d"], "alphas": data}, indent=1))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", required=True, help="folder of scripts/lab_experiments.py runs")
@@ -391,6 +589,9 @@ def main(argv=None) -> int:
     ap.add_argument("--edge", type=float, default=4.0, help="simulated edge length, rod diameters (default 4)")
     ap.add_argument("--cache", default=None, help="cache folder (default RUNS/../ct_like_for_like_cache)")
     ap.add_argument("--no-controls", action="store_true", help="leave out the edge and noise controls")
+    ap.add_argument("--structureless", default="", help="alphas (e.g. 38,100) of the random-sequential-addition "
+                    "control (minutes each: the placement nears jamming)")
+    ap.add_argument("--structureless-seeds", default="0,1,2", help="its seeds (default 0,1,2)")
     ap.add_argument("--out", default=str(OUT), help="results folder (default benchmarks/results)")
     args = ap.parse_args(argv)
     runs, data = Path(args.runs), Path(args.paper_fields)
@@ -406,6 +607,9 @@ def main(argv=None) -> int:
     import rodwarp
     import warp as wp
 
+    sys.path.insert(0, str(ROOT))
+    from benchmarks.common import cpu_model
+
     ct = {}
     for a in ALPHAS:
         for s in STRAINS:
@@ -414,16 +618,20 @@ def main(argv=None) -> int:
                 ct[f"{a}_{s:g}"] = regional(f)
     sim = analyse_runs(runs, cache, args.edge, log)
     rec = {"command": "python scripts/ct_like_for_like.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-           "date": f"{datetime.now(timezone.utc):%Y-%m-%d}", "machine": f"{platform.processor() or platform.machine()}, "
-           f"{__import__('os').cpu_count()} cores", "versions": {"rodwarp": rodwarp.__version__, "warp": wp.__version__,
+           "date": f"{datetime.now(timezone.utc):%Y-%m-%d}", "machine": f"{cpu_model()}, {os.cpu_count()} cores", "versions": {"rodwarp": rodwarp.__version__, "warp": wp.__version__,
                                                                 "numpy": np.__version__},
            "edge_d": args.edge, "ct": ct, "sim": sim,
            "controls": {} if args.no_controls else controls(runs, cache, args.edge, log)}
+    if args.structureless:
+        rec["controls"]["structureless"] = structureless(
+            runs, cache, args.edge, [int(a) for a in args.structureless.split(",")],
+            [int(v) for v in args.structureless_seeds.split(",")], log)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "ct_like_for_like.json").write_text(json.dumps(rec, indent=1))
     write_md(out / "ct_like_for_like.md", rec)
     write_figure(out / "ct_like_for_like.png", rec)
+    write_fig23(out, rec)
     print(f"wrote {out / 'ct_like_for_like.md'} ({len(sim)} simulated packings)")
     return 0
 

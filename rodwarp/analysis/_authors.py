@@ -90,15 +90,23 @@ def kept_edges(starts: np.ndarray, centre, radius: float) -> np.ndarray:
     -------
     ndarray of bool (E,)
     """
-    return np.linalg.norm(starts - np.asarray(centre, dtype=np.float64), axis=1) < radius
+    d = starts - np.asarray(centre, dtype=np.float64)
+    return _dot(d, d) < radius * radius
+
+
+def _dot(a, b):
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
 
 
 def _solid_angle(u, v, w):
     """Signed solid angle of the triangle (u, v, w) seen from the origin (Van Oosterom-Strackee)."""
-    nu, nv, nw = (np.linalg.norm(a, axis=-1) for a in (u, v, w))
-    num = np.einsum("...i,...i", u, np.cross(v, w))
-    den = (nu * nv * nw + np.einsum("...i,...i", u, v) * nw + np.einsum("...i,...i", u, w) * nv
-           + np.einsum("...i,...i", v, w) * nu)
+    # component arithmetic, not np.cross / np.linalg.norm: a ball calls this on a few hundred
+    # pairs, where those functions' overhead outweighs the arithmetic
+    nu, nv, nw = (np.sqrt(_dot(a, a)) for a in (u, v, w))
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    wx, wy, wz = w[..., 0], w[..., 1], w[..., 2]
+    num = u[..., 0] * (vy * wz - vz * wy) + u[..., 1] * (vz * wx - vx * wz) + u[..., 2] * (vx * wy - vy * wx)
+    den = nu * nv * nw + _dot(u, v) * nw + _dot(u, w) * nv + _dot(v, w) * nu
     return 2.0 * np.arctan2(num, den)
 
 
@@ -164,9 +172,12 @@ def entanglement_e(a0, a1, rod) -> float:
     """
     if len(rod) < 2:
         return 0.0
-    g = np.abs(gauss_pairs(a0[:, None], a1[:, None], a0[None, :], a1[None, :]))
-    other = rod[:, None] != rod[None, :]  # the self blocks are subtracted
-    return float(np.sum(g[other]))
+    # |G| is symmetric in its two edges: each unordered pair of edges of different rods once,
+    # counted twice (half the solid angles of the full matrix; the self blocks never computed)
+    i, j = np.triu_indices(len(rod), 1)
+    other = rod[i] != rod[j]
+    i, j = i[other], j[other]
+    return 2.0 * float(np.sum(np.abs(gauss_pairs(a0[i], a1[i], a0[j], a1[j]))))
 
 
 def entanglement_e2(a0, a1, n_rods: int) -> float:
@@ -197,15 +208,14 @@ def entanglement_e2(a0, a1, n_rods: int) -> float:
     if k < 2:
         return 0.0
     p0, p1 = a0[:k], a1[:k]
-    g = np.abs(gauss_pairs(p0[:, None], p1[:, None], p0[None, :], p1[None, :]))
-    ends0, ends1 = (p0[:, None], p1[:, None]), (p0[None, :], p1[None, :])
-    shared = np.zeros((k, k), bool)
-    for u in ends0:
-        for v in ends1:
+    # symmetric in the pair: each unordered pair i < j once, counted twice
+    i, j = np.triu_indices(k, 1)
+    g = np.abs(gauss_pairs(p0[i], p1[i], p0[j], p1[j]))
+    shared = np.zeros(len(i), bool)
+    for u in (p0[i], p1[i]):
+        for v in (p0[j], p1[j]):
             shared |= np.all(u == v, axis=-1)
-    g = np.where(shared, 0.5, g)
-    np.fill_diagonal(g, 0.0)
-    return float(np.sum(g))
+    return 2.0 * float(np.sum(np.where(shared, 0.5, g)))
 
 
 def order_authors(a0, a1) -> float:
@@ -332,14 +342,20 @@ def authors_field_arrays(starts, ends, rod, contact_points, x, y, z, radius: flo
     for iz, cz in enumerate(z):
         # the routine's slab: edges and contacts within 1.1 R in z (a prefilter, same result)
         slab = np.abs(starts[:, 2] - cz) < 1.1 * radius
-        s0, s1, sr = starts[slab], ends[slab], rod[slab]
+        z0, z1, zr = starts[slab], ends[slab], rod[slab]
+        zpts = pts[np.abs(pts[:, 2] - cz) < 1.1 * radius]
         for iy, cy in enumerate(y):
+            # and the row's: edges and contacts within 1.1 R in y too (a prefilter, same result)
+            row = np.abs(z0[:, 1] - cy) < 1.1 * radius
+            s0, s1, sr = z0[row], z1[row], zr[row]
+            rpts = zpts[np.abs(zpts[:, 1] - cy) < 1.1 * radius]
             for ix, cx in enumerate(x):
                 c = np.array([cx, cy, cz])
                 keep = kept_edges(s0, c, radius)
                 a0, a1, r = s0[keep], s1[keep], sr[keep]
                 n = rods_in_ball(r)
-                k = np.count_nonzero(np.linalg.norm(pts - c, axis=1) < radius) if len(pts) else 0
+                dk = rpts - c
+                k = np.count_nonzero(_dot(dk, dk) < radius * radius) if len(rpts) else 0
                 out["n"][iz, iy, ix] = n
                 out["e"][iz, iy, ix] = entanglement_e(a0, a1, r)
                 out["e2"][iz, iy, ix] = entanglement_e2(a0, a1, n)
