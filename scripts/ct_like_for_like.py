@@ -74,7 +74,10 @@ def region_stats(fields: dict, mask: np.ndarray) -> dict:
            "cv_e": float(e.std() / e.mean()) if e.mean() > 0 else float("nan"),
            "e_pair_median": float(np.median(pe)) if len(pe) else float("nan"),
            "e_pair_mean": float(pe.mean()) if len(pe) else float("nan"),
-           "e2_over_e": float(np.median(fields["e2"][mask][pos] / e[pos])) if pos.any() else float("nan")}
+           "e2_over_e": float(np.median(fields["e2"][mask][pos] / e[pos])) if pos.any() else float("nan"),
+           # cv_e's two parts: how the rods per ball vary (density) and how e per pair does
+           "cv_n": float(n.std() / n.mean()) if n.mean() > 0 else float("nan"),
+           "cv_e_pair": float(pe.std() / pe.mean()) if len(pe) and pe.mean() > 0 else float("nan")}
     if "e_text" in fields:
         et = fields["e_text"][mask]
         pt = pair_entanglement(et, fields["n_text"][mask])
@@ -224,16 +227,20 @@ def run_info(folder: Path) -> dict:
 
 
 def cached(cache: Path, key: str, compute) -> dict:
-    """``compute()`` once: its result kept as JSON under ``cache/key.json`` (written atomically)."""
-    f = cache / f"{key}.json"
+    """The fields ``compute()`` returns (arrays and numbers), computed once and kept under
+    ``cache/key.npz`` (float32 arrays, written atomically); the statistics are taken from them
+    at each report, so a new statistic needs no recomputation."""
+    f = cache / f"{key}.npz"
     if f.is_file():
-        return json.loads(f.read_text())
+        with np.load(f) as d:
+            return {k: (float(d[k]) if d[k].ndim == 0 else np.asarray(d[k], dtype=np.float64)) for k in d.files}
     out = compute()
     cache.mkdir(parents=True, exist_ok=True)
-    tmp = f.with_suffix(".tmp")
-    tmp.write_text(json.dumps(out))
+    tmp = f.with_name(f.stem + ".tmp.npz")
+    np.savez_compressed(tmp, **{k: (np.asarray(v, dtype=np.float64) if np.ndim(v) <= 1 else
+                                    np.asarray(v, dtype=np.float32)) for k, v in out.items()})
     tmp.replace(f)
-    return out
+    return {k: (float(v) if np.ndim(v) == 0 else np.asarray(v, dtype=np.float64)) for k, v in out.items()}
 
 
 def analyse_runs(runs: Path, cache: Path, edge: float, log) -> list[dict]:
@@ -254,13 +261,12 @@ def analyse_runs(runs: Path, cache: Path, edge: float, log) -> list[dict]:
             def compute(src=src, info=info):
                 t0 = time.perf_counter()
                 f = sim_fields(rodwarp.load(src), info["container_m"], edge)
-                out = regional(f)
-                out["wall_s"] = time.perf_counter() - t0
-                return out
+                f["wall_s"] = time.perf_counter() - t0
+                return f
 
             key = f"{folder.name}_{st['stage']}_edge{edge:g}"
             log(f"{key}")
-            res = cached(cache, key, compute)
+            res = regional(cached(cache, key, compute))
             rows.append({**{k: v for k, v in info.items() if k != "strains"}, "set": kind,
                          "strain": float(st["strain"]), "strain_reached": float(st["strain_reached"]), **res})
     return rows
@@ -282,12 +288,12 @@ def controls(runs: Path, cache: Path, edge: float, log) -> dict:
         for e in EDGES:
             key = f"{folder.name}_press0_edge{e:g}"
             log(key)
-            res = cached(cache, key, lambda e=e: regional(sim_fields(rods, info["container_m"], e)))
+            res = regional(cached(cache, key, lambda e=e: sim_fields(rods, info["container_m"], e)))
             out["edges"].append({"alpha": alpha, "edge_d": e, **{r: res[r] for r in REGIONS}})
         for nv in NOISE_VOXELS:
             key = f"{folder.name}_press0_edge{edge:g}_noise{nv:g}"
             log(key)
-            res = cached(cache, key, lambda nv=nv: regional(sim_fields(rods, info["container_m"], edge,
+            res = regional(cached(cache, key, lambda nv=nv: sim_fields(rods, info["container_m"], edge,
                                                                        noise_m=nv * VOXEL_M, text=False)))
             out["noise"].append({"alpha": alpha, "noise_voxels": nv, "noise_d": nv * VOXEL_M * alpha /
                                  info["length_m"], **{r: res[r] for r in REGIONS}})
@@ -324,20 +330,50 @@ def structureless(runs: Path, cache: Path, edge: float, alphas, seeds, log) -> l
                 rods = rods.with_points(rods.points - np.array([rc, rc, 0.0]))
                 rods.contacts = detect_contacts(rods)
                 rods.attrs["piston_height_m"] = top
-                res = regional(sim_fields(rods, rc, edge))
+                res = sim_fields(rods, rc, edge)
                 res.update({"place_s": placed, "wall_s": time.perf_counter() - t0})
                 return res
 
-            res = cached(cache, key, compute)
+            res = regional(cached(cache, key, compute))
             out.append({"alpha": alpha, "seed": seed, "n_rods": info["n_rods"], **{r: res[r] for r in REGIONS},
                         "cv_e_all": res["fig"]["cv_e_all"]})
+    return out
+
+
+def old_measure(runs: Path) -> list[dict]:
+    """Where the earlier measure's cv_e fell under compression: the lab run's own fields
+    (``fields_press<E>.npz``: the text convention over the box inscribed in the cylinder, from the
+    plate to the piston), cv_e over all its balls, over those below 0.7 of the piston's height,
+    and over those within 2 R of the piston, with the mean e there over the mean e below."""
+    from rodwarp.analysis import Fields
+
+    out = []
+    for folder in sorted(runs.glob("press_alpha*_seed*")):
+        if not (folder / "summary.json").is_file():
+            continue
+        info = run_info(folder)
+        for st in info["strains"]:
+            if not st.get("fields") or not (folder / st["fields"]).is_file():
+                continue
+            f = Fields.load(folder / st["fields"])
+            e = np.asarray(f.e)
+            v = f.valid & np.isfinite(e)
+            z = np.broadcast_to(np.asarray(f.z)[:, None, None], e.shape)
+            top = float(st["piston_height"])
+            below, near = v & (z <= 0.7 * top), v & (z > top - 2 * f.radius)
+            cv = lambda m: float(e[m].std() / e[m].mean()) if m.any() and e[m].mean() > 0 else float("nan")  # noqa: E731
+            out.append({"run": folder.name, "alpha": info["alpha"], "seed": info["seed"], "strain": float(st["strain"]),
+                        "cv_e_box": cv(v), "cv_e_below": cv(below), "cv_e_top": cv(near),
+                        "top_over_below_e": float(e[near].mean() / e[below].mean()) if near.any() else float("nan"),
+                        "top_balls": int(near.sum()), "balls": int(v.sum())})
     return out
 
 
 # ----------------------------------------------------------------------------- report
 
 COLS = (("n", "n", 1), ("phi", "phi", 3), ("S", "S", 2), ("c", "c", 2), ("e", "e", 1),
-        ("cv_e", "cv_e", 2), ("e_pair_median", "e/pair", 3), ("e2_over_e", "e2/e", 2))
+        ("cv_e", "cv_e", 2), ("cv_n", "cv_n", 2), ("cv_e_pair", "cv e/pair", 2), ("e_pair_median", "e/pair", 3),
+        ("e2_over_e", "e2/e", 2))
 
 
 def _f(v, nd):
@@ -354,6 +390,8 @@ def seed_mean(rows: list[dict], kind: str, alpha: int, strain: float, region: st
     out = {k: float(np.mean([r[region][k] for r in sel])) for k in keys}
     out["seeds"] = len(sel)
     out["spread"] = {k: float(np.ptp([r[region][k] for r in sel])) for k in ("cv_e", "e_pair_median", "n")}
+    out["cv_e_min"] = float(min(r[region]["cv_e"] for r in sel))
+    out["cv_e_max"] = float(max(r[region]["cv_e"] for r in sel))
     return out
 
 
@@ -429,6 +467,17 @@ def write_md(path: Path, rec: dict) -> None:
             L.append(f"| {r['alpha']} | {r['noise_voxels']:g} | {r['noise_d']:.2f} | {r['core']['cv_e']:.2f} | "
                      f"{r['core']['e_pair_median']:.3f} | {r['rim']['cv_e']:.2f} | {r['rim']['e_pair_median']:.3f} | "
                      f"{r['core']['e2_over_e']:.2f} |")
+    if ctl.get("old_measure"):
+        L += ["", "## The earlier measure's fall under compression (press, text convention)", "",
+              "The lab run's own fields (`fields_press<E>.npz`: the box inscribed in the cylinder, from the plate to "
+              "the piston), cv_e over all balls, over those below 0.7 of the piston's height, and over those "
+              "within 2 R of the piston (with their mean e over the mean e below).", "",
+              "| run | strain | cv_e box | cv_e below 0.7 H | cv_e top 2 R | top e / below e | top balls |",
+              "|---|---|---|---|---|---|---|"]
+        for r in ctl["old_measure"]:
+            if r["strain"] in (0.0, 0.15):
+                L.append(f"| {r['run']} | {r['strain']:g} | {r['cv_e_box']:.2f} | {r['cv_e_below']:.2f} | "
+                         f"{r['cv_e_top']:.2f} | {r['top_over_below_e']:.2f} | {r['top_balls']} |")
     if ctl.get("structureless"):
         L += ["", "## A packing without structure (random sequential addition)", "",
               "The press set's rods placed uniformly and isotropically, without overlaps, in the same cylinder up "
@@ -622,6 +671,7 @@ def main(argv=None) -> int:
                                                                 "numpy": np.__version__},
            "edge_d": args.edge, "ct": ct, "sim": sim,
            "controls": {} if args.no_controls else controls(runs, cache, args.edge, log)}
+    rec["controls"]["old_measure"] = old_measure(runs)
     if args.structureless:
         rec["controls"]["structureless"] = structureless(
             runs, cache, args.edge, [int(a) for a in args.structureless.split(",")],
