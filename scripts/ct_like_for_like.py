@@ -87,14 +87,14 @@ def region_stats(fields: dict, mask: np.ndarray) -> dict:
     return out
 
 
-#: Fig. 2's histogram bins: S (the authors' S lies in [-1/2, 1]) and c over the packing's mean c
+#: Fig. 2's histogram bins of S (the authors' S lies in [-1/2, 1]) and quantiles of c over its mean
 S_BINS = np.linspace(-0.5, 1.0, 61)
-C_BINS = np.linspace(0.0, 4.0, 41)
+C_QUANTILES = np.linspace(0.0, 1.0, 101)
 
 
 def figure_data(fields: dict) -> dict:
     """Fig. 2-3's quantities of one packing over its occupied balls (n > 0, as the authors'
-    statistics count them): p(S) and p(c / mean c), the tangles (balls above e_lb = Q3 + 1.5 IQR,
+    statistics count them): p(S) and the distribution of c / mean c, the tangles (balls above e_lb = Q3 + 1.5 IQR,
     26-connected) and the z-profiles of phi, S, c / mean c, e and n (means over each layer's
     occupied balls; z in m above the plate)."""
     from rodwarp.analysis import find_tangles, outlier_bound
@@ -112,7 +112,8 @@ def figure_data(fields: dict) -> dict:
         v = np.where(occ, np.nan_to_num(fields[name], nan=0.0), 0.0)
         prof[name] = (v.sum(axis=(1, 2)) / count / (cm if name == "c" else 1.0)).tolist()
     return {"p_S": np.histogram(S, bins=S_BINS, density=True)[0].tolist(),
-            "p_c": np.histogram(c / cm, bins=C_BINS, density=True)[0].tolist(),
+            # c is a count over a constant: a histogram of it aliases, its quantiles do not
+            "q_c": np.quantile(c / cm, C_QUANTILES).tolist(),
             "median_S": float(np.median(S)), "mean_c": cm, "e_lb": float(lb), "n_tangles": len(tangles),
             "largest_xi_over_L": big["xi_over_L"] if big else None, "percolates": bool(big and big["percolates"]),
             "z": [float(v) for v in fields["z"]], "profiles": prof,
@@ -146,6 +147,18 @@ def ct_fields(data: Path, alpha: int, strain: float) -> dict | None:
         out[k] = np.asarray(d["c" + k], dtype=np.float64) * VOXEL_M
     out["R"] = float(d["R"]) * VOXEL_M
     return out
+
+
+def c_check(f: dict, geometry: dict) -> dict:
+    """What the authors' c rule gives on average over a packing's occupied balls, against the
+    published mean: each contact lies in about V_ball / h^3 balls, so mean c is about
+    V_cyl / (occupied balls h^3), V_cyl the packing's bounding cylinder (here its footprint's
+    diameter and its top plus R: the vertices' extents, which the rule uses, are not published)."""
+    occ = f["n"] > 0
+    h = float(f["x"][1] - f["x"][0])
+    top = float(f["z"][occ.any(axis=(1, 2))].max()) + f["R"]
+    v_cyl = np.pi * (2.0 * geometry["radius"]) ** 2 * top / 4.0
+    return {"rule_mean_c": float(v_cyl / (occ.sum() * h**3)), "published_mean_c": float(f["c"][occ].mean())}
 
 
 # ----------------------------------------------------------------------------- the simulated side
@@ -429,6 +442,13 @@ def write_md(path: Path, rec: dict) -> None:
             g = r["geometry"]
             L.append(f"| {r['run']} | {g['radius']:.4f} | {g['bottom']:.4f} | {g['top']:.4f} | {g['core_balls']} | "
                      f"{g['rim_balls']} |")
+    L += ["", "The authors' c rule, checked on the CT's own grid: mean c over the occupied balls is about "
+          "V_cyl / (occupied balls h^3) whatever the contacts (`c_check`), against the published mean.", "",
+          "| alpha | rule's mean c | published mean c |", "|---|---|---|"]
+    for a in ALPHAS:
+        c = ct.get(f"{a}_0", {}).get("c_check")
+        if c:
+            L.append(f"| {a} | {c['rule_mean_c']:.2f} | {c['published_mean_c']:.2f} |")
     for kind in SETS:
         if not any(r["set"] == kind for r in rows):
             continue
@@ -530,15 +550,21 @@ def write_figure(path: Path, rec: dict) -> None:
     plt.close(fig)
 
 
-def _fig_rows(rec: dict, kind: str = "press") -> dict:
-    """alpha -> {"ct": fig data, "sim": [fig data of each seed]} at strain 0."""
+#: the packings of the CT's size: its container at l = 50 mm, twice the press set's pile at alpha 38
+CT_SIZE = ("press-ct", "press-wide")
+
+
+def _fig_rows(rec: dict) -> dict:
+    """alpha -> {"ct": fig data, "sim": [the press set's seeds], "big": [CT-size packings]} at strain 0."""
     out = {}
     for a in ALPHAS:
         c = rec["ct"].get(f"{a}_0")
-        sims = [r["fig"] for r in rec["sim"] if r["set"] == kind and r["alpha"] == a and r["strain"] == 0]
+        at0 = [r for r in rec["sim"] if r["alpha"] == a and r["strain"] == 0]
+        sims = [r["fig"] for r in at0 if r["set"] == "press"]
         if c and sims:
-            out[a] = {"ct": c["fig"], "sim": sims, "length_m": next(r["length_m"] for r in rec["sim"]
-                                                                      if r["set"] == kind and r["alpha"] == a)}
+            out[a] = {"ct": c["fig"], "sim": sims, "big": [r["fig"] for r in at0 if r["set"] in CT_SIZE],
+                      "big_set": sorted({r["set"] for r in at0 if r["set"] in CT_SIZE}),
+                      "length_m": next(r["length_m"] for r in at0)}
     return out
 
 
@@ -554,17 +580,17 @@ def write_fig23(out: Path, rec: dict) -> None:
         return
     colours = dict(zip(ALPHAS, ("tab:blue", "tab:orange", "tab:green", "tab:red")))
     sc = 0.5 * (S_BINS[1:] + S_BINS[:-1])
-    cc = 0.5 * (C_BINS[1:] + C_BINS[:-1])
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     for a, d in data.items():
         axes[0].plot(sc, d["ct"]["p_S"], "-", color=colours[a], label=f"alpha {a} CT")
         axes[0].plot(sc, np.mean([s["p_S"] for s in d["sim"]], axis=0), "--", color=colours[a], label=f"alpha {a} sim")
-        axes[1].plot(cc, d["ct"]["p_c"], "-", color=colours[a])
-        axes[1].plot(cc, np.mean([s["p_c"] for s in d["sim"]], axis=0), "--", color=colours[a])
+        axes[1].plot(d["ct"]["q_c"], C_QUANTILES, "-", color=colours[a])
+        axes[1].plot(np.mean([s["q_c"] for s in d["sim"]], axis=0), C_QUANTILES, "--", color=colours[a])
     axes[0].set_xlabel("S (authors': eigenvalue of largest magnitude)")
     axes[1].set_xlabel("c / mean c")
-    for ax, t in zip(axes, ("p(S)", "p(c)")):
-        ax.set_title(f"{t}: CT (solid) and simulated (dashed), strain 0, every occupied ball", fontsize=8)
+    axes[1].set_xlim(0, 4)
+    for ax, t in zip(axes, ("p(S)", "P(c / mean c <= x)")):
+        ax.set_title(f"{t}: CT (solid), press set (dashed), strain 0, occupied balls", fontsize=8)
     axes[0].legend(fontsize=6, ncol=2)
     fig.tight_layout()
     fig.savefig(out / "fig2_pS_pc.png", dpi=120)
@@ -572,14 +598,17 @@ def write_fig23(out: Path, rec: dict) -> None:
 
     al = sorted(data)
     fig, axes = plt.subplots(1, 3, figsize=(11, 3.4))
-    for src, marker in (("ct", "o"), ("sim", "s")):
-        get = (lambda d: [d["ct"]]) if src == "ct" else (lambda d: d["sim"])
-        n_t = [np.mean([f["n_tangles"] for f in get(data[a])]) for a in al]
-        ext = [np.mean([max((f["largest_xi_over_L"] or {"x": 0}).values()) for f in get(data[a])]) for a in al]
-        perc = [np.mean([f["percolates"] for f in get(data[a])]) for a in al]
-        lab = "CT" if src == "ct" else "simulated (seed mean)"
+    for src, marker in (("ct", "o"), ("sim", "s"), ("big", "^")):
+        aa = [a for a in al if (data[a][src] if src != "ct" else True)]
+        if not aa:
+            continue
+        get = (lambda d: [d["ct"]]) if src == "ct" else (lambda d, src=src: d[src])
+        n_t = [np.mean([f["n_tangles"] for f in get(data[a])]) for a in aa]
+        ext = [np.mean([max((f["largest_xi_over_L"] or {"x": 0}).values()) for f in get(data[a])]) for a in aa]
+        perc = [np.mean([f["percolates"] for f in get(data[a])]) for a in aa]
+        lab = {"ct": "CT", "sim": "press set (seed mean)", "big": "CT-size pile (press-ct, press-wide)"}[src]
         for ax, v in zip(axes, (n_t, ext, perc)):
-            ax.plot(al, v, marker, ls="-", label=lab)
+            ax.plot(aa, v, marker, ls="-", label=lab)
     for ax, t in zip(axes, ("tangles (e > e_lb, 26-connected)", "largest tangle: max xi / L",
                             "largest tangle percolates (share)")):
         ax.set_xlabel("alpha")
@@ -594,9 +623,9 @@ def write_fig23(out: Path, rec: dict) -> None:
         for a, d in data.items():
             zl = np.asarray(d["ct"]["z"]) / d["length_m"]
             ax.plot(zl, d["ct"]["profiles"][name], "-", color=colours[a], label=f"alpha {a} CT")
-            s0 = d["sim"][0]
+            s0 = (d["big"] or d["sim"])[0]  # the CT-size pile where there is one: height matters here
             ax.plot(np.asarray(s0["z"]) / d["length_m"], s0["profiles"][name], "--", color=colours[a],
-                    label=f"alpha {a} sim")
+                    label=f"alpha {a} sim ({d['big_set'][0] if d['big'] else 'press'})")
         ax.axvline(0.5, color="grey", lw=0.8)
         ax.set_xlabel("z / l")
         ax.set_title(f"{lab}(z), occupied balls", fontsize=9)
@@ -608,19 +637,24 @@ def write_fig23(out: Path, rec: dict) -> None:
     L = ["# Fig. 2-3: the lab's poured packings beside the CT, like for like", "",
          f"Written by `scripts/ct_like_for_like.py` on {rec['date']} ({rec['machine']}). Both sides in the "
          f"authors' convention (the simulated rods resampled to edges of {rec['edge_d']:g} d), over every "
-         "occupied ball (n > 0) as the authors' statistics count them. Simulated: the `press` set's packings "
-         "at strain 0 (poured into the lab's cylinder, the piston resting on them; "
-         "docs/experiments.md), seed means where a column has several seeds; z-profiles and p(S), p(c) "
-         "from seed 0 and the seed mean respectively. c is shown over its packing's mean: the authors' "
-         "normalisation of c does not carry over (ct_like_for_like.md).", "",
+         "occupied ball (n > 0) as the authors' statistics count them. Simulated: the lab's packings at "
+         "strain 0 (poured into the cylinder, the piston resting on them; docs/experiments.md): the `press` set "
+         "(Rc = l, filled to 1 l, seed means) and the CT-size piles (`press-ct`: the CT's 150 mm container "
+         "filled to 100 mm; `press-wide`: alpha 38, Rc = 2 l, filled to 2 l). p(S) and c's distribution from the "
+         "press set, the z-profiles from the CT-size pile where there is one. c is shown over its packing's "
+         "mean: the authors' normalisation of c does not carry over (ct_like_for_like.md).", "",
          "| alpha | packing | median S | mean e | cv_e | e_lb | tangles | largest tangle max xi/L | percolates |",
          "|---|---|---|---|---|---|---|---|---|"]
     for a in al:
-        for src in ("ct", "sim"):
-            fs = [data[a]["ct"]] if src == "ct" else data[a]["sim"]
+        for src in ("ct", "sim", "big"):
+            fs = [data[a]["ct"]] if src == "ct" else data[a][src]
+            if not fs:
+                continue
             m = lambda k: float(np.mean([f[k] for f in fs]))  # noqa: E731
             ext = np.mean([max((f["largest_xi_over_L"] or {"x": 0}).values()) for f in fs])
-            L.append(f"| {a} | {'CT, strain 0' if src == 'ct' else f'simulated ({len(fs)} seeds)'} | "
+            name = {"ct": "CT, strain 0", "sim": f"press ({len(fs)} seeds)",
+                    "big": f"{data[a]['big_set'][0] if data[a]['big_set'] else ''} ({len(fs)} seed)"}[src]
+            L.append(f"| {a} | {name} | "
                      f"{m('median_S'):.2f} | {m('mean_e_all'):.1f} | {m('cv_e_all'):.2f} | {m('e_lb'):.0f} | "
                      f"{m('n_tangles'):.1f} | {ext:.2f} | {m('percolates'):.2f} |")
     L += ["", "Figures: [fig2_pS_pc.png](fig2_pS_pc.png), [fig3_tangles.png](fig3_tangles.png), "
@@ -665,6 +699,7 @@ def main(argv=None) -> int:
             f = ct_fields(data, a, s)
             if f is not None:
                 ct[f"{a}_{s:g}"] = regional(f)
+                ct[f"{a}_{s:g}"]["c_check"] = c_check(f, ct[f"{a}_{s:g}"]["geometry"])
     sim = analyse_runs(runs, cache, args.edge, log)
     rec = {"command": "python scripts/ct_like_for_like.py " + " ".join(argv if argv is not None else sys.argv[1:]),
            "date": f"{datetime.now(timezone.utc):%Y-%m-%d}", "machine": f"{cpu_model()}, {os.cpu_count()} cores", "versions": {"rodwarp": rodwarp.__version__, "warp": wp.__version__,
