@@ -53,6 +53,8 @@ SETS = {"press": "cylinder Rc = l, filled to 1 l; walls mu 0.2",
 VOXEL_M = 78.22e-6
 #: tracing noise tried on the simulated centrelines, in CT voxels (the straightness control)
 NOISE_VOXELS = (0.5, 1.0, 2.0)
+#: bows (rod diameters at mid-length) tried on the simulated rods (the straightness control)
+BOWS_D = (0.5, 1.0, 2.0)
 #: edge lengths (d) of the sensitivity check
 EDGES = (2.0, 4.0, 8.0)
 REGIONS = ("core", "rim")
@@ -68,7 +70,9 @@ def region_stats(fields: dict, mask: np.ndarray) -> dict:
     pe = pair_entanglement(e, n)
     pe = pe[np.isfinite(pe)]
     pos = e > 0
-    out = {"balls": int(mask.sum()), "n": float(n.mean()), "phi": float(np.nanmean(fields["phi"][mask])),
+    phi = fields["phi"][mask]
+    phi = phi[np.isfinite(phi)]  # NaN where the text fields were not computed (the controls)
+    out = {"balls": int(mask.sum()), "n": float(n.mean()), "phi": float(phi.mean()) if phi.size else float("nan"),
            "S": float(fields["S"][mask].mean()), "S_median": float(np.median(fields["S"][mask])),
            "c": float(fields["c"][mask].mean()), "e": float(e.mean()),
            "cv_e": float(e.std() / e.mean()) if e.mean() > 0 else float("nan"),
@@ -192,7 +196,27 @@ def resampled(rods, edge_d: float, noise_m: float = 0.0, seed: int = 0):
     return out
 
 
-def sim_fields(rods, container_m: float, edge_d: float, noise_m: float = 0.0, text: bool = True) -> dict:
+def bowed(rods, bow_d: float, seed: int = 0):
+    """``rods`` bent into a half-sine bow of ``bow_d`` diameters at mid-length, each in a random
+    direction across its axis (a rod not quite straight; ends fixed)."""
+    rng = np.random.default_rng(seed)
+    pts = rods.points.copy()
+    o = rods.offsets
+    for i in range(rods.n_rods):
+        p = pts[o[i]:o[i + 1]]
+        axis = p[-1] - p[0]
+        length = np.linalg.norm(axis)
+        axis /= length
+        v = rng.normal(size=3)
+        v -= v.dot(axis) * axis
+        v /= np.linalg.norm(v)
+        s = (p - p[0]) @ axis / length
+        p += np.outer(bow_d * 2 * rods.radii[i] * np.sin(np.pi * np.clip(s, 0, 1)), v)
+    return rods.with_points(pts)
+
+
+def sim_fields(rods, container_m: float, edge_d: float, noise_m: float = 0.0, text: bool = True,
+               bow_d: float = 0.0) -> dict:
     """The pressed packing's fields on the authors' grid over the cylinder's box, from the plate
     to the piston (m): n, e, e2, S, c by the authors' rules; phi (and e, n) by the text's."""
     from rodwarp.analysis import compute_fields
@@ -207,6 +231,8 @@ def sim_fields(rods, container_m: float, edge_d: float, noise_m: float = 0.0, te
     dom = np.array([[-container_m, -container_m, 0.0], [container_m, container_m, top]])
     x, y, z = authors_grid(dom, R, h)
     rs = resampled(rods, edge_d, noise_m)
+    if bow_d > 0:
+        rs = bowed(rs, bow_d)
     s0, s1, rod = rs.segments()
     a = authors_field_arrays(s0, s1, rod, np.asarray(rods.contacts.point, np.float64), x, y, z, R)
     out = {"n": a["n"], "e": a["e"], "e2": a["e2"], "S": a["S"], "c": a["c"], "x": x, "y": y, "z": z, "R": R,
@@ -290,7 +316,7 @@ def controls(runs: Path, cache: Path, edge: float, log) -> dict:
     packings (strain 0)."""
     import rodwarp
 
-    out = {"edges": [], "noise": []}
+    out = {"edges": [], "noise": [], "bow": []}
     for alpha in ALPHAS:
         folder = runs / f"press_alpha{alpha}_seed0"
         src = folder / "rods_press0.npz"
@@ -310,6 +336,12 @@ def controls(runs: Path, cache: Path, edge: float, log) -> dict:
                                                                        noise_m=nv * VOXEL_M, text=False)))
             out["noise"].append({"alpha": alpha, "noise_voxels": nv, "noise_d": nv * VOXEL_M * alpha /
                                  info["length_m"], **{r: res[r] for r in REGIONS}})
+        for b in BOWS_D:
+            key = f"{folder.name}_press0_edge{edge:g}_bow{b:g}"
+            log(key)
+            res = regional(cached(cache, key, lambda b=b: sim_fields(rods, info["container_m"], edge, text=False,
+                                                                     bow_d=b)))
+            out["bow"].append({"alpha": alpha, "bow_d": b, **{r: res[r] for r in REGIONS}})
     return out
 
 
@@ -487,6 +519,14 @@ def write_md(path: Path, rec: dict) -> None:
             L.append(f"| {r['alpha']} | {r['noise_voxels']:g} | {r['noise_d']:.2f} | {r['core']['cv_e']:.2f} | "
                      f"{r['core']['e_pair_median']:.3f} | {r['rim']['cv_e']:.2f} | {r['rim']['e_pair_median']:.3f} | "
                      f"{r['core']['e2_over_e']:.2f} |")
+    if ctl.get("bow"):
+        L += ["", f"## Bent rods (press, seed 0, strain 0, edges {rec['edge_d']:g} d)", "",
+              "Each rod bent into a half-sine bow of the given depth at mid-length, in a random direction across "
+              "its axis: rods not quite straight.", "",
+              "| alpha | bow (d) | core cv_e | core cv_n | core e/pair | rim cv_e |", "|---|---|---|---|---|---|"]
+        for r in ctl["bow"]:
+            L.append(f"| {r['alpha']} | {r['bow_d']:g} | {r['core']['cv_e']:.2f} | {r['core']['cv_n']:.2f} | "
+                     f"{r['core']['e_pair_median']:.3f} | {r['rim']['cv_e']:.2f} |")
     if ctl.get("old_measure"):
         L += ["", "## The earlier measure's fall under compression (press, text convention)", "",
               "The lab run's own fields (`fields_press<E>.npz`: the box inscribed in the cylinder, from the plate to "
@@ -523,10 +563,11 @@ def write_figure(path: Path, rec: dict) -> None:
 
     rows, ct = rec["sim"], rec["ct"]
     kinds = [k for k in SETS if any(r["set"] == k for r in rows)]
-    fig, axes = plt.subplots(2, 4, figsize=(16, 7), sharex=True)
+    fig, axes = plt.subplots(3, 4, figsize=(16, 10), sharex=True)
     styles = {"press": "o-", "press-frictionless": "s--", "press-ct": "^-.", "press-wide": "v:"}
     for j, a in enumerate(ALPHAS):
-        for i, (key, label) in enumerate((("cv_e", "cv_e"), ("e_pair_median", "e per rod pair (median)"))):
+        for i, (key, label) in enumerate((("cv_e", "cv_e"), ("cv_n", "cv_n (rods per ball)"),
+                                          ("e_pair_median", "e per rod pair (median)"))):
             ax = axes[i, j]
             for region, col in (("core", "C0"), ("rim", "C3")):
                 xs = [s for s in STRAINS if f"{a}_{s:g}" in ct]
@@ -541,7 +582,7 @@ def write_figure(path: Path, rec: dict) -> None:
             ax.set_title(f"alpha {a}")
             if j == 0:
                 ax.set_ylabel(label)
-            if i == 1:
+            if i == 2:
                 ax.set_xlabel("strain")
     axes[0, 0].legend(fontsize=6)
     fig.suptitle("Pressed packings against the authors' CT: authors' convention, each packing's core and rim")
