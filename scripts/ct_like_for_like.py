@@ -644,13 +644,13 @@ def write_fig23(out: Path, rec: dict) -> None:
         if not aa:
             continue
         get = (lambda d: [d["ct"]]) if src == "ct" else (lambda d, src=src: d[src])
-        n_t = [np.mean([f["n_tangles"] for f in get(data[a])]) for a in aa]
+        n_t = [np.mean([1e4 * f["n_tangles"] / f["balls"] for f in get(data[a])]) for a in aa]
         ext = [np.mean([max((f["largest_xi_over_L"] or {"x": 0}).values()) for f in get(data[a])]) for a in aa]
         perc = [np.mean([f["percolates"] for f in get(data[a])]) for a in aa]
         lab = {"ct": "CT", "sim": "press set (seed mean)", "big": "CT-size pile (press-ct, press-wide)"}[src]
         for ax, v in zip(axes, (n_t, ext, perc)):
             ax.plot(aa, v, marker, ls="-", label=lab)
-    for ax, t in zip(axes, ("tangles (e > e_lb, 26-connected)", "largest tangle: max xi / L",
+    for ax, t in zip(axes, ("tangles (e > e_lb, 26-connected) per 10^4 occupied balls", "largest tangle: max xi / L",
                             "largest tangle percolates (share)")):
         ax.set_xlabel("alpha")
         ax.set_title(t, fontsize=9)
@@ -684,8 +684,9 @@ def write_fig23(out: Path, rec: dict) -> None:
          "filled to 100 mm; `press-wide`: alpha 38, Rc = 2 l, filled to 2 l). p(S) and c's distribution from the "
          "press set, the z-profiles from the CT-size pile where there is one. c is shown over its packing's "
          "mean: the authors' normalisation of c does not carry over (ct_like_for_like.md).", "",
-         "| alpha | packing | median S | mean e | cv_e | e_lb | tangles | largest tangle max xi/L | percolates |",
-         "|---|---|---|---|---|---|---|---|---|"]
+         "| alpha | packing | median S | mean e | cv_e | e_lb | tangles | per 10^4 balls | balls | largest tangle "
+         "max xi/L | percolates |",
+         "|---|---|---|---|---|---|---|---|---|---|---|"]
     for a in al:
         for src in ("ct", "sim", "big"):
             fs = [data[a]["ct"]] if src == "ct" else data[a][src]
@@ -693,11 +694,13 @@ def write_fig23(out: Path, rec: dict) -> None:
                 continue
             m = lambda k: float(np.mean([f[k] for f in fs]))  # noqa: E731
             ext = np.mean([max((f["largest_xi_over_L"] or {"x": 0}).values()) for f in fs])
-            name = {"ct": "CT, strain 0", "sim": f"press ({len(fs)} seeds)",
-                    "big": f"{data[a]['big_set'][0] if data[a]['big_set'] else ''} ({len(fs)} seed)"}[src]
+            seeds = f"{len(fs)} seed{'s' if len(fs) > 1 else ''}"
+            name = {"ct": "CT, strain 0", "sim": f"press ({seeds})",
+                    "big": f"{data[a]['big_set'][0] if data[a]['big_set'] else ''} ({seeds})"}[src]
             L.append(f"| {a} | {name} | "
                      f"{m('median_S'):.2f} | {m('mean_e_all'):.1f} | {m('cv_e_all'):.2f} | {m('e_lb'):.0f} | "
-                     f"{m('n_tangles'):.1f} | {ext:.2f} | {m('percolates'):.2f} |")
+                     f"{m('n_tangles'):.1f} | {1e4 * m('n_tangles') / m('balls'):.1f} | {m('balls'):.0f} | {ext:.2f} | "
+                     f"{m('percolates'):.2f} |")
     L += ["", "Figures: [fig2_pS_pc.png](fig2_pS_pc.png), [fig3_tangles.png](fig3_tangles.png), "
           "[fig3_zprofiles.png](fig3_zprofiles.png)."]
     (out / "fig23.md").write_text("\n".join(L) + "\n")
@@ -742,7 +745,10 @@ def main(argv=None) -> int:
                 ct[f"{a}_{s:g}"] = regional(f)
                 ct[f"{a}_{s:g}"]["c_check"] = c_check(f, ct[f"{a}_{s:g}"]["geometry"])
     sim = analyse_runs(runs, cache, args.edge, log)
-    rec = {"command": "python scripts/ct_like_for_like.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+    given = list(argv if argv is not None else sys.argv[1:])
+    # the data folder by its name: where it lies on this machine is not the record's
+    shown = [Path(a).name if i and given[i - 1] == "--paper-fields" else a for i, a in enumerate(given)]
+    rec = {"command": "python scripts/ct_like_for_like.py " + " ".join(shown),
            "date": f"{datetime.now(timezone.utc):%Y-%m-%d}", "machine": f"{cpu_model()}, {os.cpu_count()} cores", "versions": {"rodwarp": rodwarp.__version__, "warp": wp.__version__,
                                                                 "numpy": np.__version__},
            "edge_d": args.edge, "ct": ct, "sim": sim,
