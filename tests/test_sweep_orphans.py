@@ -23,6 +23,11 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="pa
 #: two tiny points (about 2 s each on a CPU core) on two workers
 SWEEP = ["sweep", "--alpha", "20,30", "--freq", "1", "--entangle-duration", "0.02", "--duration", "0.02",
          "--save-every", "0.01", "--workers", "2", "--device", "cpu", "--quiet", "--no-figures", "--set", "n_rods=12"]
+#: the same points, long enough (about half a minute each) that an interruption surely lands while
+#: they run: with SWEEP's points both could finish, and the sweep exit 0, between seeing a point's
+#: folder and the signal (seen once in CI)
+SWEEP_LONG = [*SWEEP[:SWEEP.index("--duration")], "--duration", "60", "--save-every", "0.5",
+              *SWEEP[SWEEP.index("--save-every") + 2:]]
 #: the longest a sweep's processes may outlive it (s); they are gone in about a second
 GONE_WITHIN = 30.0
 #: the longest a sweep may take to start a worker or a point (s): a few seconds, many more on a
@@ -30,11 +35,11 @@ GONE_WITHIN = 30.0
 STARTS_WITHIN = 120.0
 
 
-def _start(tmp_path: Path) -> subprocess.Popen:
+def _start(tmp_path: Path, args=SWEEP) -> subprocess.Popen:
     """``rodwarp sweep`` in a new session (its id is the sweep's pid), its output in tmp_path."""
     exe = Path(sys.executable).with_name("rodwarp")
     log = open(tmp_path / "sweep.log", "wb")  # a file, not a pipe: a worker must not block on a full pipe
-    return subprocess.Popen([str(exe), *SWEEP, "--out", str(tmp_path / "sw")], stdout=log, stderr=log,
+    return subprocess.Popen([str(exe), *args, "--out", str(tmp_path / "sw")], stdout=log, stderr=log,
                             stdin=subprocess.DEVNULL, start_new_session=True)
 
 
@@ -134,9 +139,10 @@ def test_kill_9_while_points_run_leaves_no_process(tmp_path):
 
 @pytest.mark.parametrize("how", ["ctrl-c", "sigterm"])
 def test_interrupted_sweep_leaves_no_process(tmp_path, how):
-    sweep = _start(tmp_path)
+    sweep = _start(tmp_path, SWEEP_LONG)
     _wait(lambda: _point_running(tmp_path), STARTS_WITHIN, "point running", sweep, tmp_path)
     seen = _workers(sweep)
+    assert seen and sweep.poll() is None
     if how == "ctrl-c":  # the terminal signals the whole foreground process group
         os.killpg(sweep.pid, signal.SIGINT)
     else:
