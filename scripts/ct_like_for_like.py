@@ -460,7 +460,7 @@ def write_md(path: Path, rec: dict) -> None:
             al = sorted({r["alpha"] for r in sel})
             L.append(f"| {kind} | {what} | {', '.join(map(str, al))} | "
                      f"{', '.join(str(next(r['n_rods'] for r in sel if r['alpha'] == a)) for a in al)} | "
-                     f"{len({r['seed'] for r in sel})} |")
+                     f"{', '.join(str(len({r['seed'] for r in sel if r['alpha'] == a})) for a in al)} |")
     L += ["", "Each packing's region geometry (m): radius, bottom and top of its body, at strain 0.", "",
           "| packing | radius | bottom | top | core balls | rim balls |", "|---|---|---|---|---|---|"]
     for a in ALPHAS:
