@@ -112,7 +112,7 @@ def test_valid_set_still_analyzed_and_simulated(capsys, tmp_path, sets):
 
 def test_a_dilute_set_is_not_called_far(polylines):
     """Rods spread evenly over a wide box are not refused: only a stray rod is."""
-    from rodwarp.rodset._sanity import check_rod_geometry
+    from rodwarp.rodset.sanity import check_rod_geometry
 
     rng = np.random.default_rng(1)
     spread = [p + rng.uniform(0, 300, 3) for p in polylines * 5]

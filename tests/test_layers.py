@@ -1,6 +1,6 @@
 """The package's layers import downwards only (README, "Layout").
 
-    bottom  rodwarp.errors, rodwarp._util, rodwarp._warp, rodwarp.validation, rodwarp.kernels
+    bottom  rodwarp.errors, rodwarp._util, rodwarp.arguments, rodwarp._warp, rodwarp.validation, rodwarp.kernels
     io      rodwarp.rodset (rod sets, formats, files, trajectories, run folders)
     peers   rodwarp.sim, rodwarp.analysis, rodwarp.ct, rodwarp.testing
     top     rodwarp.experiments
@@ -20,7 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 LAYERS = {
-    "rodwarp.errors": 0, "rodwarp._util": 0, "rodwarp._warp": 0, "rodwarp.validation": 0, "rodwarp.kernels": 0,
+    "rodwarp.errors": 0, "rodwarp._util": 0, "rodwarp.arguments": 0, "rodwarp._warp": 0, "rodwarp.validation": 0, "rodwarp.kernels": 0,
     "rodwarp.rodset": 1,
     "rodwarp.sim": 2, "rodwarp.analysis": 2, "rodwarp.ct": 2, "rodwarp.testing": 2,
     "rodwarp.experiments": 3,
@@ -82,9 +82,43 @@ def upward_imports() -> list[str]:
     return bad
 
 
+def _is_package(dotted: str) -> bool:
+    rel = dotted.split(".")[1:]
+    if dotted.startswith("rodwarp.kernels"):
+        return len(rel) == 1
+    return (ROOT / "rodwarp" / Path(*rel) / "__init__.py").exists() if rel else True
+
+
+def private_imports() -> list[str]:
+    """Every import of a private module (a name part starting with ``_``) from outside the package
+    that holds it, as 'file:line: a -> b': ``rodwarp.sim._bounds`` is for ``rodwarp.sim`` alone,
+    ``rodwarp._util`` for all of ``rodwarp``; other packages go through public faces."""
+    bad = []
+    for module, path in _modules():
+        package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        for line, target in _imports(path, package):
+            if not target.startswith("rodwarp"):
+                continue
+            parts = target.split(".")
+            for i, part in enumerate(parts):
+                if part.startswith("_") and not part.startswith("__"):
+                    owner = ".".join(parts[:i])
+                    if i == len(parts) - 1 and not _is_package(owner):
+                        owner = owner.rpartition(".")[0]  # a private name of a module: its package's own
+                    if not (module == owner or module.startswith(owner + ".")):
+                        bad.append(f"{path.relative_to(ROOT)}:{line}: {module} -> {target}")
+                    break
+    return bad
+
+
 def test_no_module_imports_from_a_layer_above_it_or_a_peer():
     assert upward_imports() == []
 
 
+def test_no_module_imports_another_packages_private_module():
+    assert private_imports() == []
+
+
 if __name__ == "__main__":  # pragma: no cover - `python tests/test_layers.py` lists the offenders
     print("\n".join(upward_imports()) or "no upward imports")
+    print("\n".join(private_imports()) or "no private cross-package imports")

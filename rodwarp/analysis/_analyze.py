@@ -129,12 +129,12 @@ def _load_rods(path: Path, opts: AnalyzeOptions) -> RodSet:
         rods = load_rods(path, units=opts.units)
     if rods.n_rods == 0:
         raise RodwarpError(f"'{path}' holds no rods: nothing to analyse")
-    from rodwarp.rodset._sanity import check_rod_geometry
+    from rodwarp.rodset.sanity import check_rod_geometry
 
     # zero-length rods have no axis, duplicates would each count as a contact, and one stray
     # rod would stretch the grid over its distance: refused, naming the rod
     check_rod_geometry(rods, str(path))
-    from rodwarp.rodset._scale import check_diameter_agrees
+    from rodwarp.rodset.scale import check_diameter_agrees
 
     # --diameter stands in for a missing radius column; one that contradicts the file's radii
     # would silently set R = sqrt(d l) from the wrong thickness

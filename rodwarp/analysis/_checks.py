@@ -30,7 +30,7 @@ def check_grid_memory(n_voxels: float, rods=None, extent: float | None = None) -
     With ``rods`` (and the domain's largest edge ``extent``, in the rods' units) whose sizes
     are implausible for their declared units, the message points at ``--units`` first.
     """
-    from rodwarp.rodset._scale import unit_hint
+    from rodwarp.rodset.scale import unit_hint
 
     hint = unit_hint(rods, extent) if rods is not None else None
     fix = f"check the units first: {hint}; else raise --spacing or --radius" if hint else "raise --spacing or --radius"

@@ -28,7 +28,7 @@ from rodwarp.analysis import _registry
 from rodwarp.analysis._registry import BallMeasures
 from rodwarp.errors import RodwarpError, RodwarpTypeError
 from rodwarp.rodset import MAX_COORDINATE, Contacts, RodSet, detect_contacts
-from rodwarp.rodset._args import instance, real
+from rodwarp.arguments import instance, real
 
 # Clipped parts held at once (each ~60 bytes): bounds memory on big grids.
 MAX_CLIPPED_PER_BATCH = 2_000_000
@@ -142,7 +142,7 @@ def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float 
         raise RodwarpError("rods have zero diameter or length; give --diameter and --length")
     R = pos(radius, "radius") or math.sqrt(d * l)
     h = pos(spacing, "spacing") or 0.5 * R
-    from rodwarp.rodset._scale import unit_hint
+    from rodwarp.rodset.scale import unit_hint
 
     _check_ball_and_grid(R, h, d, l, spacing is not None, rods.units,
                          unit_hint(rods, float(np.max(dom[1] - dom[0]))))
@@ -150,7 +150,7 @@ def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float 
         "contact_tolerance", contact_tolerance, ge=0, le=MAX_COORDINATE, unit=rods.units, hint="a surface gap")
     size = dom[1] - dom[0]
     if not keep_outside and np.any(size < 2 * R):
-        from rodwarp.rodset._scale import unit_hint
+        from rodwarp.rodset.scale import unit_hint
 
         hint = unit_hint(rods, float(np.max(size)))
         raise RodwarpError(
@@ -159,7 +159,7 @@ def resolve_params(rods: RodSet, *, radius: float | None = None, spacing: float 
             + "lower --radius or pass --keep-outside")
     n_vox = np.prod(np.floor(size / h) + 1)
     if n_vox > 2**31 - 1:
-        from rodwarp.rodset._scale import unit_hint
+        from rodwarp.rodset.scale import unit_hint
 
         # wrong units (a CSV in mm read as m) against a --spacing meant in the right ones is the
         # usual cause: say so before suggesting a coarser grid

@@ -27,8 +27,8 @@ from rodwarp._util import json_safe
 from rodwarp.analysis._registry import field_names
 from rodwarp.errors import RodwarpError
 from rodwarp.rodset import MAX_COORDINATE
-from rodwarp.rodset._args import real
-from rodwarp.rodset._units import _check_units
+from rodwarp.arguments import real
+from rodwarp.rodset import check_units
 from rodwarp.rodset.files import atomic_path, consolidate_zarr
 
 __all__ = ["Fields"]
@@ -88,7 +88,7 @@ class Fields:
             object.__setattr__(self, name, a)
         self.radius = real("radius", radius, gt=0, le=MAX_COORDINATE, unit=str(units))
         self.spacing = real("spacing", spacing, gt=0, le=MAX_COORDINATE, unit=str(units))
-        self.units = _check_units(units)
+        self.units = check_units(units)
         self.attrs = {} if attrs is None else attrs
 
     def __getattr__(self, name: str):

@@ -26,7 +26,7 @@ from rodwarp._util import json_safe
 from rodwarp.analysis._fieldset import Fields
 from rodwarp.analysis._registry import fields_with
 from rodwarp.errors import RodwarpError, RodwarpTypeError
-from rodwarp.rodset._args import instance, real, whole
+from rodwarp.arguments import instance, real, whole
 
 __all__ = ["outlier_bound", "find_tangles", "histogram", "z_profiles", "field_statistics", "power_law_fit",
            "power_law_density", "log_histogram",

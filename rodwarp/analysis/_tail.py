@@ -29,7 +29,7 @@ import numpy as np
 from scipy import optimize, special
 
 from rodwarp.errors import RodwarpError
-from rodwarp.rodset._args import real, whole
+from rodwarp.arguments import real, whole
 
 __all__ = ["TailFit", "tail_fit"]
 

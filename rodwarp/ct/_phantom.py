@@ -276,7 +276,7 @@ def make_phantom(rods: str, shape, out, **options) -> RodSet:
         if p.is_dir() and (p / "final.npz").exists():
             p = p / "final.npz"
         rs = load(p)
-        from rodwarp.rodset._sanity import check_rod_geometry
+        from rodwarp.rodset.sanity import check_rod_geometry
 
         check_rod_geometry(rs, str(p))  # duplicated or degenerate rods would be false ground truth
         if units is not None and units != rs.units:

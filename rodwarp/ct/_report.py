@@ -60,7 +60,7 @@ def _csv_text(header: list[str], rows) -> str:
 def write_rods_csv(path, rods: RodSet) -> Path:
     """``rod,x,y,z,radius``, one row per vertex, in the rod set's units: the rod-set CSV format,
     written by its one writer (:func:`rodwarp.rodset.save_csv`)."""
-    from rodwarp.rodset._formats import save_csv
+    from rodwarp.rodset import save_csv
 
     return save_csv(rods, path)
 

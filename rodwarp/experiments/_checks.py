@@ -330,7 +330,7 @@ def check_input_rods(p, explicit=()):
     column (none is guessed); npz/zarr files record their own unit. Refuses an empty set,
     voxel units, a ``--units`` that contradicts an npz/zarr's recorded unit, a ``--diameter``
     that contradicts the file's radii, a mean rod length outside
-    :data:`rodwarp.rodset._scale.PLAUSIBLE_LENGTH_M` (1e-5 to 100 m: most likely the wrong
+    :data:`rodwarp.rodset.scale.PLAUSIBLE_LENGTH_M` (1e-5 to 100 m: most likely the wrong
     unit, the message names the measured length and the likely ``--units``), rods
     overlapping deeper than :data:`MAX_INPUT_OVERLAP` diameters (naming the deepest pair), an
     --alpha or --length among ``explicit`` that contradicts the input, and a set too large for
@@ -352,7 +352,7 @@ def check_input_rods(p, explicit=()):
     path = Path(p.initial)
     if not path.exists():
         fail(f"initial rod set not found: {path}; check the --initial path")
-    from rodwarp.rodset._scale import PLAUSIBLE_LENGTH_M, check_diameter_agrees, unit_hint
+    from rodwarp.rodset.scale import PLAUSIBLE_LENGTH_M, check_diameter_agrees, unit_hint
 
     if p.units is not None and p.units not in ("m", "mm", "um"):
         if p.units == "voxel":
@@ -382,7 +382,7 @@ def check_input_rods(p, explicit=()):
     memory_fits(f"--initial {path} ({rods.n_rods} rods, {rods.n_vertices} vertices)",
                 BASE_BYTES + BYTES_PER_VERTEX * rods.n_vertices, "simulate a smaller rod set")
     d = float(np.mean(rods.diameters))
-    from rodwarp.rodset._sanity import check_rod_geometry
+    from rodwarp.rodset.sanity import check_rod_geometry
 
     # zero-length rods, duplicates (refused here with their own message, not as an overlap of
     # 1 d) and a stray rod, which would stretch the container over its distance

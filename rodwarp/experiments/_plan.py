@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from rodwarp.sim._bounds import STEPS_PER_PERIOD
+from rodwarp.sim import STEPS_PER_PERIOD
 
 #: the stages of the paper's protocol, by the names metrics.csv's ``stage`` column carries
 ENTANGLE = "entangle"

@@ -21,7 +21,7 @@ from rodwarp._util import json_safe
 from rodwarp._util import one_line_error as _fail
 from rodwarp.errors import RodwarpError
 from rodwarp.rodset._rodset import FORMAT_NAME, FORMAT_VERSION, MAX_COORDINATE, SUPPORTED_SUFFIXES, Contacts, RodSet
-from rodwarp.rodset._units import _check_units, _positive
+from rodwarp.rodset._units import check_units, _positive
 from rodwarp.rodset.files import atomic_path
 
 __all__ = ["save", "save_csv", "load"]
@@ -131,7 +131,7 @@ def load(path: str | os.PathLike, *, radius: float | None = None, diameter: floa
     if radius is not None and diameter is not None:
         raise _fail("pass either radius or diameter, not both")
     if units is not None:
-        _check_units(units)
+        check_units(units)
     suffix = path.suffix.lower()
     is_zarr_dir = path.is_dir() and (suffix == ".zarr" or (path / "zarr.json").exists()
                                      or (path / ".zgroup").exists())

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rodwarp.rodset._args import instance, real
+from rodwarp.arguments import instance, real
 from rodwarp.rodset._rodset import MAX_COORDINATE, Contacts, RodSet
 
 __all__ = ["segment_closest_params", "segment_distance", "detect_contacts"]

@@ -26,7 +26,7 @@ import numpy as np
 from rodwarp._util import json_safe
 from rodwarp.errors import RodwarpTypeError
 from rodwarp._util import one_line_error as _fail
-from rodwarp.rodset._units import UNITS, _check_units, _scale, _unit_scale
+from rodwarp.rodset._units import UNITS, check_units, _scale, _unit_scale
 
 __all__ = ["UNITS", "FORMAT_NAME", "FORMAT_VERSION", "SUPPORTED_SUFFIXES", "MAX_COORDINATE", "Contacts", "RodSet"]
 
@@ -39,7 +39,7 @@ SUPPORTED_SUFFIXES = (".npz", ".zarr", ".csv")
 #: any packing or scan, while squares and cubes of such values (distances, box volumes) stay far
 #: from float64 overflow (1e308): a larger value is a stray or corrupt number, not a length.
 #: Sets far smaller than this but spread over many rod lengths are refused with their own
-#: message (:func:`rodwarp.rodset._sanity.far_rod`, the engine's and the grid's limits).
+#: message (:func:`rodwarp.rodset.sanity.far_rod`, the engine's and the grid's limits).
 MAX_COORDINATE = 1e12
 
 
@@ -237,7 +237,7 @@ class RodSet:
             Empty set, bad offsets, inconsistent shapes, NaN/inf, non-positive radii, unknown
             units, an inverted box, contacts referring to missing rods, or non-JSON attrs.
         """
-        _check_units(self.units)
+        check_units(self.units)
         p, o, r = self.points, self.offsets, self.radii
         if p.ndim != 2 or p.shape[1] != 3:
             raise _fail(f"points must have shape (V, 3), got {p.shape}")

@@ -27,7 +27,7 @@ def _positive(v, name: str, what: str = "a positive number") -> float:
     return f
 
 
-def _check_units(units) -> str:
+def check_units(units) -> str:
     if not isinstance(units, str) or units not in UNITS:
         raise _fail(f"unknown units {units!r}; use one of {', '.join(repr(u) for u in UNITS)}")
     return units
@@ -39,8 +39,8 @@ def _unit_scale(src: str, dst: str, voxel_size: float | None) -> tuple[float, bo
     Metric conversions use exact powers of ten, multiplying for factors >= 1 and dividing
     otherwise, so each value is correctly rounded (``m -> mm`` is exactly ``x * 1000``).
     """
-    _check_units(src)
-    _check_units(dst)
+    check_units(src)
+    check_units(dst)
     if voxel_size is not None:
         if "voxel" not in (src, dst) or src == dst:
             raise _fail(f"voxel_size only applies to conversions to or from 'voxel' (got {src!r} -> {dst!r})")

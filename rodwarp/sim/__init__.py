@@ -21,6 +21,7 @@ the centroid height of a state); device code lives in :mod:`rodwarp.kernels`, gr
 The model, its units and its step bounds are described in docs/physics.md.
 """
 
+from rodwarp.sim._bounds import STEPS_PER_PERIOD
 from rodwarp.sim.builder import ModelBuilder
 from rodwarp.sim.contact_law import ContactLaw
 from rodwarp.sim.contacts import ContactPoints
@@ -32,4 +33,4 @@ from rodwarp.sim.state import State
 from rodwarp.sim.walls import Plane
 
 __all__ = ["ContactLaw", "ContactPoints", "Control", "Drive", "Material", "Model", "ModelBuilder", "Plane",
-           "ROD_MODELS", "RodSolver", "STEEL", "State", "StepInfo", "centroid_height", "rod_contacts", "run"]
+           "ROD_MODELS", "RodSolver", "STEEL", "STEPS_PER_PERIOD", "State", "StepInfo", "centroid_height", "rod_contacts", "run"]

@@ -4,7 +4,7 @@
 the walls, the control's drive and :class:`~rodwarp.sim.RodSolver` check their arguments here
 before any array is built: a wrong kind raises ``TypeError``, a value out of its range a
 one-line :class:`~rodwarp.errors.RodwarpError` naming the argument, the range and the unit
-(:mod:`rodwarp.rodset._args`).  The ranges are wide enough for any rod scene on Earth or in a
+(:mod:`rodwarp.arguments`).  The ranges are wide enough for any rod scene on Earth or in a
 centrifuge and narrow enough that a typo or a unit slip (1e300, a length in um read as m) is
 refused instead of overflowing mid-run.
 """
@@ -15,7 +15,7 @@ import numpy as np
 
 from rodwarp.errors import RodwarpTypeError
 from rodwarp.rodset import RodSet
-from rodwarp.rodset._args import instance, real, vector
+from rodwarp.arguments import instance, real, vector
 from rodwarp.validation import MAX_MU  # as ``rodwarp simulate --mu``
 
 __all__ = ["MAX_LENGTH_M", "MIN_RADIUS_M", "MAX_GRAVITY", "MAX_MU", "MAX_DAMPING", "YOUNG_RANGE", "DENSITY_RANGE",

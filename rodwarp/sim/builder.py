@@ -18,7 +18,7 @@ import numpy as np
 
 from rodwarp.errors import RodwarpError
 from rodwarp.rodset import RodSet
-from rodwarp.rodset._args import instance
+from rodwarp.arguments import instance
 from rodwarp.sim._limits import check_model_options, check_rods, friction
 from rodwarp.sim.model import STEEL, Material, Model, checked_box
 from rodwarp.sim.walls import Plane, _Wall

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from rodwarp.errors import RodwarpError, RodwarpTypeError
-from rodwarp.rodset._args import real
+from rodwarp.arguments import real
 from rodwarp.sim._limits import MAX_LENGTH_M, MAX_SPEED
 
 LAWS = ("exact", "imc")

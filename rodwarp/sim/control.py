@@ -14,8 +14,8 @@ import numpy as np
 import warp as wp
 
 from rodwarp.errors import RodwarpError, RodwarpTypeError
-from rodwarp.rodset._args import direction as _direction
-from rodwarp.rodset._args import real
+from rodwarp.arguments import direction as _direction
+from rodwarp.arguments import real
 from rodwarp.sim._limits import MAX_FREQUENCY, MAX_LENGTH_M, MAX_SPEED
 
 

@@ -16,7 +16,7 @@ import warp as wp
 
 from rodwarp.kernels import narrowphase
 from rodwarp.rodset import Contacts
-from rodwarp.rodset._args import optional_real, real
+from rodwarp.arguments import optional_real, real
 from rodwarp.sim._limits import MAX_LENGTH_M
 from rodwarp.sim.model import Model
 from rodwarp.sim.state import State

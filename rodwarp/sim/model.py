@@ -34,7 +34,7 @@ import warp as wp
 from rodwarp import _warp
 from rodwarp.errors import RodwarpError, RodwarpTypeError
 from rodwarp.rodset import RodSet
-from rodwarp.rodset._args import instance, real
+from rodwarp.arguments import instance, real
 from rodwarp.sim._limits import (DENSITY_RANGE, MAX_LENGTH_M, YOUNG_RANGE, check_model_options, check_rods, friction,
                                  pinned_indices)
 from rodwarp.sim.contact_law import ContactLaw

@@ -42,7 +42,7 @@ from rodwarp.sim._diagnostics import SolverChecks
 from rodwarp.sim._launches import SolveLaunches
 from rodwarp.sim.contact_law import IMC_SHARPNESS
 from rodwarp.sim.contacts import ContactPipeline, ContactPoints
-from rodwarp.rodset._args import instance, optional_real, real, whole
+from rodwarp.arguments import instance, optional_real, real, whole
 from rodwarp.sim._limits import MAX_LENGTH_M, MAX_SPEED
 from rodwarp.sim.model import Model
 from rodwarp.sim.state import State

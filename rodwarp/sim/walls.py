@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rodwarp.errors import RodwarpError, RodwarpTypeError
-from rodwarp.rodset._args import direction, real, vector
+from rodwarp.arguments import direction, real, vector
 from rodwarp.sim._limits import MAX_LENGTH_M, friction
 
 #: the device's kind codes (kernels/walls.py)
