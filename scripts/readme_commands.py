@@ -1,5 +1,7 @@
 """Run the README as a newcomer would: a fresh clone, the two quick-start commands, then every
-command and Python example the README shows, in order, as written. Writes
+command and Python example the README shows, in order, as written (then the commands its prose
+shows in backticks). ``tests/test_readme.py`` runs the same examples in the test suite, without
+the clone and the install; it shares :func:`commands` and :func:`inline_commands`. Writes
 ``benchmarks/results/readme_commands.md`` (each command, exit code, wall time, last line).
 
     python scripts/readme_commands.py [--clone DIR] [--skip-tests]
@@ -7,7 +9,7 @@ command and Python example the README shows, in order, as written. Writes
 The clone is made from this repository's committed ``main`` (``git clone``), so uncommitted
 work is not what is tested. The quick-start commands create ``.venv`` in the clone; the later
 commands run in the clone's root with ``.venv/bin`` first on ``PATH``. A line ending in ``&``
-(the cluster example's scheduler and worker) is started in the background, given a few
+(a background process, such as a Dask scheduler) is started in the background, given a few
 seconds, and stopped when everything else is done.
 """
 
@@ -44,6 +46,13 @@ def commands(readme: str) -> list[tuple[str, str]]:
     return out
 
 
+def inline_commands(readme: str) -> list[str]:
+    """The ``.venv/bin/rodwarp ...`` commands the README's prose shows in backticks (outside its
+    code blocks), in order: they must run as printed too."""
+    prose = re.sub(r"```\w*\n.*?```", "", readme, flags=re.S)
+    return re.findall(r"`(\.venv/bin/rodwarp [^`]*)`", prose)
+
+
 def _cpu_model() -> str:
     """The processor the table was made on (the benchmarks' own provenance helper)."""
     sys.path.insert(0, str(ROOT))
@@ -66,7 +75,8 @@ def main(argv=None) -> int:
     env["PATH"] = f"{clone / '.venv' / 'bin'}{os.pathsep}{env['PATH']}"
     env.pop("VIRTUAL_ENV", None)
     rows, background = [], []
-    for lang, cmd in commands((clone / "README.md").read_text()):
+    readme = (clone / "README.md").read_text()
+    for lang, cmd in commands(readme) + [("bash", c) for c in inline_commands(readme)]:
         if args.skip_tests and "pytest" in cmd:
             cmd = cmd.replace("&& .venv/bin/python -m pytest -q", "&& echo 'tests skipped (--skip-tests)'")
         shown = cmd if lang == "bash" else "python: " + cmd.strip().splitlines()[0] + " ..."

@@ -3,8 +3,8 @@
 The result line on stdout and progress and notes on stderr; flags shown as flags in
 ``--help``; ``--quiet``, ``--out`` and ``--overwrite`` alike on every writing command;
 ``--device auto`` wherever Warp runs; a note once a long phase has run
-:data:`rodwarp._util.NOTE_AFTER_S` (tested with the threshold at 0, not by waiting); the README's
-commands runnable as printed after its quick start.
+:data:`rodwarp._util.NOTE_AFTER_S` (tested with the threshold at 0, not by waiting). That the
+README's commands run as printed after its quick start is ``tests/test_readme.py``.
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from typer.testing import CliRunner
 from rodwarp import _util
 from rodwarp.cli import app, main
 
-ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()
 #: rich's help table unwrapped, so an option and its help stay on one line
 WIDE = {"COLUMNS": "200"}
@@ -276,20 +275,3 @@ def test_phase_diagram_notes_on_stderr_and_quiet_silences_them(tmp_path, monkeyp
     assert len(_lines(res.stdout)) == 1 and "note:" not in res.stdout
     res = runner.invoke(app, ["phase-diagram", str(sw), "--out", str(tmp_path / "pd"), "--quiet"])
     assert res.exit_code == 0 and res.stderr == "", res.output
-
-
-# ------------------------------------------------------------------------------------ README
-
-
-def test_readme_commands_run_as_printed_after_the_quick_start():
-    sys.path.insert(0, str(ROOT / "scripts"))
-    from readme_commands import commands
-
-    bash = [cmd for lang, cmd in commands((ROOT / "README.md").read_text()) if lang == "bash"]
-    assert bash[:2] == [
-        "python3 -m venv .venv && .venv/bin/pip install -e . && .venv/bin/rodwarp simulate --alpha 100 --freq 10",
-        "python3 -m venv .venv && .venv/bin/pip install -e '.[test]' && .venv/bin/python -m pytest -q"]
-    # no later line relies on an activated environment: rodwarp is the environment's own
-    for cmd in bash[2:]:
-        words = cmd.split()
-        assert words[0] != "rodwarp" and words[0] in (".venv/bin/rodwarp", ".venv/bin/dask"), cmd
