@@ -4,7 +4,7 @@ After the velocity solve (kernels/friction.py) and the position update, each rod
 rod-wall overlap deeper than the slop is pushed apart along its normal by a Baumgarte fraction
 of its excess, through the same mobility the contact's impulses use (a rigid capsule moves
 rigidly, an elastic rod at the edge's two vertices). Velocities are untouched, so the
-correction never adds kinetic energy (docs/engine.md, "Post-stabilisation").
+correction never adds kinetic energy (docs/performance.md, "The step follows the motion").
 
 Contacts that share a vertex must not be moved concurrently: on the CPU one launch sweeps
 them in order, on a GPU the rod-rod contacts go colour by colour and the wall contacts one

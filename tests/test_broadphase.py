@@ -58,7 +58,8 @@ def test_partial_refresh_gives_the_same_trajectory_as_a_full_rebuild_every_step(
 
 def test_the_refreshed_list_holds_every_pair_within_its_guaranteed_reach():
     """After every refresh the list holds all pairs whose capsule gap is below M - 3 tau
-    (the reach it promises; docs/engine.md, "Contacts"), checked against brute force."""
+    (the reach it promises; docs/performance.md, "The pair list: refreshed where rods moved"),
+    checked against brute force."""
     model, control = shaken_pile(seed=1, n_rods=30)
     seg = model.arrays.seg_vertex.numpy()
     vr = model.arrays.vertex_rod.numpy()

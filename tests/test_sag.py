@@ -37,7 +37,7 @@ def test_lab_alpha_200_sag_is_the_simply_supported_figure():
 
 @pytest.mark.parametrize("kw, quoted", [
     (dict(protocol="lab", alpha=333, length=0.05, gravity=9.81), 0.148),   # experiments.md: "0.15 d"
-    (dict(alpha=100, gravity=0.5), 0.0041),                               # engine.md: "0.004 d"
+    (dict(alpha=100, gravity=0.5), 0.0041),                               # performance.md: "0.004 d"
     (dict(alpha=50, gravity=10.0), 0.0102),                               # transition.md: "0.010 d"
     (dict(alpha=300, gravity=10.0), 2.21),                                # verdict.md: "2.2 d"
 ])
