@@ -322,7 +322,7 @@ def real_scan_qa(results_dir=None) -> dict:
     import shutil
 
     from rodwarp.ct import SegmentParams
-    from rodwarp.ct._report import run_segment
+    from rodwarp.ct import run_segment
 
     src = common.ROOT / REAL_SCAN
     dest = Path(results_dir) if results_dir is not None else common.ROOT / "benchmarks" / "results"

@@ -43,7 +43,7 @@ COMMANDS = {
 OWN = {
     ("sweep", "workers"): Range(ge=1, whole=True),  # and at most the cores and memory: run_sweep's check
     ("sweep", "seeds"): Range(ge=1, le=10_000, whole=True),
-    ("phantom", "shape"): Range(ge=2, le=100_000, whole=True),  # rodwarp.ct._checks.SHAPE_RANGE
+    ("phantom", "shape"): Range(ge=2, le=100_000, whole=True),  # rodwarp.ct.phantom._checks.SHAPE_RANGE
 }
 #: the options each simulate option needs to apply at all (else "only applies with ..." refuses it)
 CONTEXT = {

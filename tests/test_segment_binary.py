@@ -9,8 +9,8 @@ from typer.testing import CliRunner
 
 from rodwarp import ct
 from rodwarp.ct import SegmentParams, match_rods, score_contacts, segment_volume
-from rodwarp.ct._binary import MAX_LABEL_LEVELS, SurfaceDistance, read_binarised, surface_radius
-from rodwarp.ct._segment import _flags
+from rodwarp.ct.segment._binary import MAX_LABEL_LEVELS, SurfaceDistance, read_binarised, surface_radius
+from rodwarp.ct.segment._segment import _flags
 from rodwarp.cli import app
 from rodwarp.errors import RodwarpError
 from rodwarp.testing.binarised import ENCODINGS

@@ -1,5 +1,5 @@
-"""Where the trace is unsure (rodwarp.ct._doubt) and the curved-filament bridges
-(rodwarp.ct._bridging): known answers on phantoms, and the outputs that show them."""
+"""Where the trace is unsure (rodwarp.ct.segment._doubt) and the curved-filament bridges
+(rodwarp.ct.segment._bridging): known answers on phantoms, and the outputs that show them."""
 
 from __future__ import annotations
 
@@ -13,10 +13,10 @@ import pytest
 
 from rodwarp import ct
 from rodwarp.ct import SegmentParams, segment_volume
-from rodwarp.ct._bridging import drop_duplicates, hermite, pair_ends
-from rodwarp.ct._doubt import DOUBT_CONFIDENCE, assess
-from rodwarp.ct._levels import _measure_levels
-from rodwarp.ct._reader import _Reader
+from rodwarp.ct.segment._bridging import drop_duplicates, hermite, pair_ends
+from rodwarp.ct.segment._doubt import DOUBT_CONFIDENCE, assess
+from rodwarp.ct.segment._levels import _measure_levels
+from rodwarp.ct.segment._reader import _Reader
 from rodwarp.rodset import RodSet
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -118,7 +118,7 @@ def _disc_sampler(polys, r):
     """Normalised intensity 1 within r of the given polylines, 0 elsewhere (a binary scan)."""
     from scipy.spatial import cKDTree
 
-    from rodwarp.ct._score import resample_polyline
+    from rodwarp.ct.segment._score import resample_polyline
 
     tree = cKDTree(np.concatenate([resample_polyline(p, 0.25) for p in polys]))
 
@@ -186,7 +186,7 @@ def test_ends_are_fitted_with_the_bend():
     # the end tangent of a circle of radius 15 (6 radii: the tightest bend of the wire tangles)
     # from a quadratic fit is the circle's tangent; a chord over the same stretch lags by half
     # the turn (here 14 degrees)
-    from rodwarp.ct._bridging import _ends
+    from rodwarp.ct.segment._bridging import _ends
 
     th = np.arange(0.0, 2.0, 1.0 / 15.0)
     p = np.stack([15 * np.cos(th), 15 * np.sin(th), np.zeros_like(th)], 1)
@@ -213,7 +213,7 @@ def test_duplicates_along_a_longer_filament_are_dropped():
 # ----------------------------------------------------------------------------------------------
 
 def test_real_scan_outputs_confidence_and_unexplained(tmp_path):
-    from rodwarp.ct._report import run_segment
+    from rodwarp.ct import run_segment
 
     src = ROOT / "examples" / "data" / "pcl_scaffold_128.tif"
     out = tmp_path / "seg"

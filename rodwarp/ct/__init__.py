@@ -6,66 +6,56 @@
 >>> result.rods, result.contacts                                         # doctest: +SKIP
 
 Volumes are indexed ``(z, y, x)`` = (slice, row, column); points are ``(x, y, z)`` with the
-centre of voxel ``(0, 0, 0)`` at the origin.  One private module per job, their public names
-re-exported here (scikit-image's layout); segmentation is split by stage, in the order
-:func:`segment_volume` runs them:
+centre of voxel ``(0, 0, 0)`` at the origin.  Three subpackages, each with its own public face;
+their public names are re-exported here, flat:
 
-===================  ============================================================================
-``_volume_io``       reading multi-page TIFF, folders of slices, zarr (:func:`read_volume`)
-``_volume_meta``     a volume's files, :func:`write_tiff`, voxel sizes from the metadata
-``_phantom``         a phantom's truth, files and command (:func:`make_phantom`)
-``_phantom_render``  :func:`render_phantom`: partial volume, blur, noise, artefacts
-``_scenes``          phantom scenes in voxel units (random packings, bundles, arcs, wires)
-``_cases``           realistic-scan cases with their truth (:func:`make_case`)
-``_params``          :class:`SegmentParams`, :class:`SegmentOptions`, :class:`SegmentResult`
-``_prepare``         0 - field-of-view mask, background trend, dark rods, anisotropic voxels
-``_binary``          0, 1, 4 - binarised stacks: two levels recognised, the rods' mask, its radii
-``_levels``          1 - levels and binarisation (background, plateau, threshold, coarse radius)
-``_seeds``           2 - seeds: straight pieces of the skeleton, junctions removed
-``_tracing``         2 - cylinder fits and marching (``_bundles``: bundles of touching rods)
-``_pasting``         3 - pieces of one rod pasted, duplicates made one
-``_refine``          4 - axes, radii and ends against the greyscale (``_profile``: blurred rods)
-``_contacts``        5 - contact candidates confirmed by the image
-``_curved``          curved filaments traced as polylines (``shape="curved"``)
-``_segment``         :func:`segment_volume`, the driver
-``_score``           :func:`match_rods`, :func:`match_polylines`, :func:`score_contacts`
-``_report``          :func:`run_segment`: the files of ``rodwarp segment``
-``_checks``          :func:`check_phantom`, :func:`check_segment`: the commands' options, before any work
-===================  ============================================================================
+==================  =============================================================================
+``io``              volume files: :func:`read_volume` (TIFF, folders of slices, zarr), lazy
+                    access, :func:`write_tiff`, voxel sizes from the metadata
+``phantom``         phantoms with their truth: :func:`render_phantom`, scenes, realistic-scan
+                    cases (:func:`make_case`), :func:`make_phantom` (``rodwarp phantom``)
+``segment``         :func:`segment_volume`, a list of stages (:data:`DEFAULT_STAGES`,
+                    :class:`Stage`, :func:`insert_stage`); scoring against a truth;
+                    :func:`run_segment` (``rodwarp segment``)
+``_voxels``         shared by all three: geometry in voxel space, voxel-size parsing
+``_outputs``        the files ``rodwarp segment`` writes (registered with the run folders)
+==================  =============================================================================
 
-Shared helpers: ``_reader`` (lazy volume access) and ``_voxels`` (geometry in voxel space).
-Nothing here imports warp; names load on first use.
+Modules inside a subpackage are private to it; the subpackages use each other through these
+faces only.  Nothing under ``rodwarp.ct`` imports Warp (``tests/test_ct_imports.py``); names
+load on first use.
 """
 
 from rodwarp._util import lazy_exports
 
 _WHERE = {
     # volume files
-    "read_volume": "_volume_io", "open_volume_lazy": "_volume_io", "write_tiff": "_volume_meta",
-    "list_slices": "_volume_meta", "check_volume": "_volume_io", "read_voxel_size": "_volume_meta",
-    "read_voxel_unit": "_volume_meta",
+    "read_volume": "io", "open_volume_lazy": "io", "write_tiff": "io", "list_slices": "io", "check_volume": "io",
+    "read_voxel_size": "io", "read_voxel_unit": "io", "read_voxel_ratio": "io",
     # phantoms
-    "render_phantom": "_phantom_render", "occupancy": "_phantom_render", "phantom_truth": "_phantom",
-    "write_phantom": "_phantom", "truth_paths": "_phantom", "make_phantom": "_phantom", "PhantomOptions": "_phantom",
-    "capsule_volume": "_phantom_render", "DEFAULT_TOLERANCE_VOXELS": "_phantom", "SCENES": "_phantom",
-    "scene_isolated": "_scenes", "scene_crossing_pair": "_scenes", "scene_parallel_pair": "_scenes",
-    "scene_random_packing": "_scenes", "scene_bundles": "_scenes", "scene_arcs": "_scenes",
-    "scene_wire_tangle": "_scenes",
-    "ScanCase": "_cases", "CASES": "_cases", "make_case": "_cases", "crop_straight": "_cases",
-    "scored_subset": "_cases",
+    "render_phantom": "phantom", "occupancy": "phantom", "phantom_truth": "phantom", "write_phantom": "phantom",
+    "truth_paths": "phantom", "make_phantom": "phantom", "PhantomOptions": "phantom", "capsule_volume": "phantom",
+    "DEFAULT_TOLERANCE_VOXELS": "phantom", "SCENES": "phantom",
+    "scene_isolated": "phantom", "scene_crossing_pair": "phantom", "scene_parallel_pair": "phantom",
+    "scene_random_packing": "phantom", "scene_bundles": "phantom", "scene_arcs": "phantom",
+    "scene_wire_tangle": "phantom",
+    "ScanCase": "phantom", "CASES": "phantom", "make_case": "phantom", "crop_straight": "phantom",
+    "scored_subset": "phantom", "check_phantom": "phantom", "check_phantom_out": "phantom",
     # segmentation
-    "SegmentParams": "_params", "SegmentOptions": "_params", "SegmentResult": "_params",
-    "prepare_volume": "_prepare", "parse_voxel_size": "_prepare", "Prepared": "_prepare",
-    "cross_section": "_bundles", "looks_bundled": "_bundles", "fit_discs": "_bundles",
-    "trace_filaments": "_curved", "FilamentResult": "_curved",
-    "segment_volume": "_segment", "AUTO_BEND_FRACTION": "_segment",
+    "SegmentParams": "segment", "SegmentOptions": "segment", "SegmentResult": "segment",
+    "Stage": "segment", "SegmentContext": "segment", "DEFAULT_STAGES": "segment", "insert_stage": "segment",
+    "prepare_volume": "segment", "Prepared": "segment",
+    "cross_section": "segment", "looks_bundled": "segment", "fit_discs": "segment",
+    "trace_filaments": "segment", "FilamentResult": "segment",
+    "segment_volume": "segment", "AUTO_BEND_FRACTION": "segment",
     # scoring and the command's files
-    "RodMatch": "_score", "match_rods": "_score", "ContactScore": "_score", "score_contacts": "_score",
-    "PolylineMatch": "_score", "match_polylines": "_score", "resample_polyline": "_score",
-    "run_segment": "_report", "write_outputs": "_report", "to_physical": "_report", "write_rods_csv": "_report",
-    "write_contacts_csv": "_report", "plot_qa_slices": "_report", "plot_qa_projection": "_report",
-    "parse_voxel_size_text": "_report", "default_out": "_report",
-    "check_phantom": "_checks", "check_segment": "_checks",
+    "RodMatch": "segment", "match_rods": "segment", "ContactScore": "segment", "score_contacts": "segment",
+    "PolylineMatch": "segment", "match_polylines": "segment", "resample_polyline": "segment",
+    "run_segment": "segment", "write_outputs": "segment", "to_physical": "segment", "write_rods_csv": "segment",
+    "write_contacts_csv": "segment", "plot_qa_slices": "segment", "plot_qa_projection": "segment",
+    "default_out": "segment", "check_segment": "segment",
+    # voxel sizes
+    "parse_voxel_size": "_voxels", "parse_voxel_size_text": "_voxels",
 }
 
 __all__ = sorted(_WHERE)

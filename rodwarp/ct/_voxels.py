@@ -10,6 +10,9 @@ import math
 import numpy as np
 from scipy import ndimage
 
+from rodwarp._util import one_line_error as _fail
+from rodwarp.errors import RodwarpError
+
 
 def _unit(v):
     v = np.asarray(v, dtype=np.float64)
@@ -121,3 +124,56 @@ class _BlockSampler:
         c = pts.reshape(-1, 3)[:, ::-1].T - self.o[:, None]
         v = ndimage.map_coordinates(self.g, c, order=1, mode="constant", cval=np.nan, output=np.float64)
         return v.reshape(sh)
+
+
+def _resample(poly: np.ndarray, step: float) -> np.ndarray:
+    """The polyline ``poly`` (m, 3) resampled at equal arc-length steps of at most ``step`` voxels
+    (its end points kept; a polyline of zero length becomes its first point twice)."""
+    seg = np.linalg.norm(np.diff(poly, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    if cum[-1] <= 1e-9:
+        return poly[:1].repeat(2, 0)
+    n = max(2, int(math.ceil(cum[-1] / step)) + 1)
+    s = np.linspace(0.0, cum[-1], n)
+    return np.stack([np.interp(s, cum, poly[:, j]) for j in range(3)], 1)
+
+
+# voxel sizes (read by the volume files and by segmentation alike)
+
+def parse_voxel_size(voxel_size) -> tuple[float, float, float]:
+    """One edge length or three (z, y, x, the array order) -> (dz, dy, dx); positive and finite."""
+    if voxel_size is None:
+        return (1.0, 1.0, 1.0)
+    v = np.atleast_1d(np.asarray(voxel_size, dtype=object))
+    try:
+        vals = [float(x) for x in v.ravel()]
+    except (TypeError, ValueError):
+        raise _fail(f"voxel size must be numbers, got {voxel_size!r}") from None
+    if len(vals) == 1:
+        vals = vals * 3
+    if len(vals) != 3:
+        raise _fail(f"voxel size takes one value (isotropic) or three (z, y, x), got {len(vals)}: {vals}; "
+                    f"pass e.g. --voxel-size 0.05 or --voxel-size 0.1,0.05,0.05")
+    if not all(math.isfinite(x) and x > 0 for x in vals):
+        raise _fail(f"voxel size must be positive numbers, got {vals}")
+    return tuple(vals)
+
+
+def parse_voxel_size_text(text) -> tuple[float, float, float] | None:
+    """``"0.05"`` or ``"0.1,0.05,0.05"`` (z, y, x; commas or spaces) -> (dz, dy, dx); None stays None."""
+    if text is None:
+        return None
+    if isinstance(text, str):
+        parts = [t for t in text.replace(",", " ").split() if t]
+        try:
+            vals = [float(t) for t in parts]
+        except ValueError:
+            raise RodwarpError(f"--voxel-size must be one number or three (z,y,x), e.g. 0.05 or 0.1,0.05,0.05; "
+                               f"got '{text}'") from None
+        if not vals:
+            raise RodwarpError("--voxel-size is empty; give one number or three (z,y,x)")
+        text = vals
+    try:
+        return parse_voxel_size(text)
+    except RodwarpError as e:
+        raise RodwarpError(f"--voxel-size: {e}") from None

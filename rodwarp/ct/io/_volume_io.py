@@ -3,7 +3,7 @@
 Volumes are NumPy-style arrays indexed ``(z, y, x)`` = (slice, row, column). Every problem with
 the input raises :class:`~rodwarp.errors.RodwarpError` with a one-line message that says what is
 wrong and how to fix it. Writing (:func:`write_tiff`, atomic) and the voxel size from the
-metadata (:func:`read_voxel_size`, ...) are in :mod:`rodwarp.ct._volume_meta`, re-exported here.
+metadata (:func:`read_voxel_size`, ...) are in :mod:`rodwarp.ct.io._volume_meta`, re-exported here.
 
 This module does not import warp.
 """
@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from rodwarp._util import one_line_error as _fail
-from rodwarp.ct._volume_meta import _TIFF_SUFFIXES, _folder_files, _is_zarr, _resolve, _tifffile_quiet
+from rodwarp.ct.io._volume_meta import _TIFF_SUFFIXES, _folder_files, _is_zarr, _resolve, _tifffile_quiet
 # re-exported: their home is _volume_meta
-from rodwarp.ct._volume_meta import list_slices, read_voxel_ratio, read_voxel_size  # noqa: F401
-from rodwarp.ct._volume_meta import read_voxel_unit, write_tiff  # noqa: F401
+from rodwarp.ct.io._volume_meta import list_slices, read_voxel_ratio, read_voxel_size  # noqa: F401
+from rodwarp.ct.io._volume_meta import read_voxel_unit, write_tiff  # noqa: F401
 from rodwarp.errors import RodwarpError
 
 __all__ = ["read_volume", "open_volume_lazy", "write_tiff", "list_slices", "check_volume", "read_voxel_size",

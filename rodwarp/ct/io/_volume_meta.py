@@ -5,7 +5,7 @@ a zarr store), tifffile's log kept quiet while a file is opened, :func:`write_ti
 multi-page TIFF with its ImageJ metadata: axes, voxel size, unit) and the voxel size, unit or
 ratio read back from TIFF, OME-TIFF and OME-Zarr metadata (:func:`read_voxel_size`,
 :func:`read_voxel_unit`, :func:`read_voxel_ratio`). The voxels are read and checked in
-:mod:`rodwarp.ct._volume_io`.
+:mod:`rodwarp.ct.io._volume_io`.
 
 This module does not import warp.
 """
@@ -135,7 +135,7 @@ def write_tiff(path, volume, *, voxel_size=None, unit: str = "um") -> Path:
     if imagej:
         meta = {"axes": "ZYX"}
         if voxel_size is not None:
-            from rodwarp.ct._prepare import parse_voxel_size
+            from rodwarp.ct._voxels import parse_voxel_size
 
             from rodwarp.rodset import UNITS
 

@@ -20,8 +20,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rodwarp.ct._phantom import phantom_truth, render_phantom
-from rodwarp.ct._scenes import scene_arcs, scene_bundles, scene_random_packing, scene_wire_tangle
+from rodwarp.ct.phantom._phantom_render import render_phantom
+from rodwarp.ct.phantom._truth import phantom_truth
+from rodwarp.ct.phantom._scenes import scene_arcs, scene_bundles, scene_random_packing, scene_wire_tangle
 from rodwarp.rodset import RodSet
 
 __all__ = ["ScanCase", "CASES", "make_case", "crop_straight", "scored_subset"]

@@ -1,11 +1,10 @@
-"""Checks of ``rodwarp phantom`` and ``rodwarp segment`` before any work (the generic ones:
-:mod:`rodwarp.validation`)."""
+"""Checks of ``rodwarp phantom`` before any work (the generic ones: :mod:`rodwarp.validation`)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from rodwarp.ct._phantom import SCENES as PHANTOM_SCENES
+from rodwarp.ct.phantom._phantom import SCENES as PHANTOM_SCENES
 from rodwarp.validation import BASE_BYTES, Range, check_ranges, disk_fits, fail, memory_fits, output_location
 
 #: bytes per voxel of `rodwarp phantom`: the float64 occupancy, the blurred copy, the noise and
@@ -23,7 +22,7 @@ def check_phantom(*, rods, shape, voxel_size, out, blur, cnr, ring, cupping, str
     ``streaks`` at most 1 contrast, ``|cupping|`` below 1); a scene's ``radius`` must be at
     least 0.5 voxel. The rods' scale against the voxel and the volume is checked once they are
     loaded (:func:`rodwarp.ct.make_phantom`)."""
-    from rodwarp.ct._phantom import PhantomOptions
+    from rodwarp.ct.phantom._phantom import PhantomOptions
 
     if len(shape) != 3:
         fail(f"--shape must be three sizes Z Y X, got {shape}")
@@ -52,24 +51,3 @@ def check_phantom(*, rods, shape, voxel_size, out, blur, cnr, ring, cupping, str
         fail(f"--out {out} must end in .tif or .tiff (a multi-page TIFF)")
     output_location(out, "--out", directory=False)
     disk_fits(out, 2.0 * n_vox, f"the 16-bit TIFF of --shape {' '.join(str(s) for s in shape)}", "lower --shape")
-
-
-def check_segment(*, stack, voxel_size, units, diameter, out, chunk, contact_tolerance, min_fill=0.6) -> None:
-    """Checks of ``rodwarp segment`` before the volume is read (``voxel_size``: None for the
-    file's metadata, or one or three comma-separated values z,y,x)."""
-    from rodwarp.rodset import UNITS
-
-    if not Path(stack).exists():
-        fail(f"CT stack '{stack}' does not exist; pass a multi-page TIFF, a folder of slices or a zarr array")
-    if voxel_size is not None:
-        from rodwarp.ct._report import parse_voxel_size_text
-
-        parse_voxel_size_text(voxel_size)  # the one parser: one value or three (z,y,x), positive and finite
-    if units is not None and units not in UNITS:
-        fail(f"--units must be one of {', '.join(UNITS)}, got '{units}'")
-    from rodwarp.ct._params import SegmentOptions
-
-    # every option within the range stated beside it (SegmentOptions)
-    check_ranges(SegmentOptions(units=units, diameter=diameter, min_fill=min_fill, chunk=chunk,
-                                contact_tolerance=contact_tolerance))
-    output_location(Path(out), "--out")

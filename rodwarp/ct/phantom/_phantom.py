@@ -4,14 +4,13 @@ Volumes are indexed ``(z, y, x)`` = (slice, row, column); a point in voxel units
 ``x = column``, ``y = row``, ``z = slice`` and the centre of voxel ``(0, 0, 0)`` is the origin.
 Physical coordinates are voxel coordinates times the voxel size.
 
-:func:`render_phantom` (in :mod:`rodwarp.ct._phantom_render`, re-exported here) turns a rod set
+:func:`render_phantom` (in :mod:`rodwarp.ct.phantom._phantom_render`, re-exported here) turns a rod set
 into a 16-bit CT-like volume: partial-volume occupancy, cupping, blur, rings, streaks and noise.
-This module holds the rest: :func:`phantom_truth` (the true contacts), :func:`write_phantom`
+This module holds the rest: :func:`write_phantom`
 (a TIFF stack plus ``<stem>_truth.npz`` and ``<stem>_truth.json`` beside it) and
 :func:`make_phantom`, the ``rodwarp phantom`` command. The scenes (voxel units, with their
-true contacts) are built in :mod:`rodwarp.ct._scenes`.
-
-This module does not import warp.
+true contacts) are built in :mod:`rodwarp.ct.phantom._scenes`, the truth (:func:`phantom_truth`,
+:func:`truth_paths`) in :mod:`rodwarp.ct.phantom._truth`.
 """
 
 from __future__ import annotations
@@ -23,7 +22,8 @@ import numpy as np
 
 from rodwarp._util import json_safe
 from rodwarp._util import one_line_error as _fail
-from rodwarp.ct._phantom_render import _to_voxels, capsule_volume, occupancy, render_phantom  # noqa: F401
+from rodwarp.ct.phantom._phantom_render import _to_voxels, capsule_volume, occupancy, render_phantom  # noqa: F401
+from rodwarp.ct.phantom._truth import DEFAULT_TOLERANCE_VOXELS, phantom_truth, truth_paths  # noqa: F401
 from rodwarp.rodset import UNITS, Contacts, RodSet
 from rodwarp.validation import Range
 
@@ -31,48 +31,11 @@ __all__ = ["render_phantom", "occupancy", "phantom_truth", "write_phantom", "tru
            "PhantomOptions",
            "capsule_volume", "DEFAULT_TOLERANCE_VOXELS", "SCENES"]
 
-#: Largest surface gap (voxels) counted as a true contact. Scenes make gaps of exactly 0 or >= 2.
-DEFAULT_TOLERANCE_VOXELS = 0.5
-
-
-# ----------------------------------------------------------------------------------------------
-# truth
-# ----------------------------------------------------------------------------------------------
-
-def phantom_truth(rods: RodSet, tolerance_voxels: float = DEFAULT_TOLERANCE_VOXELS, *,
-                  voxel_size: float | None = None) -> Contacts:
-    """Ground-truth contacts: rod pairs whose surfaces come within ``tolerance_voxels``.
-
-    For rods in metric units pass ``voxel_size`` (metres per voxel) to convert the tolerance.
-    Contact points and gaps are in the rods' units.
-    """
-    from rodwarp.rodset import detect_contacts
-
-    if not isinstance(rods, RodSet):
-        raise _fail(f"rods must be a RodSet, got {type(rods).__name__}")
-    tol = float(tolerance_voxels)
-    if rods.units != "voxel":
-        if voxel_size is None:
-            raise _fail(f"rods are in {rods.units!r}; pass voxel_size (metres per voxel) to convert the tolerance")
-        from rodwarp.rodset import UNITS
-        tol = tol * float(voxel_size) / UNITS[rods.units]
-    return detect_contacts(rods, tol)
 
 
 # ----------------------------------------------------------------------------------------------
 # output
 # ----------------------------------------------------------------------------------------------
-
-def truth_paths(path_tif) -> tuple[Path, Path]:
-    """``(<stem>_truth.npz, <stem>_truth.json)`` beside a phantom TIFF."""
-    p = Path(path_tif)
-    stem = p.name
-    for suf in (".ome.tiff", ".ome.tif", ".tiff", ".tif"):
-        if stem.lower().endswith(suf):
-            stem = stem[: -len(suf)]
-            break
-    return p.with_name(f"{stem}_truth.npz"), p.with_name(f"{stem}_truth.json")
-
 
 def write_phantom(path_tif, volume: np.ndarray, rods: RodSet, contacts: Contacts | None = None,
                   voxel_size: float | None = None, params: dict | None = None, z_thickness: int = 1, *,
@@ -100,7 +63,7 @@ def write_phantom(path_tif, volume: np.ndarray, rods: RodSet, contacts: Contacts
         Paths written: ``{"tiff": ..., "truth_rods": ..., "truth_json": ...}``.
     """
     from rodwarp.rodset.files import write_json
-    from rodwarp.ct._volume_io import write_tiff
+    from rodwarp.ct.io import write_tiff
 
     vol = np.asarray(volume)
     if vol.ndim != 3:
@@ -129,7 +92,7 @@ def write_phantom(path_tif, volume: np.ndarray, rods: RodSet, contacts: Contacts
         rv.attrs["voxel_size_units"] = unit
     # the truth JSON is the phantom's manifest: incomplete until its last write, so a kill in
     # between never leaves the TIFF of one phantom beside the truth of another passing as whole
-    from rodwarp.ct._phantom_owner import PHANTOM_FORMAT, mark_truth
+    from rodwarp.ct.phantom._phantom_owner import PHANTOM_FORMAT, mark_truth
 
     mark_truth(path_tif, complete=False, tiff=Path(path_tif).name, seed=params.get("seed"))
     # the TIFF states the voxel in the rods' unit: segment then reports lengths in it by default
@@ -246,7 +209,7 @@ def make_phantom(rods: str, shape, out, **options) -> RodSet:
     """
     import numpy as np
 
-    from rodwarp.ct import _scenes as sc
+    from rodwarp.ct.phantom import _scenes as sc
     from rodwarp.rodset import detect_contacts, load
 
     o = PhantomOptions(**options)

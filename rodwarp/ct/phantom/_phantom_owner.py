@@ -15,16 +15,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from rodwarp.ct.phantom._truth import truth_paths as _truth_paths
 from rodwarp.errors import RodwarpError
 
 #: ``format`` of a phantom's truth JSON
 PHANTOM_FORMAT = "rodwarp-phantom-truth"
-
-
-def _truth_paths(path_tif) -> tuple[Path, Path]:
-    from rodwarp.ct._phantom import truth_paths
-
-    return truth_paths(path_tif)
 
 
 def read_truth_meta(path_tif) -> dict | None:

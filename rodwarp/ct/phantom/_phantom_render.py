@@ -4,7 +4,7 @@
 capsules (supersampled in a thin shell around the surface); :func:`render_phantom` turns it
 into a 16-bit CT-like volume with cupping, Gaussian point-spread blur, ring artefacts, metal
 streaks and Gaussian noise at a chosen contrast-to-noise ratio. The ground truth, the files and
-the ``rodwarp phantom`` command are in :mod:`rodwarp.ct._phantom`.
+the ``rodwarp phantom`` command are in :mod:`rodwarp.ct.phantom._phantom`.
 
 Volumes are indexed ``(z, y, x)`` = (slice, row, column); a point in voxel units has
 ``x = column``, ``y = row``, ``z = slice`` and the centre of voxel ``(0, 0, 0)`` is the origin.

@@ -16,8 +16,8 @@ import math
 import numpy as np
 
 from rodwarp._util import one_line_error as _fail
-from rodwarp.ct._phantom import DEFAULT_TOLERANCE_VOXELS, phantom_truth
-from rodwarp.ct._phantom_render import _check_shape
+from rodwarp.ct.phantom._truth import DEFAULT_TOLERANCE_VOXELS, phantom_truth
+from rodwarp.ct.phantom._phantom_render import _check_shape
 from rodwarp.rodset import RodSet, segment_distance
 
 __all__ = ["scene_isolated", "scene_crossing_pair", "scene_parallel_pair", "scene_random_packing",

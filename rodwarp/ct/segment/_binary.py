@@ -273,7 +273,7 @@ def _ridge(m: np.ndarray) -> np.ndarray:
 
 
 def mask_levels(reader, P):
-    """Stage 1 for a mask (:func:`rodwarp.ct._levels._measure_levels` for a greyscale scan).
+    """Stage 1 for a mask (:func:`rodwarp.ct.segment._levels._measure_levels` for a greyscale scan).
 
     The background and rod levels are known, 0 and 1, and a mask has no noise.  In the (up to)
     four blocks with the most rod voxels (specks of a noisy threshold left out), the smoothed
@@ -284,7 +284,7 @@ def mask_levels(reader, P):
 
     Returns
     -------
-    rodwarp.ct._levels._Levels
+    rodwarp.ct.segment._levels._Levels
         With ``binary=True``.
 
     Raises
@@ -292,8 +292,8 @@ def mask_levels(reader, P):
     RodwarpError
         One line: no rod voxel is thicker than one voxel.
     """
-    from rodwarp.ct._levels import MIXED_RIDGE_SPREAD, _densest_blocks, _Levels, _sample_step
-    from rodwarp.ct._params import _HINT
+    from rodwarp.ct.segment._levels import MIXED_RIDGE_SPREAD, _densest_blocks, _Levels, _sample_step
+    from rodwarp.ct.segment._params import _HINT
 
     step = _sample_step(reader.shape)
     blocks = []

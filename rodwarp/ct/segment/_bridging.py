@@ -3,7 +3,7 @@
 The skeleton of a tangle falls apart at every crossing and touching run into branches; each
 branch lies on one filament (on the wire tangles, every branch does), so tracing the
 filaments is pairing the branch ends through the junction gaps.  This stage works on the
-*refined* branches (:mod:`rodwarp.ct._curved`):
+*refined* branches (:mod:`rodwarp.ct.segment._curved`):
 
 1. **ends** -- each branch's end is taken ``trim`` inside its last vertex, with point and
    outward tangent from a quadratic fitted to the ``reach`` behind it (a chord lags the bend);
@@ -29,6 +29,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from rodwarp.ct._voxels import _resample
 
 __all__ = ["pair_ends", "drop_duplicates", "hermite"]
 
@@ -220,8 +222,6 @@ def pair_ends(polys, sampler, r0: float, max_gap: float, level: float = MIN_LEVE
 
 def _chains(polys, ends, partner):
     """Filaments from pieces and the bridges between their ends (``partner``: end -> (end, path))."""
-    from rodwarp.ct._curved import _resample
-
     n = len(polys)
     if not partner:
         return list(polys)

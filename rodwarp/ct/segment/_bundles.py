@@ -80,7 +80,7 @@ def _profile(r: float, sigma: float):
     """Tabulated blurred-disc profile (unit contrast) of radius r: (rho grid, values)."""
     key = (round(r, 2), round(sigma, 2))
     if key not in _PROFILES:
-        from rodwarp.ct._profile import _blur_model
+        from rodwarp.ct.segment._profile import _blur_model
 
         rho = np.linspace(0.0, r + 5.0 * sigma + 1.0, 160)
         _PROFILES[key] = (rho, _blur_model(-np.inf, rho, key[0], key[1], n_r=24, n_th=32))

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from rodwarp.ct._levels import _Levels
-from rodwarp.ct._params import SegmentParams
-from rodwarp.ct._profile import _axis_level
-from rodwarp.ct._reader import _Reader
+from rodwarp.ct.segment._levels import _Levels
+from rodwarp.ct.segment._params import SegmentParams
+from rodwarp.ct.segment._profile import _axis_level
+from rodwarp.ct.segment._reader import _Reader
 from rodwarp.ct._voxels import _basis, _disc_offsets
 from rodwarp.rodset import Contacts, RodSet, detect_contacts, segment_closest_params
 

@@ -15,7 +15,7 @@ Pipeline (:func:`trace_filaments`):
    normal to the branch, ignoring voxels nearer to another branch (so touching filaments do
    not pull each other), then smoothed again.
 3. **joining** -- branch ends are paired through the junction gaps by a minimum-cost matching
-   of smooth bridges the image supports (:func:`rodwarp.ct._bridging.pair_ends`); chains of
+   of smooth bridges the image supports (:func:`rodwarp.ct.segment._bridging.pair_ends`); chains of
    paired branches are filaments, refined once more as wholes; faint chains (noise) and
    duplicates (one skeleton drawn for two touching filaments) are dropped.
 4. **radius** -- per filament, from the intensity mass per unit length (voxels assigned to
@@ -33,6 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage
+
+from rodwarp.ct._voxels import _resample
 
 
 __all__ = ["trace_filaments", "bend_fraction", "FilamentResult"]
@@ -70,16 +72,6 @@ def _order_branch(pts: np.ndarray, pairs: np.ndarray):
     return out
 
 
-def _resample(poly: np.ndarray, step: float) -> np.ndarray:
-    seg = np.linalg.norm(np.diff(poly, axis=0), axis=1)
-    cum = np.concatenate([[0.0], np.cumsum(seg)])
-    if cum[-1] <= 1e-9:
-        return poly[:1].repeat(2, 0)
-    n = max(2, int(math.ceil(cum[-1] / step)) + 1)
-    s = np.linspace(0.0, cum[-1], n)
-    return np.stack([np.interp(s, cum, poly[:, j]) for j in range(3)], 1)
-
-
 def _smooth(poly: np.ndarray, sigma: float) -> np.ndarray:
     """Gaussian smoothing along a unit-spaced polyline; the ends stay anchored (reflected)."""
     if len(poly) < 5 or sigma <= 0:
@@ -96,7 +88,7 @@ def _smooth(poly: np.ndarray, sigma: float) -> np.ndarray:
 def _branches(mask: np.ndarray, r0: float, junction_radius: float):
     """Skeleton branches (ordered (m, 3) xyz arrays) with junction neighbourhoods removed;
     also the junction voxels (xyz) and the skeleton size."""
-    from rodwarp.ct._seeds import _components, _skeleton
+    from rodwarp.ct.segment._seeds import _components, _skeleton
 
     idx, junc, keep = _skeleton(mask, r0, junction_radius)
     if len(idx) == 0:
@@ -239,7 +231,7 @@ class FilamentResult:
     faint : int
         Filaments rejected because their axis is fainter than ``0.8 min_fill`` of the plateau.
     bridges : int
-        Branch ends joined by smooth bridges through the junction gaps (:mod:`rodwarp.ct._bridging`).
+        Branch ends joined by smooth bridges through the junction gaps (:mod:`rodwarp.ct.segment._bridging`).
     duplicates : int
         Pieces dropped as lying along a longer filament (one skeleton for two touching ones).
     mask : ndarray of bool
@@ -270,7 +262,7 @@ def trace_filaments(raw: np.ndarray, st, P, progress=None) -> FilamentResult:
     ----------
     raw : ndarray (z, y, x) float32
         The prepared volume.
-    st : rodwarp.ct._levels._Levels
+    st : rodwarp.ct.segment._levels._Levels
         Background and foreground levels, threshold, coarse radius ``r0`` (voxels).
     P : rodwarp.ct.SegmentParams
         Knobs (``smooth_sigma``, ``junction_radius``, ``min_length``, ``window_margin``).
@@ -304,7 +296,7 @@ def trace_filaments(raw: np.ndarray, st, P, progress=None) -> FilamentResult:
     pieces = [_resample(b, 1.0) for b in branches]
     pieces = [_resample(_smooth(p, max(1.0, 0.5 * r0)), 1.0) if len(p) >= 5 else p for p in pieces]
     pieces = _refine_centrelines(pieces, sampler, r0)
-    from rodwarp.ct._bridging import drop_duplicates, pair_ends
+    from rodwarp.ct.segment._bridging import drop_duplicates, pair_ends
 
     polys, bridges = pair_ends(pieces, sampler, r0, BRIDGE_GAP * r0 + 6.0)
     polys = [p for p in polys if float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())

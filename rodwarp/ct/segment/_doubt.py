@@ -118,7 +118,7 @@ def _unit_rows(v: np.ndarray) -> np.ndarray:
 def _axis_samples(rods, step: float = 1.0):
     """Points every ``step`` along each axis (x, y, z), their rod, their unit tangents, and each
     rod's two end points with their outward unit tangents (2 n, 3) each."""
-    from rodwarp.ct._score import resample_polyline
+    from rodwarp.ct.segment._score import resample_polyline
 
     pts, owner, tang, ends, out = [], [], [], [], []
     for k in range(rods.n_rods):
@@ -142,9 +142,9 @@ def assess(reader, st, rods, P, block: int = BLOCK, mask=None) -> Doubt:
 
     Parameters
     ----------
-    reader : rodwarp.ct._reader._Reader
+    reader : rodwarp.ct.segment._reader._Reader
         The prepared volume (z, y, x).
-    st : rodwarp.ct._levels._Levels
+    st : rodwarp.ct.segment._levels._Levels
         Levels of stage 1 (``threshold``, ``bg``, ``fg_smooth``).
     rods : RodSet
         The traced rods or filaments in working voxels (x, y, z), with their radii.
@@ -159,7 +159,7 @@ def assess(reader, st, rods, P, block: int = BLOCK, mask=None) -> Doubt:
     -------
     Doubt
     """
-    from rodwarp.ct._tracing import _rasterize
+    from rodwarp.ct.segment._tracing import _rasterize
 
     shape = reader.shape
     n = rods.n_rods

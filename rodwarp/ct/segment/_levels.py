@@ -17,8 +17,8 @@ import numpy as np
 from scipy import ndimage
 
 from rodwarp._util import one_line_error as _fail
-from rodwarp.ct._params import _HINT, SegmentParams
-from rodwarp.ct._reader import _Reader
+from rodwarp.ct.segment._params import _HINT, SegmentParams
+from rodwarp.ct.segment._reader import _Reader
 
 
 @dataclass

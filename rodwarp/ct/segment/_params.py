@@ -104,7 +104,7 @@ class SegmentParams:
         Edge of the blocks used for the level and coarse-radius statistics.
     dark : bool or None
         Rods darker than the background (grey values are negated first); ``None`` detects it
-        from the histogram (:mod:`rodwarp.ct._prepare`).
+        from the histogram (:mod:`rodwarp.ct.segment._prepare`).
     fov : bool or None
         Field-of-view mask (a constant outside the reconstruction circle): ``None`` detects
         it, ``False`` never masks.
@@ -113,7 +113,7 @@ class SegmentParams:
         when it exceeds half the noise, ``True`` always, ``False`` never.
     shape : str
         ``"straight"`` (straight rods, two vertices each), ``"curved"`` (filaments traced as
-        polylines, :mod:`rodwarp.ct._curved`) or ``"auto"`` (curved when the skeleton's
+        polylines, :mod:`rodwarp.ct.segment._curved`) or ``"auto"`` (curved when the skeleton's
         branches bend, see :func:`segment_volume`).
     """
 
@@ -197,49 +197,6 @@ class SegmentParams:
             raise _fail(f"radius_range must be (low, high) with 0 <= low < high, got {self.radius_range!r}")
 
 
-@dataclass(frozen=True)
-class SegmentOptions:
-    """Options of ``rodwarp segment`` (:func:`~rodwarp.ct.run_segment`), frozen: each field's
-    default and help are the command's. Lengths in ``units`` unless marked voxels."""
-
-    voxel_size: str | None = option(None, "Voxel edge in --units: one value, or three for z,y,x (e.g. 0.1,0.05,0.05). "
-                                          "Default: the file's metadata (ImageJ/OME-TIFF, OME-Zarr).")
-    units: str | None = option(None, "Unit of --voxel-size, --diameter and the outputs (m, mm, um, voxel); default mm, "
-                                     "or the metadata's.")
-    diameter: float | None = option(None, "Rod diameter in --units (estimated when absent).",
-                                    range=Range(gt=0, le=1e12, hint="in --units"))
-    shape: str = option(SegmentParams.shape, "straight (rods), curved (filaments as polylines) or auto.")
-    dark_rods: bool | None = option(None, "Rods darker / brighter than the background (default: detected).")
-    min_fill: float = option(SegmentParams.min_fill, "Reject rods whose axis plateau is below this share of what a "
-                                                     "rod of their radius shows under the measured blur.",
-                                range=Range(gt=0, le=1, hint="a share of the plateau a rod shows"))
-    chunk: int | None = option(None, "Process in overlapping chunks of this edge (voxels), for big volumes.",
-                               range=Range(ge=16, le=100_000, whole=True, hint="an edge of at least 16 voxels"))
-    contact_tolerance: float = option(SegmentParams.contact_tolerance, "Largest surface gap counted as contact "
-                                                                       "(voxels).",
-                                      range=Range(ge=0, le=1000, unit="voxels"))
-    figures: bool = option(True, "Write the QA PNGs.")
-
-    def validate(self, stack, out) -> None:
-        """Refuse (one line) a bad option, a missing stack or an unusable ``out`` before the
-        volume is read (:func:`rodwarp.ct.check_segment`)."""
-        from rodwarp.ct._checks import check_segment
-
-        if self.shape not in ("straight", "curved", "auto"):
-            raise _fail(f"--shape must be straight, curved or auto, got '{self.shape}'")
-        check_segment(stack=stack, voxel_size=self.voxel_size, units=self.units, diameter=self.diameter, out=out,
-                      chunk=self.chunk, contact_tolerance=self.contact_tolerance, min_fill=self.min_fill)
-
-    def params(self) -> SegmentParams:
-        """The segmentation knobs these options set (the rest at their defaults)."""
-        return SegmentParams(shape=self.shape, dark=self.dark_rods, min_fill=self.min_fill)
-
-    def run_kwargs(self) -> dict:
-        """The keywords of :func:`~rodwarp.ct.run_segment` these options give."""
-        return {"voxel_size": self.voxel_size, "units": self.units, "diameter": self.diameter, "chunk": self.chunk,
-                "contact_tolerance": self.contact_tolerance, "figures": self.figures, "params": self.params()}
-
-
 @dataclass
 class SegmentResult:
     """What :func:`segment_volume` found.
@@ -261,7 +218,7 @@ class SegmentResult:
     spacing : float
         Edge of the working voxel in the units of the ``voxel_size`` given (1 without one):
         physical coordinates are ``rods.points * spacing``.
-    doubt : rodwarp.ct._doubt.Doubt, optional
+    doubt : rodwarp.ct.segment._doubt.Doubt, optional
         Per-rod confidence and the foreground no trace explains (``quality["unexplained"]``
         holds its summary).
     """

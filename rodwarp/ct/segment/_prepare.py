@@ -22,7 +22,7 @@ module removes before any level is measured (:func:`prepare_volume`):
   result are in units of that edge, with voxel (0, 0, 0) at the same place.
 
 A **binarised** stack (exactly two grey levels: bool, 0/1, 0/255, any two values) has none of
-the first three: it is recognised first (:mod:`rodwarp.ct._binary`), replaced by the rods' mask
+the first three: it is recognised first (:mod:`rodwarp.ct.segment._binary`), replaced by the rods' mask
 (1.0 rods, 0.0 background; the brighter level is the rods unless ``dark=True``) and only
 resampled; a stack of one level or of a handful (a label image) is refused there.
 
@@ -41,27 +41,9 @@ import numpy as np
 from scipy import ndimage
 
 from rodwarp._util import one_line_error as _fail
+from rodwarp.ct._voxels import parse_voxel_size
 
 __all__ = ["Prepared", "prepare_volume", "parse_voxel_size"]
-
-
-def parse_voxel_size(voxel_size) -> tuple[float, float, float]:
-    """One edge length or three (z, y, x, the array order) -> (dz, dy, dx); positive and finite."""
-    if voxel_size is None:
-        return (1.0, 1.0, 1.0)
-    v = np.atleast_1d(np.asarray(voxel_size, dtype=object))
-    try:
-        vals = [float(x) for x in v.ravel()]
-    except (TypeError, ValueError):
-        raise _fail(f"voxel size must be numbers, got {voxel_size!r}") from None
-    if len(vals) == 1:
-        vals = vals * 3
-    if len(vals) != 3:
-        raise _fail(f"voxel size takes one value (isotropic) or three (z, y, x), got {len(vals)}: {vals}; "
-                    f"pass e.g. --voxel-size 0.05 or --voxel-size 0.1,0.05,0.05")
-    if not all(math.isfinite(x) and x > 0 for x in vals):
-        raise _fail(f"voxel size must be positive numbers, got {vals}")
-    return tuple(vals)
 
 
 @dataclass
@@ -86,7 +68,7 @@ class Prepared:
         Pixels of a slice inside the field of view (working grid).
     binarised : dict or None
         ``{"levels": [lo, hi], "rod_level": v, "rod_fraction": f}`` of a binarised stack, whose
-        ``volume`` is then the rods' mask (:meth:`rodwarp.ct._binary.Binarised.info`).
+        ``volume`` is then the rods' mask (:meth:`rodwarp.ct.segment._binary.Binarised.info`).
     """
 
     volume: object
@@ -248,9 +230,9 @@ def prepare_volume(volume, voxel_size=None, *, dark=None, fov=None, background=N
     ------
     RodwarpError
         One line: not 3-D, empty, NaN or inf values, or a stack of discrete levels segmentation
-        cannot read (:func:`rodwarp.ct._binary.read_binarised`).
+        cannot read (:func:`rodwarp.ct.segment._binary.read_binarised`).
     """
-    from rodwarp.ct._binary import mask_of, read_binarised
+    from rodwarp.ct.segment._binary import mask_of, read_binarised
 
     dz, dy, dx = parse_voxel_size(voxel_size)
     shape = tuple(int(s) for s in volume.shape)
@@ -351,7 +333,7 @@ def _isotropic(out: Prepared, d_zyx, inside) -> Prepared:
         new_shape = tuple(int(math.floor((n - 1) * f + 1e-9)) + 1 for n, f in zip(shape, d))
         # output voxel i sits at input coordinate i / f: voxel (0, 0, 0) stays in place
         if out.binarised is not None:
-            from rodwarp.ct._binary import resample_mask
+            from rodwarp.ct.segment._binary import resample_mask
 
             res = resample_mask(src > 0.5, d, new_shape)
         else:

@@ -23,12 +23,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rodwarp.ct._binary import MASK_EDGE_SIGMA, SurfaceDistance, surface_radius
-from rodwarp.ct._levels import MIXED_RADIUS_CV, _Levels
-from rodwarp.ct._params import SegmentParams
-from rodwarp.ct._pasting import _gap_filler, _merge_lines
-from rodwarp.ct._profile import _axis_level, _blur_model, _end_weight, _fit_radial_profile
-from rodwarp.ct._reader import _Reader
+from rodwarp.ct.segment._binary import MASK_EDGE_SIGMA, SurfaceDistance, surface_radius
+from rodwarp.ct.segment._levels import MIXED_RADIUS_CV, _Levels
+from rodwarp.ct.segment._params import SegmentParams
+from rodwarp.ct.segment._pasting import _gap_filler, _merge_lines
+from rodwarp.ct.segment._profile import _axis_level, _blur_model, _end_weight, _fit_radial_profile
+from rodwarp.ct.segment._reader import _Reader
 from rodwarp.ct._voxels import _basis, _point_segment_distance, _unit, _window_voxels
 from rodwarp.rodset import segment_distance
 

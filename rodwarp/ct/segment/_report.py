@@ -22,6 +22,7 @@ import numpy as np
 
 from rodwarp._util import progress_bar, versions
 from rodwarp.errors import RodwarpError
+from rodwarp.ct._voxels import parse_voxel_size_text
 from rodwarp.rodset import UNITS, RodSet
 from rodwarp.ct._outputs import SEGMENT_OUTPUTS
 from rodwarp.rodset.files import save_figure, write_json, write_text
@@ -174,7 +175,7 @@ def plot_qa_confidence(path, rods_vox: RodSet, doubt) -> Path:
     from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
 
-    from rodwarp.ct._doubt import DOUBT_CONFIDENCE
+    from rodwarp.ct.segment._doubt import DOUBT_CONFIDENCE
 
     fig = Figure(figsize=(13, 6))
     p0, p1, rod = rods_vox.segments()
@@ -307,28 +308,6 @@ def default_out(stack) -> Path:
     return p.parent / "segment"
 
 
-def parse_voxel_size_text(text) -> tuple[float, float, float] | None:
-    """``"0.05"`` or ``"0.1,0.05,0.05"`` (z, y, x; commas or spaces) -> (dz, dy, dx); None stays None."""
-    from rodwarp.ct._prepare import parse_voxel_size
-
-    if text is None:
-        return None
-    if isinstance(text, str):
-        parts = [t for t in text.replace(",", " ").split() if t]
-        try:
-            vals = [float(t) for t in parts]
-        except ValueError:
-            raise RodwarpError(f"--voxel-size must be one number or three (z,y,x), e.g. 0.05 or 0.1,0.05,0.05; "
-                               f"got '{text}'") from None
-        if not vals:
-            raise RodwarpError("--voxel-size is empty; give one number or three (z,y,x)")
-        text = vals
-    try:
-        return parse_voxel_size(text)
-    except RodwarpError as e:
-        raise RodwarpError(f"--voxel-size: {e}") from None
-
-
 def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: float | None = None, out=None,
                 chunk: int | None = None, contact_tolerance: float = 1.0, figures: bool = True,
                 progress: bool = False, params=None, overwrite: bool = False) -> dict:
@@ -361,9 +340,9 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     import time
     from dataclasses import asdict, replace
 
-    from rodwarp.ct._volume_io import open_volume_lazy, read_voxel_size
-    from rodwarp.ct._params import SegmentParams
-    from rodwarp.ct._segment import segment_volume
+    from rodwarp.ct.io import open_volume_lazy, read_voxel_size
+    from rodwarp.ct.segment._params import SegmentParams
+    from rodwarp.ct.segment._segment import segment_volume
     from rodwarp.rodset import rundir
 
     t0 = time.perf_counter()
@@ -384,7 +363,7 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
     source = "--voxel-size"
     if vs is None:
         md = read_voxel_size(stack)
-        from rodwarp.ct._volume_io import read_voxel_ratio
+        from rodwarp.ct.io import read_voxel_ratio
 
         ratio = read_voxel_ratio(stack) if md is None else None
         if ratio is not None and units in (None, "voxel"):
@@ -395,7 +374,7 @@ def run_segment(stack, *, voxel_size=None, units: str | None = None, diameter: f
                                f"(one value, or three for z,y,x) and --units")
         sizes_m, source = md
         if units is None:
-            from rodwarp.ct._volume_io import read_voxel_unit
+            from rodwarp.ct.io import read_voxel_unit
 
             # the unit the file states its voxel in (phantom writes the rods' own), else by size
             units = read_voxel_unit(stack) or ("mm" if min(sizes_m) >= 1e-4 else "um")

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rodwarp.ct._params import SegmentParams
+from rodwarp.ct.segment._params import SegmentParams
 from rodwarp.ct._voxels import _canonical
 
 

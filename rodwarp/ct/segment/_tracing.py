@@ -4,7 +4,7 @@ A seed is fitted by iterative intensity-weighted centroid/line fits inside a cyl
 radius around the current axis, then *marched*: the axis grows block by block while a small
 disc on it stays filled, refitting as it grows.  An elongated cross-section is two rods side
 by side (split in two); a cross-section much shallower than it is wide is a bundle (split by
-:mod:`rodwarp.ct._bundles`).  Foreground that no traced rod explains seeds a second round.
+:mod:`rodwarp.ct.segment._bundles`).  Foreground that no traced rod explains seeds a second round.
 This module must not import warp.
 """
 
@@ -17,9 +17,9 @@ from typing import NamedTuple
 import numpy as np
 from scipy import ndimage
 
-from rodwarp.ct._levels import _Levels
-from rodwarp.ct._params import SegmentParams
-from rodwarp.ct._seeds import _skeleton_seeds
+from rodwarp.ct.segment._levels import _Levels
+from rodwarp.ct.segment._params import SegmentParams
+from rodwarp.ct.segment._seeds import _skeleton_seeds
 from rodwarp.ct._voxels import _BlockSampler, _basis, _canonical, _disc_offsets, _point_segment_distance, _unit, _window_voxels
 
 
@@ -31,7 +31,7 @@ class TraceStats:
     ----------
     skeleton_voxels, skeleton_junctions : int
         Voxels of the binarised foreground's 3-D skeleton, and of its junctions (see
-        :class:`rodwarp.ct._seeds.SeedResult`).
+        :class:`rodwarp.ct.segment._seeds.SeedResult`).
     seeds : int
         Skeleton seeds traced (straight skeleton pieces).
     split : int
@@ -262,156 +262,177 @@ def _rasterize(lines, shape_zyx, origin_zyx, radius):
     return cov
 
 
-def _detect_block(raw: np.ndarray, origin_zyx, st: _Levels, P: SegmentParams,
-                  volume_shape=None) -> TraceResult:
-    """Trace rods in one block: their axes (p0, p1) in global xyz, and the block's counts."""
-    g = ndimage.gaussian_filter(raw, P.smooth_sigma) if P.smooth_sigma > 0 else raw
-    scale = 1.0 / (st.fg_smooth - st.bg)  # the smoothed rod plateau is 1
-    g = (g - np.float32(st.bg)) * np.float32(scale)
-    level = (st.threshold - st.bg) * scale
-    mask = g > level
-    r0 = st.r0
-    tr = _Tracer(g, origin_zyx, r0, P)
-    tr.mixed = st.mixed
-    max_len = float(np.linalg.norm(raw.shape)) + 2.0
-    lines: list[tuple[np.ndarray, np.ndarray]] = []
-    cut = None
-    if volume_shape is not None:
-        cut = [(origin_zyx[a] > 0, origin_zyx[a] + raw.shape[a] < volume_shape[a]) for a in range(3)]
-    sr = _skeleton_seeds(mask, r0, P, cut)
-    seeds = sr.seeds
-    stats = TraceStats(skeleton_voxels=sr.skeleton_voxels, skeleton_junctions=sr.skeleton_junctions,
-                       seeds=len(seeds), branch_voxels=sr.branch_voxels, bent_voxels=sr.bent_voxels,
-                       bent_branches=sr.bent_branches)
-    o_xyz = np.asarray(origin_zyx, float)[::-1]
-    raw_s = []
-    r_kid = r0
-    kid_r: dict[int, float] = {}  # lines traced as rods of a bundle: their own radius
+def _kid_segment(kd):
+    """The axis (p0, p1) of a child trace ``(c, u, t0, t1)``."""
+    return (kd[0] + kd[2] * kd[1], kd[0] + kd[3] * kd[1])
 
-    def cover_radius():
-        # a bundle's rods cover only themselves, so that one the fit missed is seeded again
-        return np.array([kid_r.get(i, r0) + 1.5 for i in range(len(lines))])
 
-    def _bundle_offsets(c, u, t0, t1):
+class _BlockTrace:
+    """Tracing of one block: the smoothed image, its mask, and the rod axes traced so far.
+
+    Seeds are traced in order (:meth:`run`); each seed's trace becomes a bundle's rods
+    (:meth:`_trace_bundle`), two rods side by side (:meth:`_split_pair`) or one rod.  Axes are
+    ``(p0, p1)`` in global ``(x, y, z)`` voxels.
+    """
+
+    def __init__(self, raw: np.ndarray, origin_zyx, st: _Levels, P: SegmentParams):
+        g = ndimage.gaussian_filter(raw, P.smooth_sigma) if P.smooth_sigma > 0 else raw
+        scale = 1.0 / (st.fg_smooth - st.bg)  # the smoothed rod plateau is 1
+        self.g = (g - np.float32(st.bg)) * np.float32(scale)
+        self.mask = self.g > (st.threshold - st.bg) * scale
+        self.raw, self.origin_zyx, self.st, self.P = raw, origin_zyx, st, P
+        self.r0 = st.r0
+        self.tr = _Tracer(self.g, origin_zyx, self.r0, P)
+        self.tr.mixed = st.mixed
+        self.max_len = float(np.linalg.norm(raw.shape)) + 2.0
+        self.o_xyz = np.asarray(origin_zyx, float)[::-1]
+        self.lines: list[tuple[np.ndarray, np.ndarray]] = []
+        self.stats = TraceStats()
+        self.r_kid = self.r0     # radius of the last bundle's rods
+        self.kid_r: dict[int, float] = {}  # lines traced as rods of a bundle: their own radius
+        self._raw_norm = None
+
+    def cover_radius(self) -> np.ndarray:
+        """Radius (voxels) each line covers; a bundle's rods cover only themselves, so that one
+        the fit missed is seeded again."""
+        return np.array([self.kid_r.get(i, self.r0) + 1.5 for i in range(len(self.lines))])
+
+    def _raw_sampler(self):
+        """The raw block's samples normalised (background 0, rods 1), made on first use."""
+        if self._raw_norm is None:
+            rs, bg, scale = _BlockSampler(self.raw, self.origin_zyx), self.st.bg, 1.0 / (self.st.fg - self.st.bg)
+            self._raw_norm = lambda q: (rs(q) - bg) * scale
+        return self._raw_norm
+
+    def _bundle_offsets(self, c, u, t0, t1):
         """Offsets (k >= 3, 2) of the rods of a bundle around axis c, u, or None."""
-        nonlocal r_kid
-        from rodwarp.ct._bundles import cross_section, fit_discs, looks_bundled
+        from rodwarp.ct.segment._bundles import cross_section, fit_discs, looks_bundled
 
-        if not raw_s:  # the raw block, its samples normalised (background 0, rods 1)
-            rs, bg, scale = _BlockSampler(raw, origin_zyx), st.bg, 1.0 / (st.fg - st.bg)
-            raw_s.append(lambda q: (rs(q) - bg) * scale)
+        r0 = self.r0
+        sample = self._raw_sampler()
         e1, e2 = _basis(u)
         # a cheap screen first (the median of 4 cross-sections: almost every trace is one rod),
         # the 16-section median only for a suspected bundle
-        img, g1 = cross_section(raw_s[0], c, u, e1, e2, t0, t1, 2.5 * r0 + 2.0, h=1.0, n_pos=4)
+        img, g1 = cross_section(sample, c, u, e1, e2, t0, t1, 2.5 * r0 + 2.0, h=1.0, n_pos=4)
         if img is None or not looks_bundled(img, 1.0):
             return None
-        img, g1 = cross_section(raw_s[0], c, u, e1, e2, t0, t1, 2.5 * r0 + 2.0, h=1.0)
+        img, g1 = cross_section(sample, c, u, e1, e2, t0, t1, 2.5 * r0 + 2.0, h=1.0)
         if img is None or not looks_bundled(img, 1.0):
             return None
         fit = fit_discs(img, g1)
         if fit is None or len(fit[0]) < 3:
             return None
         # the kids' own radius (a bundle's binarised outline inflates the coarse one)
-        r_kid = min(r0, max(0.75, fit[1]))
+        self.r_kid = min(r0, max(0.75, fit[1]))
         return fit[0]
 
-    def run(seed_list):
-        for c, u, t0, t1, _ in seed_list:
-            if _lines_cover(lines, c, 0.75 * r0):
+    def _trace_bundle(self, c2, u2, a, b, kids_xy) -> bool:
+        """A bundle: one child per rod, fitted alternately, each ignoring its siblings.
+
+        Returns True when the seed is done (rods of the bundle traced, or the bundle traced
+        before), False when it is to be judged as one rod.
+        """
+        P, lines, max_len, r_kid = self.P, self.lines, self.max_len, self.r_kid
+        e1, e2 = _basis(u2)
+        kids = [(c2 + x * e1 + y * e2, u2, a, b) for x, y in kids_xy]
+
+        def sibs(i_k):
+            return [_kid_segment(kd) for j, kd in enumerate(kids) if j != i_k and kd is not None]
+
+        # the children are traced with discs of their own radius
+        tk = _Tracer(self.g, self.origin_zyx, r_kid, P)
+        for rnd in range(2):
+            for i_k in range(len(kids)):
+                if kids[i_k] is not None:
+                    fk = tk.fit(*kids[i_k], P.fit_iterations, sibs(i_k))
+                    kids[i_k] = None if fk is None else fk[:4]
+        got = covered = 0
+        for i_k in range(len(kids)):
+            if kids[i_k] is None:
                 continue
-            res = tr.trace(c, u, t0, t1, max_len)
+            if _lines_cover(lines, kids[i_k][0], 0.75 * r_kid):
+                covered += 1
+                continue
+            ch = tk.trace(*kids[i_k], max_len, sibs(i_k))
+            if ch is None or ch[3] - ch[2] < 3.0 * r_kid or _lines_cover(lines, ch[0], 0.75 * r_kid):
+                continue
+            kids[i_k] = ch[:4]
+            lines.append(_kid_segment(kids[i_k]))
+            self.kid_r[len(lines) - 1] = r_kid
+            got += 1
+        if got:
+            self.stats._bump("bundles_split", 1)
+            self.stats._bump("bundle_rods", got)
+            return True
+        return bool(covered)  # a bundle traced before, seen again: its middle is no rod
+
+    def _split_pair(self, c2, u2, a, b) -> bool:
+        """Two rods side by side when the cross-section is elongated: a child traced on each
+        side (children are not split).  Returns True when at least one child was traced."""
+        P, tr, lines, r0, max_len = self.P, self.tr, self.lines, self.r0, self.max_len
+        mom = tr.moments(c2, u2, a, b)
+        if mom is None:
+            return False
+        ev, evec = np.linalg.eigh(mom[0])
+        if not ev[1] - ev[0] > P.split_anisotropy * r0 * r0:
+            return False
+        e1, e2 = _basis(u2)
+        d2 = evec[0, 1] * e1 + evec[1, 1] * e2
+        off = max(math.sqrt(ev[1] - ev[0]), r0)
+        # the two children are fitted alternately, each ignoring the voxels nearer to its sibling
+        kids = [(c2 + off * d2, u2, a, b), (c2 - off * d2, u2, a, b)]
+        for rnd in range(2):
+            for i_k in (0, 1):
+                if kids[i_k] is None or kids[1 - i_k] is None:
+                    continue
+                fk = tr.fit(*kids[i_k], P.fit_iterations, [_kid_segment(kids[1 - i_k])])
+                kids[i_k] = None if fk is None else fk[:4]
+        got = 0
+        for i_k in (0, 1):
+            if kids[i_k] is None:
+                continue
+            sib = [_kid_segment(kids[1 - i_k])] if kids[1 - i_k] is not None else None
+            if _lines_cover(lines, kids[i_k][0], 0.75 * r0):
+                continue
+            ch = tr.trace(*kids[i_k], max_len, sib)
+            if ch is None or ch[3] - ch[2] < 3.0 * r0 or _lines_cover(lines, ch[0], 0.75 * r0):
+                continue
+            kids[i_k] = ch[:4]
+            lines.append(_kid_segment(kids[i_k]))
+            got += 1
+        if got:
+            self.stats._bump("split", 1)
+        return bool(got)
+
+    def run(self, seed_list) -> None:
+        """Trace each seed ``(c, u, t0, t1, weight)`` (global xyz) not yet covered by a line."""
+        r0 = self.r0
+        for c, u, t0, t1, _ in seed_list:
+            if _lines_cover(self.lines, c, 0.75 * r0):
+                continue
+            res = self.tr.trace(c, u, t0, t1, self.max_len)
             if res is None:
                 continue
             c2, u2, a, b, fill = res
             if b - a < 3.0 * r0:  # a rod crossed sideways is about 2 r long
                 continue
-            kids_xy = _bundle_offsets(c2, u2, a, b)
-            if kids_xy is not None:
-                # a bundle: one child per rod, fitted alternately, each ignoring its siblings
-                e1, e2 = _basis(u2)
-                kids = [(c2 + x * e1 + y * e2, u2, a, b) for x, y in kids_xy]
+            kids_xy = self._bundle_offsets(c2, u2, a, b)
+            if kids_xy is not None and self._trace_bundle(c2, u2, a, b, kids_xy):
+                continue
+            if self._split_pair(c2, u2, a, b):
+                continue
+            self.lines.append((c2 + a * u2, c2 + b * u2))
 
-                def kseg(kd):
-                    return (kd[0] + kd[2] * kd[1], kd[0] + kd[3] * kd[1])
-
-                def sibs(i_k):
-                    return [kseg(kd) for j, kd in enumerate(kids) if j != i_k and kd is not None]
-
-                # the children are traced with discs of their own radius
-                tk = _Tracer(g, origin_zyx, r_kid, P)
-                for rnd in range(2):
-                    for i_k in range(len(kids)):
-                        if kids[i_k] is not None:
-                            fk = tk.fit(*kids[i_k], P.fit_iterations, sibs(i_k))
-                            kids[i_k] = None if fk is None else fk[:4]
-                got = covered = 0
-                for i_k in range(len(kids)):
-                    if kids[i_k] is None:
-                        continue
-                    if _lines_cover(lines, kids[i_k][0], 0.75 * r_kid):
-                        covered += 1
-                        continue
-                    ch = tk.trace(*kids[i_k], max_len, sibs(i_k))
-                    if ch is None or ch[3] - ch[2] < 3.0 * r_kid or _lines_cover(lines, ch[0], 0.75 * r_kid):
-                        continue
-                    kids[i_k] = ch[:4]
-                    lines.append(kseg(kids[i_k]))
-                    kid_r[len(lines) - 1] = r_kid
-                    got += 1
-                if got:
-                    stats._bump("bundles_split", 1)
-                    stats._bump("bundle_rods", got)
-                    continue
-                if covered:  # a bundle traced before, seen again: its middle is no rod
-                    continue
-            mom = tr.moments(c2, u2, a, b)
-            if mom is not None:
-                ev, evec = np.linalg.eigh(mom[0])
-                if ev[1] - ev[0] > P.split_anisotropy * r0 * r0:
-                    # two rods side by side: trace a child on each side (children are not split)
-                    e1, e2 = _basis(u2)
-                    d2 = evec[0, 1] * e1 + evec[1, 1] * e2
-                    off = max(math.sqrt(ev[1] - ev[0]), r0)
-                    # the two children are fitted alternately, each ignoring the voxels
-                    # nearer to its sibling
-                    kids = [(c2 + off * d2, u2, a, b), (c2 - off * d2, u2, a, b)]
-
-                    def seg(kd):
-                        return (kd[0] + kd[2] * kd[1], kd[0] + kd[3] * kd[1])
-
-                    for rnd in range(2):
-                        for i_k in (0, 1):
-                            if kids[i_k] is None or kids[1 - i_k] is None:
-                                continue
-                            fk = tr.fit(*kids[i_k], P.fit_iterations, [seg(kids[1 - i_k])])
-                            kids[i_k] = None if fk is None else fk[:4]
-                    got = 0
-                    for i_k in (0, 1):
-                        if kids[i_k] is None:
-                            continue
-                        sib = [seg(kids[1 - i_k])] if kids[1 - i_k] is not None else None
-                        if _lines_cover(lines, kids[i_k][0], 0.75 * r0):
-                            continue
-                        ch = tr.trace(*kids[i_k], max_len, sib)
-                        if ch is None or ch[3] - ch[2] < 3.0 * r0 or _lines_cover(lines, ch[0], 0.75 * r0):
-                            continue
-                        kids[i_k] = ch[:4]
-                        lines.append(seg(kids[i_k]))
-                        got += 1
-                    if got:
-                        stats._bump("split", 1)
-                        continue
-            lines.append((c2 + a * u2, c2 + b * u2))
-
-    run([(s[0] + o_xyz, s[1], s[2], s[3], s[4]) for s in seeds])
-    for _ in range(P.residual_passes):
-        cov = _rasterize(lines, mask.shape, origin_zyx, cover_radius())
-        resid = mask & ~cov
+    def residual_seeds(self) -> list:
+        """Seeds of the foreground no line explains: one per eroded component big enough to be a
+        rod, longest first (empty when there is none)."""
+        r0, o_xyz = self.r0, self.o_xyz
+        cov = _rasterize(self.lines, self.mask.shape, self.origin_zyx, self.cover_radius())
+        resid = self.mask & ~cov
         resid = ndimage.binary_erosion(resid, iterations=1)
         lab, nlab = ndimage.label(resid, structure=np.ones((3, 3, 3)))
         if nlab == 0:
-            break
+            return []
         sizes = np.bincount(lab.ravel())
         min_vox = max(10, int(0.5 * math.pi * max(r0 - 1, 0.5) ** 2 * 4 * r0))
         new = []
@@ -427,12 +448,44 @@ def _detect_block(raw: np.ndarray, origin_zyx, st: _Levels, P: SegmentParams,
             u = _canonical(vt[0])
             t = (q - c) @ u
             new.append((c, u, float(t.min()), float(t.max()), len(q)))
+        new.sort(key=lambda s: (-(s[3] - s[2]), -s[4], tuple(np.round(s[0], 6))))
+        return new
+
+
+def _detect_block(raw: np.ndarray, origin_zyx, st: _Levels, P: SegmentParams,
+                  volume_shape=None) -> TraceResult:
+    """Trace rods in one block: their axes (p0, p1) in global xyz, and the block's counts.
+
+    Parameters
+    ----------
+    raw : ndarray (z, y, x)
+        The block's grey values (the chunk and its halo).
+    origin_zyx : tuple of int
+        Index of the block's first voxel in the volume.
+    st : _Levels
+        The volume's levels (stage ``stats``).
+    P : SegmentParams
+        Knobs.
+    volume_shape : tuple of int, optional
+        The whole volume's shape: skeleton branches cut by an inner block face are not ends,
+        and the mask is kept when the block is the whole volume.
+    """
+    bt = _BlockTrace(raw, origin_zyx, st, P)
+    cut = None
+    if volume_shape is not None:
+        cut = [(origin_zyx[a] > 0, origin_zyx[a] + raw.shape[a] < volume_shape[a]) for a in range(3)]
+    sr = _skeleton_seeds(bt.mask, st.r0, P, cut)
+    bt.stats = TraceStats(skeleton_voxels=sr.skeleton_voxels, skeleton_junctions=sr.skeleton_junctions,
+                          seeds=len(sr.seeds), branch_voxels=sr.branch_voxels, bent_voxels=sr.bent_voxels,
+                          bent_branches=sr.bent_branches)
+    bt.run([(s[0] + bt.o_xyz, s[1], s[2], s[3], s[4]) for s in sr.seeds])
+    for _ in range(P.residual_passes):
+        new = bt.residual_seeds()
         if not new:
             break
-        new.sort(key=lambda s: (-(s[3] - s[2]), -s[4], tuple(np.round(s[0], 6))))
-        stats._bump("residual_seeds", len(new))
-        run(new)
-    # the foreground no final rod explains is measured after refinement (rodwarp.ct._doubt), on
+        bt.stats._bump("residual_seeds", len(new))
+        bt.run(new)
+    # the foreground no final rod explains is measured after refinement (stage ``doubt``), on
     # this mask when the block is the whole volume
     whole = volume_shape is not None and tuple(raw.shape) == tuple(volume_shape)
-    return TraceResult(lines, stats, mask if whole else None)
+    return TraceResult(bt.lines, bt.stats, bt.mask if whole else None)
