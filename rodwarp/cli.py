@@ -389,7 +389,7 @@ def phantom(
 
     opts = asdict(PhantomOptions(**fields))
     check_phantom(rods=rods, shape=shape, out=out, **opts)
-    from rodwarp.ct._phantom_owner import check_phantom_out
+    from rodwarp.ct import check_phantom_out
 
     check_phantom_out(out, overwrite=overwrite)
     from rodwarp._util import slow_phase
