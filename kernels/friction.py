@@ -17,15 +17,12 @@ The velocity of a surface point, and how it responds to an impulse there (the mo
   constraint (a two-vertex rod with its vertex inverse masses would, and Gauss-Seidel would
   converge slowly on every axial load: a rod standing on its end, a pile's side walls).
 
-The contact problem with W = W_a + W_b: the normal impulse keeps the normal velocity above
-its target (speculative: close an open gap at most to touching) with P_n >= 0; the
-tangential impulse satisfies the Coulomb cone |P_t| <= mu P_n exactly: it sticks when
--W_t^-1 u_t lies inside the disc, else it slides on the cone's edge with maximal dissipation,
-P_t = -(W_t + gamma I)^-1 u_t, gamma from Newton's method on 1 / |P_t(gamma)| (concave, so the
-iteration converges monotonically; one step when W_t is isotropic). No pyramid, true
-sticking. When W couples the normal and tangential parts (rigid rods, contacts off the
-segments' interiors) a sliding contact alternates the two within the contact; a sticking one
-takes the closed-form impulse W^-1 (target n - u) when it lies inside the cone.
+The contact problem with W = W_a + W_b is the contact law's (:mod:`rodwarp.kernels.contact_laws`
+tags them): the exact law (:mod:`rodwarp.kernels.exact`: Signorini and the Coulomb cone, true
+sticking) or IMC (:mod:`rodwarp.kernels.imc`: a smooth penalty and smoothed friction).
+:func:`solve_contact` asks the law for a closed-form answer first, then alternates the normal
+and the tangential part, each solved by the law with the other held, where W couples them
+(rigid rods, contacts off the segments' interiors).
 
 Contacts that share a vertex (hence an edge) must not be visited concurrently. On the CPU a
 launch runs its threads in order (sequential Gauss-Seidel); on a GPU rod-rod contacts are
@@ -36,7 +33,7 @@ contacts run one thread per rod.
 import warp as wp
 
 from rodwarp.kernels.constants import F0, F1, HALF, FAR
-from rodwarp.kernels.imc import imc_normal_impulse, smoothed_friction_impulse
+from rodwarp.kernels import contact_laws
 from rodwarp.kernels.narrowphase import any_perpendicular
 from rodwarp.kernels.structs import ContactFrame, ContactSide, RodContacts, RodModel, StepParams
 
@@ -51,57 +48,6 @@ def approach_target(gap: wp.float64, params: StepParams):
     if gap >= F0:
         return -gap / params.dt
     return F0
-
-
-@wp.func
-def coulomb_2d(u1: wp.float64, u2: wp.float64, w11: wp.float64, w12: wp.float64, w22: wp.float64,
-               limit: wp.float64, gamma0: wp.float64):
-    """Tangential impulse (p1, p2) with u + W p = 0 when |p| <= limit (sticking), else on the
-    disc's edge with u + W p anti-parallel to p (sliding with maximal dissipation), and the
-    sliding multiplier gamma (0 when it sticks). ``gamma0``: a guess of gamma (the same
-    contact's in the last sweep), where Newton starts when it is above the lower bound."""
-    if limit <= F0:
-        return wp.vec3d(F0, F0, F0)
-    # each 2 x 2 solve takes one reciprocal of its determinant, not a division per entry: a
-    # sliding contact runs this Newton loop in every sweep, and divisions set its latency
-    idet = F1 / (w11 * w22 - w12 * w12)
-    y1 = (w22 * u1 - w12 * u2) * idet
-    y2 = (w11 * u2 - w12 * u1) * idet
-    ny2 = y1 * y1 + y2 * y2
-    if ny2 <= limit * limit:
-        return wp.vec3d(-y1, -y2, F0)  # sticks: the exact impulse
-    inv_limit = F1 / limit
-    # a lower bound of the root, |u| / limit - lambda_max(W): phi below is concave, so Newton
-    # climbs from there to the root without overshooting; from a guess above the root its
-    # first step lands below it (kept above the bound), then it climbs
-    half_tr = HALF * (w11 + w22)
-    hd = HALF * (w11 - w22)
-    lower = wp.max(F0, wp.sqrt(u1 * u1 + u2 * u2) * inv_limit - half_tr - wp.sqrt(hd * hd + w12 * w12))
-    gamma = wp.max(lower, gamma0)
-    m11 = w11 + gamma
-    m22 = w22 + gamma
-    if gamma > F0:
-        idet = F1 / (m11 * m22 - w12 * w12)
-        y1 = (m22 * u1 - w12 * u2) * idet
-        y2 = (m11 * u2 - w12 * u1) * idet
-        ny2 = y1 * y1 + y2 * y2
-    ny = wp.sqrt(ny2)
-    for it in range(40):
-        if wp.abs(ny * inv_limit - F1) <= wp.float64(1.0e-10):
-            break
-        # Newton on phi(gamma) = 1 / |y| - 1 / limit; phi' = y^T (W + gamma I)^-1 y / |y|^3
-        z1 = (m22 * y1 - w12 * y2) * idet
-        z2 = (m11 * y2 - w12 * y1) * idet
-        gamma = wp.max(lower, gamma + (ny * inv_limit - F1) * ny2 / (y1 * z1 + y2 * z2))
-        m11 = w11 + gamma
-        m22 = w22 + gamma
-        idet = F1 / (m11 * m22 - w12 * w12)
-        y1 = (m22 * u1 - w12 * u2) * idet
-        y2 = (m11 * u2 - w12 * u1) * idet
-        ny2 = y1 * y1 + y2 * y2
-        ny = wp.sqrt(ny2)
-    sc = limit / ny
-    return wp.vec3d(-y1 * sc, -y2 * sc, gamma)
 
 
 @wp.func
@@ -129,42 +75,28 @@ def local_frame(W: wp.mat33d, n: wp.vec3d, target: wp.float64):
 
 @wp.func
 def solve_contact(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp.float64, params: StepParams):
-    """The impulse of one contact under the step's contact law (``params.law``: 0 exact, 1 IMC):
-    u the contact velocity with the current impulse P applied, ``f`` its :func:`local_frame`;
-    returns the new impulse and the friction solve's guess for the next sweep, kept in the
-    frame: the sliding multiplier gamma of the exact law (0 unless it slides), the slip speed
-    of IMC (:mod:`rodwarp.kernels.imc`).
+    """The impulse of one contact under the step's contact law (``params.law``, a tag of
+    :mod:`rodwarp.kernels.contact_laws`): u the contact velocity with the current impulse P
+    applied, ``f`` its :func:`local_frame`; returns the new impulse and the law's friction
+    guess for the next sweep, kept in the frame (the exact law's sliding multiplier gamma, 0
+    unless it slides; IMC's slip speed).
 
-    Both laws alternate the normal and the tangential part, each solved exactly with the
-    other held, where the mobility couples them (rigid rods, contacts at segment ends); the
-    exact law's normal part is Signorini's, its tangential part the Coulomb cone
-    (:func:`coulomb_2d`), IMC's the implicit penalty and the smoothed friction. The exact
-    law first settles two cases in closed form: a contact that does not approach faster than
-    its target without an impulse gets none, and one whose sticking impulse
-    W^-1 (target n - u_f) lies inside the friction cone sticks with exactly that impulse
-    (with W coupling the parts, the alternation would only approach it). The rest slide on
-    the cone's edge.
+    The law may settle the contact in closed form (the exact law: no approach, or sticking);
+    otherwise the normal and the tangential part alternate, each solved exactly by the law
+    with the other held, where the mobility couples them (rigid rods, contacts at segment
+    ends).
     """
     wnn = f.k[0]
     if wnn <= F0:
         return P, f.gamma
     W = f.W
     uf = u - W * P  # the velocity this contact's impulse acts on
-    imc = params.law == 1
-    rounds = 2
-    tol = wp.float64(1.0e-9)
-    if imc:
-        rounds = 3
-        tol = wp.float64(1.0e-10)
-    else:
-        if wp.dot(uf, n) >= f.target:
-            return wp.vec3d(F0, F0, F0), F0  # separating or resting without load: no impulse
-        Ps = f.Winv * (n * f.target - uf)
-        psn = wp.dot(Ps, n)
-        if psn > F0:
-            pst = Ps - n * psn
-            if wp.dot(pst, pst) <= mu * mu * psn * psn:
-                return Ps, F0  # sticks: the exact impulse
+    law = params.law
+    lp = params.law_params
+    solved, P_closed, guess_closed = contact_laws.closed_form(law, uf, n, f.target, f.Winv, mu, lp)
+    if solved != 0:
+        return P_closed, guess_closed
+    rounds, tol, idle = contact_laws.settings(law)
     e1 = f.e1
     e2 = wp.cross(n, e1)
     pn = wp.dot(P, n)
@@ -172,19 +104,11 @@ def solve_contact(u: wp.vec3d, f: ContactFrame, n: wp.vec3d, P: wp.vec3d, mu: wp
     guess = f.gamma
     for it in range(rounds):
         cn = wp.dot(uf + W * pt, n)  # normal velocity with the tangential part held
-        pn_new = F0
-        if imc:
-            pn_new = imc_normal_impulse(f.gap, cn, wnn, pn, params)
-        else:
-            pn_new = wp.max(F0, (f.target - cn) / wnn)
+        pn_new = contact_laws.normal_impulse(law, f.gap, f.target, cn, wnn, pn, params.dt, lp)
         c = uf + (W * n) * pn_new
         c1 = wp.dot(c, e1)
         c2 = wp.dot(c, e2)
-        q = wp.vec3d(F0, F0, F0)
-        if imc:
-            q = smoothed_friction_impulse(c1, c2, f.k[1], f.k[2], f.k[3], mu * pn_new, guess, params)
-        else:
-            q = coulomb_2d(c1, c2, f.k[1], f.k[2], f.k[3], mu * pn_new, guess)
+        q = contact_laws.friction_impulse(law, c1, c2, f.k[1], f.k[2], f.k[3], mu * pn_new, guess, lp)
         guess = q[2]
         pt_new = e1 * q[0] + e2 * q[1]
         change = wp.abs(pn_new - pn) + wp.length(pt_new - pt)
@@ -397,10 +321,12 @@ def solve_rod_contact(k: int, frames: wp.array(dtype=ContactFrame), impulse: wp.
     contact bundles: the innermost call of every sweep, so nothing else is copied."""
     P = impulse[k]
     n = normal[k]
-    if params.law == 0 and P[0] == F0 and P[1] == F0 and P[2] == F0:
+    rounds, tol, idle = contact_laws.settings(params.law)
+    if idle != 0 and P[0] == F0 and P[1] == F0 and P[2] == F0:
         # an idle contact (no impulse yet) that does not approach faster than its target gets
-        # none: what the exact solve below returns, without copying the whole frame or touching
-        # the rods (most speculative contacts of a pile are idle in most sweeps)
+        # none under a law that says so (the exact law): what the solve below returns, without
+        # copying the whole frame or touching the rods (most speculative contacts of a pile are
+        # idle in most sweeps)
         if frames[k].k[0] > F0:
             u = side_velocity(frames[k].a, v, spin) - side_velocity(frames[k].b, v, spin)
             if wp.dot(u, n) >= frames[k].target:

@@ -25,9 +25,16 @@ is implicit Euler with this law, so its fixed point is the law's static equilibr
 import warp as wp
 
 from rodwarp.kernels.constants import F0, F1, HALF
-from rodwarp.kernels.structs import ContactFrame, StepParams
+from rodwarp.kernels.structs import LawParams
 
 wp.set_module_options({"enable_backward": False})
+
+# the law's parameter vector (LawParams), as rodwarp/sim/law_imc.py packs it
+STIFFNESS = wp.constant(0)  # k_c (N/m): energy k_c [softplus(K1 (-gap)) / K1]^2
+K1 = wp.constant(1)  # 15 / delta (1/m)
+K2 = wp.constant(2)  # 15 / nu (s/m)
+REACH = wp.constant(3)  # distance tolerance delta (m): no force at a larger gap
+NU = wp.constant(4)  # slip tolerance nu (m/s): full Coulomb friction above it
 
 
 @wp.func
@@ -48,29 +55,29 @@ def logistic(x: wp.float64):
 
 
 @wp.func
-def imc_normal_force(gap: wp.float64, params: StepParams):
+def imc_normal_force(gap: wp.float64, lp: LawParams):
     """F(g) (N) of the IMC penalty at surface gap ``gap`` (m) and its slope dF/dg (N/m, <= 0)."""
-    if gap > params.imc_reach:
+    if gap > lp[REACH]:
         return wp.vec2d(F0, F0)
-    x = -params.imc_k1 * gap
+    x = -lp[K1] * gap
     sp = softplus(x)
     s = logistic(x)
-    k2 = wp.float64(2.0) * params.imc_k
-    return wp.vec2d(k2 * sp * s / params.imc_k1, -k2 * (s * s + sp * s * (F1 - s)))
+    k2 = wp.float64(2.0) * lp[STIFFNESS]
+    return wp.vec2d(k2 * sp * s / lp[K1], -k2 * (s * s + sp * s * (F1 - s)))
 
 
 @wp.func
-def imc_normal_impulse(gap: wp.float64, c: wp.float64, wnn: wp.float64, guess: wp.float64, params: StepParams):
+def imc_normal_impulse(gap: wp.float64, c: wp.float64, wnn: wp.float64, guess: wp.float64, dt: wp.float64,
+                       lp: LawParams):
     """The normal impulse p >= 0 (N s) with p = dt F(gap + dt (c + wnn p)): ``c`` the normal
     velocity without this impulse (m/s), ``wnn`` the contact's normal mobility.
 
     h(p) = p - dt F(gap + dt (c + wnn p)) is increasing and concave (F is decreasing and
     convex), h(0) <= 0: Newton from a point left of the root climbs to it monotonically; from
     the right its first step lands left of it (clamped at 0)."""
-    dt = params.dt
     p = wp.max(guess, F0)
     for it in range(60):
-        fs = imc_normal_force(gap + dt * (c + wnn * p), params)
+        fs = imc_normal_force(gap + dt * (c + wnn * p), lp)
         h = p - dt * fs[0]
         dh = F1 - dt * dt * wnn * fs[1]
         step = h / dh
@@ -82,12 +89,12 @@ def imc_normal_impulse(gap: wp.float64, c: wp.float64, wnn: wp.float64, guess: w
 
 
 @wp.func
-def smoothed_gamma(s: wp.float64, params: StepParams):
+def smoothed_gamma(s: wp.float64, lp: LawParams):
     """gamma(s) / s and its derivative in s, for slip speed s (m/s) >= 0: gamma = tanh(K2 s / 2)
     below nu, 1 above (series near 0, where the quotient cancels)."""
-    if s > params.imc_nu:
+    if s > lp[NU]:
         return wp.vec2d(F1 / s, -F1 / (s * s))
-    hk = HALF * params.imc_k2
+    hk = HALF * lp[K2]
     x = hk * s
     if x < wp.float64(1.0e-4):
         return wp.vec2d(hk * (F1 - x * x / wp.float64(3.0)), -hk * hk * wp.float64(2.0) * x / wp.float64(3.0))
@@ -97,7 +104,7 @@ def smoothed_gamma(s: wp.float64, params: StepParams):
 
 @wp.func
 def smoothed_friction_impulse(c1: wp.float64, c2: wp.float64, w11: wp.float64, w12: wp.float64, w22: wp.float64,
-                              limit: wp.float64, guess: wp.float64, params: StepParams):
+                              limit: wp.float64, guess: wp.float64, lp: LawParams):
     """Tangential impulse (p1, p2) (N s) of the smoothed friction, and the slip speed s (m/s):
     p = -limit gamma(s) u / s with u = c + W_t p the end-of-step slip velocity, |u| = s;
     ``limit`` = mu p_n. With beta = limit gamma(s) / s, u = (I + beta W_t)^-1 c and s solves
@@ -112,7 +119,7 @@ def smoothed_friction_impulse(c1: wp.float64, c2: wp.float64, w11: wp.float64, w
     u2 = c2
     beta = F0
     for it in range(80):
-        g = smoothed_gamma(s, params)
+        g = smoothed_gamma(s, lp)
         beta = limit * g[0]
         a11 = F1 + beta * w11
         a22 = F1 + beta * w22
@@ -139,3 +146,34 @@ def smoothed_friction_impulse(c1: wp.float64, c2: wp.float64, w11: wp.float64, w
             s_new = HALF * (lo + hi)
         s = s_new
     return wp.vec3d(-beta * u1, -beta * u2, s)
+
+
+# ----------------------------------------------------------------------------- the law's interface
+# (kernels/contact_laws.py)
+
+
+@wp.func
+def settings():
+    """Three alternations of the normal and tangential parts, to 1e-10; no idle shortcut (the
+    penalty acts before contact)."""
+    return 3, wp.float64(1.0e-10), 0
+
+
+@wp.func
+def closed_form(uf: wp.vec3d, n: wp.vec3d, target: wp.float64, Winv: wp.mat33d, mu: wp.float64, lp: LawParams):
+    """None: every contact within reach is solved by the alternation."""
+    return 0, wp.vec3d(F0, F0, F0), F0
+
+
+@wp.func
+def normal_impulse(gap: wp.float64, target: wp.float64, cn: wp.float64, wnn: wp.float64, pn: wp.float64,
+                   dt: wp.float64, lp: LawParams):
+    """:func:`imc_normal_impulse` from the current impulse ``pn``."""
+    return imc_normal_impulse(gap, cn, wnn, pn, dt, lp)
+
+
+@wp.func
+def friction_impulse(c1: wp.float64, c2: wp.float64, w11: wp.float64, w12: wp.float64, w22: wp.float64,
+                     limit: wp.float64, guess: wp.float64, lp: LawParams):
+    """:func:`smoothed_friction_impulse`; the guess is the slip speed."""
+    return smoothed_friction_impulse(c1, c2, w11, w12, w22, limit, guess, lp)

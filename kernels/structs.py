@@ -21,6 +21,9 @@ rod is two vertices with the consistent mass of a rigid bar, which has non-zero 
 
 import warp as wp
 
+#: a contact law's parameters, laid out by the law's own modules (kernels/exact.py, kernels/imc.py)
+LawParams = wp.types.vector(length=8, dtype=wp.float64)
+
 
 @wp.struct
 class RodModel:
@@ -121,7 +124,7 @@ class ContactFrame:
     target: wp.float64  # lowest normal relative velocity (m/s)
     Winv: wp.mat33d  # W^-1 (N s / m), for the exact sticking impulse; zero when W is singular
     gamma: wp.float64  # the sliding solve's multiplier in the last sweep (m/s per N s), its next guess
-    gap: wp.float64  # surface gap at the start of the step (m; negative: overlap), for the IMC law
+    gap: wp.float64  # surface gap at the start of the step (m; negative: overlap), for laws acting at a distance (IMC)
 
 
 @wp.struct
@@ -205,9 +208,5 @@ class StepParams:
     iterations: int  # most Gauss-Seidel sweeps (the single-launch solve of a sequential device)
     tolerance: wp.float64  # stop sweeping below this velocity change (m/s); 0: never early
     length_tolerance: wp.float64  # ... and with no edge length off by more than this (m)
-    law: int  # contact law: 0 exact (Signorini and the Coulomb cone), 1 IMC (smooth penalty, smoothed friction)
-    imc_k: wp.float64  # IMC contact stiffness k_c (N/m): energy k_c [softplus(K1 (-gap)) / K1]^2
-    imc_k1: wp.float64  # IMC K1 = 15 / delta (1/m)
-    imc_k2: wp.float64  # IMC K2 = 15 / nu (s/m)
-    imc_reach: wp.float64  # IMC distance tolerance delta (m): no force at a larger gap
-    imc_nu: wp.float64  # IMC slip tolerance nu (m/s): full Coulomb friction above it
+    law: int  # contact law: its tag (kernels/contact_laws.py; host rodwarp/sim/contact_law.py)
+    law_params: LawParams  # the law's parameters, as its host module packs them (device_params)

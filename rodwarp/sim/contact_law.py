@@ -1,116 +1,147 @@
-"""Which law acts at the rods' contacts: exact (the default) or IMC, the paper's DisMech law.
+"""Which law acts at the rods' contacts: one tagged kind, a host module and a device module per law.
 
-``exact``: Signorini non-penetration and the Coulomb cone, sticking exactly (docs/physics.md,
-"Contact"). ``imc``: DisMech's incremental potential contact, a smooth penalty within a distance
-tolerance delta and friction smoothed below a slip tolerance nu, on the centreline
-(docs/physics.md, "The IMC contact law"; :mod:`rodwarp.kernels.imc`). Both act on rod-rod and
-rod-wall contacts alike.
+A contact law acts on rod-rod and rod-wall contacts alike. Each law is
+
+* a host module, ``rodwarp/sim/law_<name>.py``: a frozen dataclass subclass of
+  :class:`ContactLaw` holding the law's parameters (their checks, defaults and units) and
+  packing them for the device (:meth:`ContactLaw.device_params`);
+* a device module, ``kernels/<name>.py``: the law's ``wp.func`` s with the interface of
+  :mod:`rodwarp.kernels.contact_laws`;
+* a line in the registry below (:func:`register_contact_law`), which also gives the law its
+  device tag.
+
+Built in: ``exact`` (:class:`~rodwarp.sim.law_exact.ExactLaw`, the default: Signorini
+non-penetration and the Coulomb cone, sticking exactly; docs/physics.md, "Contact") and
+``imc`` (:class:`~rodwarp.sim.law_imc.ImcLaw`, DisMech's incremental potential contact;
+docs/physics.md, "The IMC contact law").
+
+>>> ContactLaw.from_tag("imc", nu=1e-3)          # or ImcLaw(nu=1e-3), or ContactLaw("imc", nu=1e-3)
+ImcLaw(delta=None, nu=0.001, stiffness=None)
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from types import ModuleType
+from typing import ClassVar
 
 from rodwarp.errors import RodwarpError, RodwarpTypeError
-from rodwarp.arguments import real
-from rodwarp.sim._limits import MAX_LENGTH_M, MAX_SPEED
 
-LAWS = ("exact", "imc")
-#: IMC's K1 = 15 / delta and K2 = 15 / nu (DisMech's contact_force.cpp and floor_contact_force.cpp)
-IMC_SHARPNESS = 15.0
-#: default distance tolerance delta in diameters of the thinnest rod: the paper's "contact
-#: tolerance d/10" (its Materials and Methods)
-IMC_DELTA_DIAMETERS = 0.1
-#: default slip tolerance nu (m/s). DisMech's examples use 1e-3 m/s (its README and
-#: examples' "nu"); the paper does not state its value
-IMC_NU = 1e-3
-#: default contact stiffness k_c in units of the heaviest rod's weight per delta: stiff enough
-#: that a contact carrying 20 rod weights overlaps by 1% of delta beyond the law's smoothing, and
-#: an impact at 3 m/s on l = 1 m steel rods stays within 0.7 delta (k_c = 1000 m g / delta;
-#: DisMech's floor, 1e4 N/m for gram-scale rods with delta ~ 0.1 mm, sits at about 100 m g / delta)
-IMC_STIFFNESS_WEIGHTS = 1000.0
-#: stiffest contact accepted (N/m): a steel bar of 1 m^2 section and 0.2 mm length, far beyond
-#: any contact between rods
-IMC_MAX_STIFFNESS = 1e15
+#: the registered laws by name (:func:`register_contact_law`)
+CONTACT_LAWS: dict[str, type] = {}
+#: their device tags (the index of their device module in kernels/contact_laws.py)
+_TAGS: dict[str, int] = {}
+
+
+class _Tagged(type):
+    """Lets ``ContactLaw(name, **parameters)`` build the registered law of that name."""
+
+    def __call__(cls, *args, **kwargs):
+        if cls is ContactLaw:
+            return ContactLaw.from_tag(*args, **kwargs)
+        return super().__call__(*args, **kwargs)
 
 
 @dataclass(frozen=True)
-class ContactLaw:
-    """The contact law of a :class:`~rodwarp.sim.Model`.
+class ContactLaw(metaclass=_Tagged):
+    """The contact law of a :class:`~rodwarp.sim.Model`: the base of every law's host class.
 
-    Parameters
+    ``ContactLaw(name, **parameters)`` is :meth:`from_tag`. A subclass sets the class
+    attributes below and overrides the methods its law needs.
+
+    Attributes
     ----------
-    name : {"exact", "imc"}
-        ``exact`` (default) or ``imc``.
-    delta : float, optional
-        IMC distance tolerance (m, in (0, 1e6]): the penalty acts at surface gaps below it.
-        Default ``IMC_DELTA_DIAMETERS`` (0.1) diameters of the thinnest rod.
-    nu : float
-        IMC slip tolerance (m/s, in (0, 1e3]): friction is full Coulomb above it and smoothed
-        below it.
-    stiffness : float, optional
-        IMC contact stiffness k_c (N/m, in (0, ``IMC_MAX_STIFFNESS``]) of the energy
-        k_c [softplus(-K1 g) / K1]^2. Default
-        ``IMC_STIFFNESS_WEIGHTS`` heaviest-rod weights per delta (gravity's magnitude, 9.81 m/s^2
-        without gravity).
+    name : str
+        The law's tag (``exact``, ``imc``).
+    device : module
+        Its device module (:mod:`rodwarp.kernels.contact_laws` states the interface).
+    projects_overlaps : bool
+        Whether the solver's post-stabilisation removes overlaps after a step (a penalty
+        law's overlap is its compliance, not an error).
     """
 
-    name: str = "exact"
-    delta: float | None = None
-    nu: float = IMC_NU
-    stiffness: float | None = None
+    name: ClassVar[str] = ""
+    device: ClassVar[ModuleType | None] = None
+    projects_overlaps: ClassVar[bool] = True
 
-    def __post_init__(self):
-        if not isinstance(self.name, str):
-            raise RodwarpTypeError(f"name must be 'exact' or 'imc', got {type(self.name).__name__} {self.name!r}")
-        if self.name not in LAWS:
-            raise RodwarpError(f"contact law must be exact or imc, got '{self.name}'")
-        for what, value, top, unit in (("delta", self.delta, MAX_LENGTH_M, "m"), ("nu", self.nu, MAX_SPEED, "m/s"),
-                                       ("stiffness", self.stiffness, IMC_MAX_STIFFNESS, "N/m")):
-            if value is not None and not real(what, value, le=top, unit=unit, hint=f"the IMC {what}") > 0:
-                raise RodwarpError(f"{what} must be a positive number ({unit}), the IMC {what}, got {value:g}")
+    @staticmethod
+    def from_tag(name: str = "exact", **parameters) -> ContactLaw:
+        """The registered law called ``name`` with these parameters (its class's fields).
+
+        Raises
+        ------
+        TypeError
+            ``name`` not a string, or a parameter the law does not have.
+        RodwarpError
+            An unknown law, or a parameter out of its range.
+        """
+        if not isinstance(name, str):
+            raise RodwarpTypeError(f"name must be one of {', '.join(CONTACT_LAWS)}, got "
+                                   f"{type(name).__name__} {name!r}")
+        if name not in CONTACT_LAWS:
+            raise RodwarpError(f"contact law must be {' or '.join(CONTACT_LAWS)}, got '{name}'")
+        return CONTACT_LAWS[name](**parameters)
 
     @property
-    def imc(self) -> bool:
-        return self.name == "imc"
+    def tag(self) -> int:
+        """The law's device tag (``StepParams.law``)."""
+        return _TAGS[self.name]
 
     def resolved(self, min_diameter: float, rod_weight: float) -> ContactLaw:
         """This law with its defaults filled in for a scene of rods at least ``min_diameter``
         (m) thick whose heaviest rod weighs ``rod_weight`` (N)."""
-        if not self.imc:
-            return self
-        delta = self.delta if self.delta is not None else IMC_DELTA_DIAMETERS * min_diameter
-        k = self.stiffness if self.stiffness is not None else IMC_STIFFNESS_WEIGHTS * rod_weight / delta
-        return replace(self, delta=float(delta), stiffness=float(k))
+        return self
+
+    def reach(self) -> float:
+        """Surface gap (m) below which the law may act: contacts must be found there (the
+        model's contact distance is raised to it). 0: only at touching."""
+        return 0.0
+
+    def device_params(self) -> tuple:
+        """The parameters as the device module reads them (up to 8 floats, the rest 0)."""
+        return ()
 
     def describe(self) -> str:
         """One line naming the law and its parameters (for summaries and figures)."""
-        if not self.imc:
-            return "exact (Signorini and the Coulomb cone)"
-        d = f"{self.delta:.3g} m" if self.delta is not None else f"{IMC_DELTA_DIAMETERS:g} d"
-        k = f"{self.stiffness:.3g} N/m" if self.stiffness is not None else f"{IMC_STIFFNESS_WEIGHTS:g} m g / delta"
-        return f"IMC (delta {d}, nu {self.nu:.3g} m/s, k_c {k})"
+        return self.name
 
     def to_dict(self) -> dict:
-        return {"name": self.name, "delta_m": self.delta, "nu_m_per_s": self.nu, "stiffness_N_per_m": self.stiffness}
+        """The law and its parameters, for summaries (``name`` and each parameter with its unit)."""
+        return {"name": self.name}
 
 
-def imc_force(gap, delta: float, stiffness: float):
-    """The IMC normal force F(g) (N) at surface gap ``gap`` (m), on the host (NumPy): the same
-    law as :func:`rodwarp.kernels.imc.imc_normal_force`, for checks and tests."""
-    import numpy as np
+def register_contact_law(cls: type) -> type:
+    """Add a law's host class to :data:`CONTACT_LAWS` and its device module to the kernels'
+    dispatch (its device tag: the registration order). Usable as a class decorator; register
+    every law before the first :class:`~rodwarp.sim.RodSolver` is made.
 
-    g = np.asarray(gap, dtype=float)
-    k1 = IMC_SHARPNESS / delta
-    x = -k1 * g
-    sp = np.logaddexp(0.0, x)
-    s = 0.5 * (1.0 + np.tanh(0.5 * x))
-    return np.where(g > delta, 0.0, 2.0 * stiffness * sp * s / k1)
+    Raises
+    ------
+    RodwarpError
+        Not a :class:`ContactLaw` subclass with a name and a device module, or a second law
+        of the same name.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, ContactLaw) and cls.name and cls.device is not None):
+        raise RodwarpError(f"a contact law is a ContactLaw subclass with a name and a device module, got {cls!r}")
+    if CONTACT_LAWS.get(cls.name, cls) is not cls:
+        raise RodwarpError(f"a contact law named '{cls.name}' is already registered")
+    from rodwarp.kernels import contact_laws
+
+    try:
+        _TAGS[cls.name] = contact_laws.register(cls.device)
+    except RuntimeError as e:
+        raise RodwarpError(str(e)) from None
+    CONTACT_LAWS[cls.name] = cls
+    return cls
 
 
-def imc_creep_speed(load_ratio, nu: float):
-    """The slip speed (m/s) at which IMC's smoothed friction balances a tangential load of
-    ``load_ratio`` = T / (mu F_n) < 1: (2 / K2) artanh(T / (mu F_n)), K2 = 15 / nu."""
-    import numpy as np
+# the registry: one line per law, in device-tag order
+from rodwarp.sim.law_exact import ExactLaw  # noqa: E402
+from rodwarp.sim.law_imc import (IMC_DELTA_DIAMETERS, IMC_MAX_STIFFNESS, IMC_NU, IMC_SHARPNESS,  # noqa: E402,F401
+                                 IMC_STIFFNESS_WEIGHTS, ImcLaw, imc_creep_speed, imc_force)
 
-    return 2.0 * nu / IMC_SHARPNESS * np.arctanh(np.asarray(load_ratio, dtype=float))
+register_contact_law(ExactLaw)
+register_contact_law(ImcLaw)
+
+#: the registered laws' names (kept for callers that list them)
+LAWS = tuple(CONTACT_LAWS)

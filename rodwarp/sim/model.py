@@ -187,10 +187,11 @@ class Model:
         spin (an infinite axial inertia): friction then acts on the centreline only, the
         model of the seed paper's disMech, kept for comparison (docs/physics.md, "Coulomb
         friction at the surface, and rolling").
-    contact_law : ContactLaw or {"exact", "imc"}
-        The law at rod-rod and rod-wall contacts (:class:`~rodwarp.sim.ContactLaw`): exact
-        (default) or DisMech's IMC; its defaults (delta, stiffness) are filled in from the
-        rods and gravity (``model.contact_law``). IMC acts on the centreline in DisMech: pair
+    contact_law : ContactLaw or str
+        The law at rod-rod and rod-wall contacts (:class:`~rodwarp.sim.ContactLaw`, or the
+        name of a registered one, :data:`~rodwarp.sim.contact_law.CONTACT_LAWS`): exact
+        (default) or DisMech's IMC; its defaults (IMC's delta, stiffness) are filled in from
+        the rods and gravity (``model.contact_law``). IMC acts on the centreline in DisMech: pair
         it with ``rolling=False``.
     device : str
         ``cpu``, ``cuda``, ``cuda:N`` or ``auto``.
@@ -234,7 +235,7 @@ class Model:
     ):
         rods = check_rods(rods)
         instance("material", material, Material, "a Material (Material(young=..., density=...))")
-        instance("contact_law", contact_law, (ContactLaw, str), "a ContactLaw or 'exact' or 'imc'")
+        instance("contact_law", contact_law, (ContactLaw, str), "a ContactLaw or the name of one ('exact', 'imc')")
         check_model_options(dict(gravity=gravity, mu=mu, damping=damping, pinned=pinned,
                                  contact_distance=contact_distance, rod_model=rod_model, device=device))
         if rod_model not in ROD_MODELS:
@@ -348,13 +349,12 @@ class Model:
         self.bend_stiffness_np = material.young * inertia_area
         self.radius_np = r.astype(np.float64)
         self.contact_distance = float(contact_distance) if contact_distance is not None else 0.1 * float(2 * r.min())
-        law = ContactLaw(contact_law) if isinstance(contact_law, str) else contact_law
+        law = ContactLaw.from_tag(contact_law) if isinstance(contact_law, str) else contact_law
         g_mag = float(np.linalg.norm(self.gravity)) or 9.81
         rod_mass = np.bincount(vertex_rod, weights=edge_mass, minlength=N) if V else np.zeros(1)
         self.contact_law = law.resolved(float(2 * r.min()), float(rod_mass.max()) * g_mag)
-        if self.contact_law.imc:
-            # the penalty acts up to delta from touching: pairs and walls must be found there
-            self.contact_distance = max(self.contact_distance, self.contact_law.delta)
+        # contacts must be found wherever the law acts
+        self.contact_distance = max(self.contact_distance, self.contact_law.reach())
 
         d = self.device
         st = self.arrays = _structs().RodModel()

@@ -35,12 +35,11 @@ import warp as wp
 
 from rodwarp._warp import LaunchCache
 from rodwarp.errors import RodwarpError
-from rodwarp.kernels import broadphase, elastics, frames, friction, narrowphase, solve, wall_contacts
-from rodwarp.kernels.structs import ContactFrame, RodFactors, StepParams
+from rodwarp.kernels import broadphase, contact_laws, elastics, frames, friction, narrowphase, solve, wall_contacts
+from rodwarp.kernels.structs import ContactFrame, LawParams, RodFactors, StepParams
 from rodwarp.sim._bounds import STEPS_PER_PERIOD, StepBounds
 from rodwarp.sim._diagnostics import SolverChecks
 from rodwarp.sim._launches import SolveLaunches
-from rodwarp.sim.contact_law import IMC_SHARPNESS
 from rodwarp.sim.contacts import ContactPipeline, ContactPoints
 from rodwarp.arguments import instance, optional_real, real, whole
 from rodwarp.sim._limits import MAX_LENGTH_M, MAX_SPEED
@@ -240,6 +239,10 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         self._warned_explicit = False
         # one StepParams for the solver's life, its fields set every step (recorded launches)
         self._params = StepParams()
+        law = model.contact_law
+        self._law_tag = law.tag
+        self._law_params = LawParams(*law.device_params(), *[0.0] * (8 - len(law.device_params())))
+        contact_laws.seal()  # the kernels built from here on dispatch over the laws registered now
         d = model.device
         V = model.n_vertices
         f = self.factors = RodFactors()
@@ -490,14 +493,8 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         params.iterations = self.iterations
         params.tolerance = wp.float64(self.tolerance)
         params.length_tolerance = wp.float64(self.length_tolerance)
-        law = m.contact_law
-        params.law = int(law.imc)
-        if law.imc:
-            params.imc_k = wp.float64(law.stiffness)
-            params.imc_k1 = wp.float64(IMC_SHARPNESS / law.delta)
-            params.imc_k2 = wp.float64(IMC_SHARPNESS / law.nu)
-            params.imc_reach = wp.float64(law.delta)
-            params.imc_nu = wp.float64(law.nu)
+        params.law = self._law_tag
+        params.law_params = self._law_params
 
         if n_contacts:
             if self._frames.shape[0] < n_contacts:
@@ -553,8 +550,7 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         self._launch("elastics", elastics.integrate_positions, dim=V, device=dev,
                      inputs=[state_in.x, state_out.v, fdt, state_out.x])
         passes = 0
-        # an IMC overlap is the penalty's compliance, not an error to project away
-        if self.position_sweeps and (n_contacts or P) and not m.contact_law.imc:
+        if self.position_sweeps and (n_contacts or P) and m.contact_law.projects_overlaps:
             passes = self._project_positions(rs_in, state_out, contacts_view, walls, wc, params, P)
         self._launch("elastics", frames.advance_frames, dim=V, device=dev, inputs=[
             m.arrays, state_in.x, state_out.x, state_in.director, state_in.theta, state_out.spin, fdt,
