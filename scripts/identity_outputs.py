@@ -100,6 +100,18 @@ def _digest_folder(folder: Path) -> dict[str, str]:
     return out
 
 
+def _overlay(code: Path, where: Path) -> str:
+    """A ``PYTHONPATH`` entry whose ``rodwarp`` is ``code``'s, with ``code/kernels`` as
+    ``rodwarp.kernels`` (the installed layout): without it ``rodwarp.kernels`` would resolve
+    through the environment's editable install to this checkout's kernels."""
+    pkg = where / "rodwarp"
+    pkg.mkdir(parents=True)
+    for entry in (code / "rodwarp").iterdir():
+        (pkg / entry.name).symlink_to(entry)
+    (pkg / "kernels").symlink_to(code / "kernels")
+    return str(where)
+
+
 def _run(args, out: Path, env) -> float:
     target = out / "stack.tif" if args[0] == "phantom" else out  # a phantom is a file; its truth lies beside it
     cmd = [sys.executable, "-m", "rodwarp.cli", *args, "--out", str(target), "--quiet"]
@@ -121,10 +133,10 @@ def main() -> int:
     ap.add_argument("--only", default="", help="comma-separated jobs (default: all)")
     ap.add_argument("--time-main", type=int, default=0, help="time the main job this many more times")
     a = ap.parse_args()
-    env = dict(os.environ, PYTHONPATH=str(a.code.resolve()))
     only = set(filter(None, a.only.split(",")))
     result = {"code": str(a.code), "jobs": {}, "wall_s": {}}
     with tempfile.TemporaryDirectory() as tmp:
+        env = dict(os.environ, PYTHONPATH=_overlay(a.code.resolve(), Path(tmp) / "code"))
         for name, args in JOBS.items():
             if only and name not in only:
                 continue
