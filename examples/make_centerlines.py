@@ -1,7 +1,7 @@
 """Make ``examples/centerlines.csv``: 60 straight rods (l = 0.1 m, d = 2 mm, aspect ratio 50)
 placed by random sequential addition in a 0.1 x 0.1 x 0.25 m box, written as a CSV of rod
 centrelines in metres with no radius column, the way a tracing tool exports them (so readers
-pass ``--diameter 0.002 --units m``, as the README shows).
+pass ``--diameter 0.002 --units m``, as docs/commands.md shows).
 
     python examples/make_centerlines.py
 """
