@@ -1,6 +1,7 @@
-"""Geometry in voxel space shared by the segmentation stages: bases, discs, segment windows, samplers.
+"""Geometry in voxel space shared by ``rodwarp.ct``: bases, discs, segment windows, samplers, polyline
+resampling; and the parsing of voxel sizes (volume files and segmentation alike).
 
-Points are ``(x, y, z)`` in working voxels; arrays are indexed ``(z, y, x)``.  This module must not import warp.
+Points are ``(x, y, z)`` in working voxels; arrays are indexed ``(z, y, x)``.
 """
 
 from __future__ import annotations

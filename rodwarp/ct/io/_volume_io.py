@@ -4,8 +4,6 @@ Volumes are NumPy-style arrays indexed ``(z, y, x)`` = (slice, row, column). Eve
 the input raises :class:`~rodwarp.errors.RodwarpError` with a one-line message that says what is
 wrong and how to fix it. Writing (:func:`write_tiff`, atomic) and the voxel size from the
 metadata (:func:`read_voxel_size`, ...) are in :mod:`rodwarp.ct.io._volume_meta`, re-exported here.
-
-This module does not import warp.
 """
 
 from __future__ import annotations

@@ -6,8 +6,6 @@ multi-page TIFF with its ImageJ metadata: axes, voxel size, unit) and the voxel 
 ratio read back from TIFF, OME-TIFF and OME-Zarr metadata (:func:`read_voxel_size`,
 :func:`read_voxel_unit`, :func:`read_voxel_ratio`). The voxels are read and checked in
 :mod:`rodwarp.ct.io._volume_io`.
-
-This module does not import warp.
 """
 
 from __future__ import annotations

@@ -10,8 +10,6 @@ faces).  The tests and ``benchmarks/bench_segment_scans.py`` score the segmentat
 (voxel widths: x and y in voxels, z in voxel widths too, so an anisotropic scan's truth is in
 the same units as an isotropic one's), the voxel size (Z, Y, X) in those units and whether the
 truth is curved.
-
-This module does not import warp.
 """
 
 from __future__ import annotations

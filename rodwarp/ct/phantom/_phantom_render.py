@@ -8,8 +8,6 @@ the ``rodwarp phantom`` command are in :mod:`rodwarp.ct.phantom._phantom`.
 
 Volumes are indexed ``(z, y, x)`` = (slice, row, column); a point in voxel units has
 ``x = column``, ``y = row``, ``z = slice`` and the centre of voxel ``(0, 0, 0)`` is the origin.
-
-This module does not import warp.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ parallel rods (:func:`scene_bundles`) and curved ones (:func:`scene_arcs`, gentl
 :func:`scene_wire_tangle`, a nest-like tangle of wires).  Points are ``(x, y, z)`` with the
 centre of voxel ``(0, 0, 0)`` at the origin; every scene keeps its rods ``_MARGIN`` voxels
 inside the volume faces and records its truth contacts (:func:`rodwarp.ct.phantom_truth`).
-Render one with :func:`rodwarp.ct.render_phantom`.  This module does not import warp.
+Render one with :func:`rodwarp.ct.render_phantom`.
 """
 
 from __future__ import annotations

@@ -13,14 +13,12 @@ fraction of a voxel).  This module recognises it and gives the stages what they 
 * :func:`mask_of` is the stack as the rods' mask (1.0 rods, 0.0 background, float32; lazy
   for a lazy stack): preparation has nothing to correct, and resamples anisotropic voxels
   through the mask's signed distance (:func:`resample_mask`).
-* :func:`mask_levels` is stage 1 for a mask: the levels are known (0 and 1, no noise); the
+* :func:`mask_levels` is stage ``stats`` for a mask: the levels are known (0 and 1, no noise); the
   coarse radius comes from the mask's distance transform, the tracer's threshold from the
   smoothed mask, so detection runs as for a greyscale scan.
 * :class:`SurfaceDistance` and :func:`surface_radius` give the refinement a rod's radius from
   the distance transforms of the mask and of its complement instead of the blurred-profile
   fit.
-
-This module must not import warp.
 """
 
 from __future__ import annotations
@@ -273,7 +271,7 @@ def _ridge(m: np.ndarray) -> np.ndarray:
 
 
 def mask_levels(reader, P):
-    """Stage 1 for a mask (:func:`rodwarp.ct.segment._levels._measure_levels` for a greyscale scan).
+    """Stage ``stats`` for a mask (:func:`rodwarp.ct.segment._levels._measure_levels` for a greyscale scan).
 
     The background and rod levels are known, 0 and 1, and a mask has no noise.  In the (up to)
     four blocks with the most rod voxels (specks of a noisy threshold left out), the smoothed

@@ -21,7 +21,7 @@ filaments is pairing the branch ends through the junction gaps.  This stage work
    filament is the skeleton of a touching run or of a junction, drawn once for two filaments:
    it is dropped.
 
-Coordinates are ``(x, y, z)`` in working voxels.  This module must not import warp.
+Coordinates are ``(x, y, z)`` in working voxels.
 """
 
 from __future__ import annotations
@@ -34,14 +34,9 @@ from rodwarp.ct._voxels import _resample
 
 __all__ = ["pair_ends", "drop_duplicates", "hermite"]
 
-# Knobs chosen on 16 development seeds of the wire tangle (0-15, not the benchmark's), filament
-# F1 median / worst / mean: the defaults (weight 5, level 0.5, greatest cost 8): 1.00 / 0.80 /
-# 0.94; weight 3: 0.92 / 0.75 / 0.92; weight 2: 0.92 / 0.75 / 0.90; level 0.3 (weight 3): 0.92 /
-# 0.74 / 0.89; greatest cost 6 or 12 (weight 3): 0.94 / 0.75 / 0.92, 0.92 / 0.75 / 0.91; level
-# 0.7 (weight 5): 0.99 / 0.80 / 0.95, but on the real fibre scan (examples/data) 284 filaments,
-# 111 doubtful, against 160 and 26 at 0.5 (fused fibres dim the gaps); from level 0.7: weight 8:
-# 0.99 / 0.80 / 0.95; level 0.8: 0.93 / 0.83 / 0.94; ends 2 radii inside (trim): 0.79 / 0.50 /
-# 0.77; half a radius: 1.00 / 0.80 / 0.95; fits over 4 radii (reach): 0.99 / 0.78 / 0.95.
+# Knobs chosen on 16 development seeds of the wire tangle (0-15, not the benchmark's; filament F1)
+# and on the real fibre scan of examples/data (a higher MIN_LEVEL leaves many more doubtful
+# filaments there: fused fibres dim the gaps).
 #: the smoothed image along a bridge never falls below this share of the filaments' plateau (the
 #: half level: a bridge stays inside the binarised foreground)
 MIN_LEVEL = 0.5

@@ -13,8 +13,6 @@ the rods, ``k = mass / (C pi r^2)``, and that k's fit is taken.
 :func:`looks_bundled` is the cheap screen the tracer applies first: a single rod's
 cross-section is a disc whose distance-transform depth equals its area radius; a bundle's is
 much shallower (a triangle of three rods: 0.58).
-
-This module must not import warp.
 """
 
 from __future__ import annotations

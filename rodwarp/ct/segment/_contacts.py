@@ -1,8 +1,8 @@
-"""Stage 5 of segmentation, contacts: contact candidates from the geometry, confirmed by the image.
+"""Stage ``contacts`` of segmentation: contact candidates from the geometry, confirmed by the image.
 
 The candidates are rod pairs whose surface gap ``|closest axis points| - r_i - r_j`` is below
 ``contact_tolerance`` (:func:`rodwarp.rodset.detect_contacts`); a candidate becomes a contact
-of the packing when the image between the two surfaces is foreground.  This module must not import warp.
+of the packing when the image between the two surfaces is foreground.
 """
 
 from __future__ import annotations

@@ -22,8 +22,6 @@ Pipeline (:func:`trace_filaments`):
    their nearest filament), which blur does not change: ``mass = C pi r^2 (L + 4 r / 3)``.
 5. **contacts** -- pairs of *distinct* filaments whose surfaces come within the contact
    tolerance (pieces of one filament are one filament, so never in contact with each other).
-
-This module must not import warp.
 """
 
 from __future__ import annotations
@@ -40,8 +38,7 @@ from rodwarp.ct._voxels import _resample
 __all__ = ["trace_filaments", "bend_fraction", "FilamentResult"]
 
 #: the junction neighbourhood removed is this share of the straight path's (``junction_radius``):
-#: smaller gaps to bridge (wire tangles, 8 dev seeds, filament F1 median / worst: 1.0: 0.79 / 0.53,
-#: 0.5: 0.80 / 0.68, with greedy bridges)
+#: smaller gaps to bridge (chosen on development seeds of the wire tangle, filament F1)
 CURVED_JUNCTION = 0.5
 #: longest bridge between pieces: this many radii plus 6 voxels
 BRIDGE_GAP = 8.0

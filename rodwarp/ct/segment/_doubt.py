@@ -4,7 +4,7 @@ trace explains.
 Run by :func:`rodwarp.ct.segment_volume` after either path (straight rods or curved
 filaments), in one pass over the prepared volume, a block of slices at a time:
 
-* the volume is smoothed (``smooth_sigma``) and binarised at the stage-1 threshold, as
+* the volume is smoothed (``smooth_sigma``) and binarised at the threshold of stage ``stats``, as
   detection saw it;
 * the voxels within ``r + 1.5`` of a traced axis (each rod its own radius) are *explained*;
   the rest of the foreground is *unexplained*: a missed rod, a rod traced too short, a fused
@@ -25,7 +25,7 @@ filaments), in one pass over the prepared volume, a block of slices at a time:
   below :data:`DOUBT_CONFIDENCE` is *doubtful*, with its reasons in words.
 
 The cost is one Gaussian smoothing and one rasterisation of the traces over the volume (a few
-per cent of a segmentation).  This module must not import warp.
+per cent of a segmentation).
 """
 
 from __future__ import annotations
@@ -145,7 +145,7 @@ def assess(reader, st, rods, P, block: int = BLOCK, mask=None) -> Doubt:
     reader : rodwarp.ct.segment._reader._Reader
         The prepared volume (z, y, x).
     st : rodwarp.ct.segment._levels._Levels
-        Levels of stage 1 (``threshold``, ``bg``, ``fg_smooth``).
+        Levels of stage ``stats`` (``threshold``, ``bg``, ``fg_smooth``).
     rods : RodSet
         The traced rods or filaments in working voxels (x, y, z), with their radii.
     P : SegmentParams

@@ -1,11 +1,11 @@
-"""Stage 1 of segmentation, levels and binarisation: background, rod plateau, threshold, coarse radius.
+"""Stage ``stats`` of segmentation, levels and binarisation: background, rod plateau, threshold, coarse radius.
 
 A smoothed, strided sample of the volume gives an Otsu split (kept above the background noise
 when the rods are a tiny fraction of the volume); the (up to) four blocks with the most
 foreground give the background and foreground levels (medians far outside and deep inside the
 mask) and the binarisation threshold half-way between them; the local maxima of the distance
 transform (the rods' axes) give a coarse radius, and their spread says whether the radii are
-mixed.  This module must not import warp.
+mixed.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from rodwarp.ct.segment._reader import _Reader
 
 @dataclass
 class _Levels:
-    """What stage 1 measured: grey levels (raw intensity units) and a coarse radius (voxels)."""
+    """What stage ``stats`` measured: grey levels (raw intensity units) and a coarse radius (voxels)."""
 
     bg: float           # background level (raw)
     fg: float           # rod plateau (raw)
@@ -77,7 +77,7 @@ def _densest_blocks(reader: _Reader, bright: np.ndarray, step: int, block: int) 
 
 
 def _sample_step(shape) -> int:
-    """Stride of the sample that stage 1 reads (about 2 million voxels)."""
+    """Stride of the sample that stage ``stats`` reads (about 2 million voxels)."""
     return max(1, int(math.ceil((float(np.prod(shape)) / 2.0e6) ** (1.0 / 3.0))))
 
 

@@ -1,7 +1,7 @@
 """The knobs of CT segmentation and what it returns: :class:`SegmentParams`, :class:`SegmentResult`.
 
 Lengths are in (working) voxels; see :func:`rodwarp.ct.segment_volume` for the stages the
-parameters steer.  This module must not import warp.
+parameters steer.
 """
 
 from __future__ import annotations
@@ -12,14 +12,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rodwarp._util import one_line_error as _fail
-from rodwarp._util import option
 from rodwarp.rodset import Contacts, RodSet
-from rodwarp.validation import Range
 
 __all__ = ["SegmentParams", "SegmentResult"]
 
 #: the end of every "no rods found" message: what the user can change
-
 _HINT = "check the contrast / pass --diameter"
 
 
@@ -211,7 +208,8 @@ class SegmentResult:
     diameter : float
         Rod diameter in voxels (estimated or given).
     timings : dict
-        Seconds per stage (``stats``, ``detect``, ``merge``, ``refine``, ``contacts``, ``total``).
+        Seconds per stage that ran, under its name (``prepare``, ``stats``, ``detect``, ``merge``,
+        ``refine``, ``contacts``, ``doubt``; ``filaments`` on the curved path), and ``total``.
     quality : dict
         Fit and detection figures (see :func:`segment_volume`); ``quality["flags"]`` lists, in
         words, what makes the output untrustworthy (empty when nothing does).

@@ -1,9 +1,9 @@
-"""Stage 3 of segmentation, pasting: pieces of one rod joined, duplicate fits of one rod made one.
+"""Stage ``merge`` of segmentation, pasting: pieces of one rod joined, duplicate fits of one rod made one.
 
 Contacts, gaps and chunk borders cut a rod into collinear pieces; two pieces are pasted when
 their axes agree and the image shows the gap between them filled (:func:`_gap_filler`), and
 a piece whose axis lies mostly within 0.75 r of another's is a duplicate of it (distinct rods,
-even touching ones, keep their axes 2 r apart).  This module must not import warp.
+even touching ones, keep their axes 2 r apart).
 """
 
 from __future__ import annotations

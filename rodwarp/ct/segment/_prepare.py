@@ -28,8 +28,6 @@ resampled; a stack of one level or of a handful (a label image) is refused there
 
 Corrections are per pixel of a slice (2-D gain, offset and mask maps), so they are applied
 lazily, chunk by chunk, to a volume that does not fit in memory; resampling loads the volume.
-
-This module does not import warp.
 """
 
 from __future__ import annotations

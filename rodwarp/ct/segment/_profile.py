@@ -3,7 +3,7 @@
 :func:`_blur_model` integrates a Gaussian-blurred semi-infinite cylinder (or capsule) of unit
 contrast; the refinement fits its disc profile to the radial intensity of every rod (contrast,
 radius, blur) and its end profile to the intensity along each axis (sub-voxel ends), and the
-acceptance tests compare a rod's plateau with :func:`_axis_level`.  This module must not import warp.
+acceptance tests compare a rod's plateau with :func:`_axis_level`.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Read access to a CT volume in memory or on disk (lazy), for every stage of segmentation.
 
 A volume is indexed ``(z, y, x)``; lazy volumes (zarr, a slice stack) are read through an LRU
-cache of blocks, so that refining many rods does not re-read or re-decompress.  This module must not import warp.
+cache of blocks, so that refining many rods does not re-read or re-decompress.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Stage 4 of segmentation, refinement: every rod fitted against the raw greyscale.
+"""Stage ``refine`` of segmentation: every rod fitted against the raw greyscale.
 
 Every voxel within ``r + window_margin`` of a rod is assigned to the rod whose surface is
 nearest (touching neighbours then trade equal amounts of blurred intensity, so they do not
@@ -13,7 +13,6 @@ A binarised stack (``st.binary``: the volume is the rods' mask) has no blur to f
 is 1 and its edge a one-voxel step (``_binary.MASK_EDGE_SIGMA``), and each rod's radius comes
 from the distance transforms of the mask (``_binary.surface_radius``), stored as the mass per
 unit length a rod of that radius holds, so that every later use of the mass reads it.
-This module must not import warp.
 """
 
 from __future__ import annotations

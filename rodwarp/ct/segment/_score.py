@@ -8,8 +8,6 @@
   wires scores as one match at most;
 * :func:`score_contacts` scores the found contacts of the packing through a rod matching,
   leaving out the true gaps no scan can resolve.
-
-This module does not import warp.
 """
 
 from __future__ import annotations

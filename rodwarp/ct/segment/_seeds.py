@@ -1,10 +1,10 @@
-"""Stage 2a of segmentation, seeding: straight pieces of the 3-D skeleton of the binarised rods.
+"""Stage ``detect`` of segmentation, seeding: straight pieces of the 3-D skeleton of the binarised rods.
 
 Junctions of the skeleton (voxels with 3 or more skeleton neighbours, where rods touch or
 cross) are removed with a ball of about one radius around each, so that branches at contacts
 separate; each remaining branch, ordered along its path and split where it bends
 (Douglas-Peucker), is a seed: a centre, a direction and an extent.  How much of the skeleton
-bends decides ``shape="auto"``.  This module must not import warp.
+bends decides ``shape="auto"``.
 """
 
 from __future__ import annotations

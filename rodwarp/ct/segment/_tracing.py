@@ -1,11 +1,10 @@
-"""Stage 2b of segmentation, cylinder fits and marching: every seed traced into a rod axis.
+"""Stage ``detect`` of segmentation, cylinder fits and marching: every seed traced into a rod axis.
 
 A seed is fitted by iterative intensity-weighted centroid/line fits inside a cylinder of one
 radius around the current axis, then *marched*: the axis grows block by block while a small
 disc on it stays filled, refitting as it grows.  An elongated cross-section is two rods side
 by side (split in two); a cross-section much shallower than it is wide is a bundle (split by
 :mod:`rodwarp.ct.segment._bundles`).  Foreground that no traced rod explains seeds a second round.
-This module must not import warp.
 """
 
 from __future__ import annotations
@@ -47,7 +46,7 @@ class TraceStats:
         Names of the optional counters (``split``, ``bundles_split``, ``bundle_rods``,
         ``residual_seeds``) that became non-zero, in the order they first did; a counter
         never incremented is not listed.  ``SegmentResult.quality`` lists exactly these, in
-        this order, as it did when the tracer wrote them into the dict itself.
+        this order.
     """
 
     skeleton_voxels: int = 0
@@ -226,8 +225,8 @@ class _Tracer:
         # a thinner rod fills less of the fitting disc: with mixed radii accept down to a
         # quarter (a rod of half the coarse radius); without, a trace that fills under 0.4 is
         # still a thin rod when its axis is bright (radii 2-5 can spread the distance ridge too
-        # little to be called mixed: a seed of the mixed-radii phantom lost its 5 thinnest rods,
-        # r 2.0-2.3 against a coarse 3.3, which fill 0.31-0.40 of the disc with axes at 0.6-0.8)
+        # little to be called mixed: rods of r 2.0-2.3 against a coarse 3.3 fill 0.31-0.40 of
+        # the disc, with axes at 0.6-0.8 of the plateau)
         if fill < 0.25 or (fill < 0.4 and not self.mixed and self.axis_level(c, u, t0, t1) < THIN_AXIS_LEVEL):
             return None
         c, u, t0, t1 = self.march(c, u, t0, t1, max_len, avoid)
