@@ -54,7 +54,7 @@ DERIVED = {"segment_phantom": ("phantom", ["segment", "{in}/stack.tif", "--voxel
 # summary.json keys that are not results (times, versions, paths, dates)
 VOLATILE = {"wall_time_s", "wall_s", "elapsed_s", "versions", "version", "created", "date", "started", "finished",
             "command", "argv", "host", "device_name", "out", "path", "paths", "input", "timings", "time_s",
-            "compile_s", "timing", "rodwarp", "warp", "python", "numpy", "hostname", "platform", "cpu"}
+            "compile_s", "timing", "rodwarp", "warp", "python", "numpy", "hostname", "platform", "cpu", "pairs_s", "timings_s"}
 
 
 def _scrub(obj):
