@@ -16,12 +16,6 @@ draws the layers; docs/physics.md and docs/protocol.md describe the model and th
 from rodwarp.errors import RodwarpError, SimulationBlowUp
 from rodwarp.rodset import Contacts, RodSet, load
 
-# every command registers the folder it writes with the run-folder layer, so that any command
-# can tell another's run folder from a foreign one (rodwarp.rodset.rundir.register_command)
-from rodwarp.analysis import _outputs as _analyze_outputs  # noqa: E402,F401
-from rodwarp.ct import _outputs as _segment_outputs  # noqa: E402,F401
-from rodwarp.experiments import _outputs as _experiment_outputs  # noqa: E402,F401
-
 __version__ = "0.1.0"
 
 __all__ = ["RodSet", "Contacts", "load", "ModelBuilder", "Model", "State", "ContactPoints", "Control", "Material",

@@ -133,16 +133,12 @@ def _field_options(cls, table: dict, order: tuple[str, ...], renamed: dict | Non
     return decorate
 
 
-#: `rodwarp simulate`'s options in --help order: ProtocolParams fields, and the command's own
-_SIMULATE_OPTIONS = ("protocol", "alpha", "freq", "amplitude", "gravity", "duration", "entangle_duration",
-                     "entangle_freq", "entangle_amplitude", "static_load", "n_rods", "length", "vertices", "box",
-                     "container_radius", "fill_height", "container_diameter", "container_height", "tube_diameter",
-                     "pour_duration", "strains", "press_duration",
-                     "lift_duration", "mu", "wall_mu", "young",
-                     "density", "dt", "iterations", "step_safety", "steps_per_period", "rod_model", "rolling", "contact_law",
-                     "imc_delta", "imc_nu", "imc_stiffness", "save_every",
-                     "checkpoint_every", "fields_every", "resume", "overwrite", "entangle", "seed", "device", "out", "initial",
-                     "units", "initial_diameter", "entangled_from", "quiet")
+#: `rodwarp simulate`'s options in --help order: every ProtocolParams field in its dataclass order
+#: (ExperimentParams, each protocol's, RunParams), then the command's own; a new parameter is one
+#: field, placed by its dataclass
+_SIMULATE_OPTIONS = (*(f.name for f in dataclasses.fields(ProtocolParams)), "resume", "overwrite", "out",
+                     "entangled_from", "quiet")
+
 
 def _flags_as_flags(params: list) -> list:
     """``params`` with every flag's value placeholder blanked: typer's rich ``--help`` prints
@@ -302,16 +298,16 @@ def simulate(
 
     usable_cache_dir(kernel_cache_dir())  # an unusable RODWARP_KERNEL_CACHE is refused before --out is taken
     if entangled_from is not None:  # refused before any note about the run
-        from rodwarp.experiments._protocol import check_branch_protocol
+        from rodwarp.experiments import check_branch_protocol
 
         check_branch_protocol(params)
     from rodwarp._util import note
-    from rodwarp.experiments._protocols import plugin
+    from rodwarp.experiments import protocol
 
     if params.law == "imc" and params.rolling:  # a departure from the paper's model: said even with --quiet
         typer.echo("warning: --rolling with --contact-law imc: DisMech's IMC friction acts on the centreline (no "
                    "rolling); this run lets the rods spin, which the paper's model did not", err=True)
-    for why in (plugin(params.protocol).notes(params) if plugin(params.protocol) else []):
+    for why in protocol(params.protocol).notes(params):
         note(why, enabled=not quiet)
     outdir = out or Path("runs") / default_run_name(params)
     with _failure_recorded(outdir):
@@ -462,7 +458,7 @@ def _floats(text: str, name: str) -> list[float]:
 def _overrides(items: list[str]) -> dict:
     """``--set KEY=VALUE`` items as ProtocolParams overrides, each VALUE read as its field's type.
 
-    A key the sweep owns (:data:`rodwarp.experiments._sweep.SWEEP_OWNED`: --out, --alpha, ...)
+    A key the sweep owns (:data:`rodwarp.experiments.SWEEP_OWNED`: --out, --alpha, ...)
     is refused naming the sweep's own option, and a key given twice is refused rather than
     the last value kept.
     """
@@ -470,7 +466,7 @@ def _overrides(items: list[str]) -> dict:
 
     from rodwarp.errors import RodwarpError
     from rodwarp.experiments import ProtocolParams
-    from rodwarp.experiments._sweep import SWEEP_OWNED
+    from rodwarp.experiments import SWEEP_OWNED
 
     types = {f.name: f.type for f in dataclasses.fields(ProtocolParams)}
     out, given = {}, {}
@@ -629,7 +625,7 @@ def _phase_diagram_folder(sweep_dir: Path, out: Path, overwrite: bool, draw) -> 
     phase diagram of the same sweep there is replaced, anything else (another sweep's diagram,
     another command's run, files of an earlier run) is refused unless ``overwrite``.
     """
-    from rodwarp.experiments._outputs import PHASE_DIAGRAM_OUTPUTS
+    from rodwarp.rodset.rundir import PHASE_DIAGRAM_OUTPUTS
     from rodwarp.rodset import rundir
 
     source = str(sweep_dir.resolve())

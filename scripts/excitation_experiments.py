@@ -184,7 +184,7 @@ def collect(folder: Path) -> dict | None:
     """One run's record: its parameters, rod model, cost, and the shaking's measures (a run
     not finished: from its metrics.csv up to its last checkpoint, ``complete`` False)."""
     from rodwarp.experiments import ProtocolParams
-    from rodwarp.experiments._excitation import excitation_shake, sources
+    from rodwarp.experiments.protocols.excitation import excitation_shake, sources
     from rodwarp.experiments._params import rod_model_rule
     from rodwarp.experiments._verdict import DEFAULT_THRESHOLDS
 

@@ -146,7 +146,7 @@ def _in_progress(folder: Path) -> dict | None:
     import csv
 
     from rodwarp.experiments import ProtocolParams
-    from rodwarp.experiments._lab import shake_result
+    from rodwarp.experiments.protocols.lab import shake_result
     from rodwarp.experiments._params import rod_model_rule
     from rodwarp.experiments._verdict import DEFAULT_THRESHOLDS
 

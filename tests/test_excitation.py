@@ -11,12 +11,12 @@ import pytest
 
 from rodwarp.errors import RodwarpError
 from rodwarp.experiments import ProtocolParams
-from rodwarp.experiments._excitation import (CONTAINER, PAPER_RODS, RELEASE, SHAKE, excitation_plan,
+from rodwarp.experiments.protocols.excitation import (CONTAINER, PAPER_RODS, RELEASE, SHAKE, excitation_plan,
                                              formation_events, paper_rod_count, sources, tau_rule,
                                              tau_series)
-from rodwarp.experiments._lab import landed_samples
+from rodwarp.experiments.protocols.lab import landed_samples
 from rodwarp.experiments._verdict import DEFAULT_THRESHOLDS
-from rodwarp.experiments._plan import FLOOR, TUBE
+from rodwarp.experiments.protocols.lab import FLOOR, TUBE
 
 
 def _checked(**kw):
@@ -66,7 +66,7 @@ def test_alpha_200_is_elastic_by_the_sag_rule_and_shaken_at_its_resolution():
 
 
 def test_the_plan_removes_the_tube_and_shakes_floor_and_container_together():
-    from rodwarp.experiments._excitation import excitation_walls
+    from rodwarp.experiments.protocols.excitation import excitation_walls
     from rodwarp.experiments._packing import random_packing
     from rodwarp.sim import Material, ModelBuilder
 

@@ -12,7 +12,8 @@ import zarr
 
 from rodwarp.errors import RodwarpError
 from rodwarp.experiments import ProtocolParams, run_protocol
-from rodwarp.experiments._plan import FLOOR, LIFT, PISTON, POUR, SHAKE, TUBE, lab_plan, plan
+from rodwarp.experiments._plan import plan
+from rodwarp.experiments.protocols.lab import FLOOR, LIFT, PISTON, POUR, SHAKE, TUBE, PressTo, lab_plan
 
 # steel rods of the paper's experiments' scale: l = 5 cm, real gravity
 LAB = dict(protocol="lab", alpha=20, length=0.05, gravity=9.81, freq=5.0, amplitude=0.025, save_every=0.05,
@@ -34,7 +35,7 @@ def test_the_lab_plan_pours_presses_lifts_and_shakes():
     stages = lab_plan(p)
     assert [s.name for s in stages] == [POUR, "press0", "press0.05", "press0.1", LIFT, SHAKE]
     assert plan(p) == stages
-    assert [s.strain for s in stages[1:4]] == [(0.0, 0.0), (0.0, 0.05), (0.05, 0.1)]
+    assert [s.motion for s in stages[1:4]] == [PressTo(0.0, 0.0), PressTo(0.0, 0.05), PressTo(0.05, 0.1)]
     assert [s.name for s in stages if s.test] == [SHAKE]
     assert stages[0].walls_out == (PISTON,) and stages[-1].walls_out == (TUBE, PISTON)
     assert stages[-1].moving == (FLOOR,) and all(s.moving == (PISTON,) for s in stages[1:4])
@@ -126,7 +127,7 @@ def test_the_piston_reaches_each_strain_and_holds_it(tmp_path):
 
 
 def test_wall_mu_sets_the_cylinder_and_the_piston_only():
-    from rodwarp.experiments._lab import lab_packing, lab_walls
+    from rodwarp.experiments.protocols.lab import lab_packing, lab_walls
     from rodwarp.sim import ModelBuilder
 
     p = ProtocolParams(**LAB, n_rods=5, wall_mu=0.0, mu=0.3)
@@ -141,7 +142,7 @@ def test_wall_mu_sets_the_cylinder_and_the_piston_only():
 
 def test_the_shaken_plate_moves_as_asked():
     from rodwarp.experiments._protocol import _build
-    from rodwarp.experiments._lab import lab_packing
+    from rodwarp.experiments.protocols.lab import lab_packing
 
     p = ProtocolParams(**LAB, n_rods=5, duration=1.0)
     rods = lab_packing(p, "cpu")
@@ -193,7 +194,7 @@ def _inelastic_ball_on_plate(amplitude, freq, cycles, dt=1e-5, g=9.81):
 
 
 def test_fig_1e_takes_the_landed_height_of_a_packing_the_plate_throws():
-    from rodwarp.experiments._lab import landed_heights
+    from rodwarp.experiments.protocols.lab import landed_heights
 
     # at 5 Hz, 25 mm (a/g = 2.5) a ball resting 10 mm above the plate is thrown every cycle
     y0 = 0.01
@@ -213,7 +214,7 @@ def test_fig_1e_takes_the_landed_height_of_a_packing_the_plate_throws():
 
 
 def test_too_few_samples_per_cycle_for_the_landed_height_are_flagged():
-    from rodwarp.experiments._lab import landed_sampling_warning
+    from rodwarp.experiments.protocols.lab import landed_sampling_warning
 
     # 5 Hz: one sample per cycle is flagged, eight are not; a gentle drive (a/g < 1) never is
     assert "samples per cycle" in landed_sampling_warning(ProtocolParams(**{**LAB, "save_every": 0.2}))

@@ -18,7 +18,6 @@ their public names are re-exported here, flat:
                     :class:`Stage`, :func:`insert_stage`); scoring against a truth;
                     :func:`run_segment` (``rodwarp segment``)
 ``_voxels``         shared by all three: geometry in voxel space, voxel-size parsing
-``_outputs``        the files ``rodwarp segment`` writes (registered with the run folders)
 ==================  =============================================================================
 
 Modules inside a subpackage are private to it; the subpackages use each other through these

@@ -36,7 +36,10 @@ from rodwarp._util import lazy_exports
 _WHERE = {
     # the protocol
     "ProtocolParams": "_params", "RODS_PER_ALPHA": "_params", "RIGID_SAG": "_params",
-    "SIDE_WALLS": "_plan", "Stage": "_plan", "plan": "_plan", "LoopPosition": "_protocol",
+    "Stage": "_plan", "Vibrate": "_plan", "REST": "_plan", "plan": "_plan", "LoopPosition": "_loop",
+    "PROTOCOLS": "protocols", "Protocol": "protocols", "protocol": "protocols", "register_protocol": "protocols",
+    "check_branch_protocol": "_protocol", "SIDE_WALLS": "protocols.paper", "ENTANGLE": "protocols.paper",
+    "TEST": "protocols.paper",
     "option_table": "_params", "rod_model_rule": "_params", "run_protocol": "_protocol",
     "default_run_name": "_params",
     "Recorder": "_recorder", "plot_metrics": "_recorder",
@@ -47,7 +50,7 @@ _WHERE = {
     "judge_metrics_csv": "_verdict", "PileReference": "_verdict", "rod_centroids": "_verdict",
     "centroid_height_above": "_verdict", "pile_reference": "_verdict", "rods_left": "_verdict",
     # sweeps and the phase diagram
-    "SweepSpec": "_sweep", "GRID_KEYS": "_sweep", "FIXED_KEYS": "_sweep", "RESULT_KEYS": "_sweep",
+    "SweepSpec": "_sweep", "SWEEP_OWNED": "_sweep", "GRID_KEYS": "_sweep", "FIXED_KEYS": "_sweep", "RESULT_KEYS": "_sweep",
     "point_id": "_sweep", "points": "_sweep", "run_point": "_sweep", "check_points": "_sweep",
     "entangling_groups": "_sweep",
     "read_results": "_sweep", "write_results": "_sweep", "run_sweep": "_sweep",

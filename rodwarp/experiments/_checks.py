@@ -88,14 +88,11 @@ def check_protocol(p, explicit=None) -> CheckedProtocol:
     CheckedProtocol
         The parameters the run uses and what the check loaded and counted.
     """
-    from rodwarp.experiments._protocols import PROTOCOLS, plugin
+    from rodwarp.experiments.protocols import protocol
 
-    if p.protocol not in PROTOCOLS:
-        fail(f"--protocol must be one of {', '.join(PROTOCOLS)}, got '{p.protocol}'")
-    if (proto := plugin(p.protocol)) is not None:
-        # the protocol's own defaults for what was not given (an API caller: what differs from
-        # ProtocolParams' defaults)
-        p = proto.resolve(p, None if explicit is None else explicit)
+    # the protocol's own defaults for what was not given (an API caller: what differs from
+    # ProtocolParams' defaults)
+    p = protocol(p.protocol).resolve(p, None if explicit is None else explicit)
     explicit = frozenset(explicit or ())
     stages = _check_options(p, explicit)
     rods = None
@@ -111,12 +108,13 @@ def check_protocol(p, explicit=None) -> CheckedProtocol:
 
 def _check_options(p, explicit: frozenset):
     """The checks of every option and of their consistency; returns the plan's stages."""
-    from rodwarp.experiments._protocols import plugin
+    from rodwarp.experiments.protocols import protocol
 
+    proto = protocol(p.protocol)
     # every field within the range stated beside it (ProtocolParams); then what ties them together
     check_ranges(p)
-    lab = p.protocol != "paper"  # a poured protocol: lab or excitation
-    if not lab and p.duration == 0:
+    poured = proto.poured  # rods poured into an open container, not placed in a closed box
+    if not poured and p.duration == 0:
         fail("--duration 0 leaves the stability test without a step (0 leaves out the shaking of --protocol lab or "
              "excitation only); give --duration > 0 s")
     if len(tuple(p.box)) != 3:
@@ -130,9 +128,10 @@ def _check_options(p, explicit: frozenset):
         for name in ("imc_delta", "imc_nu", "imc_stiffness"):
             if getattr(p, name) is not None:
                 fail(f"--{name.replace('_', '-')} only applies with --contact-law imc; add it or drop the option")
-    if p.protocol == "lab" and p.n_rods is not None and ("fill_height" in explicit or _changed(p, ["fill_height"])):
+    if ("fill_height" in proto.fields and p.n_rods is not None
+            and ("fill_height" in explicit or _changed(p, ["fill_height"]))):
         fail(f"--fill-height and --n-rods both set the lab protocol's rod count (--fill-height {p.fill_height:g} "
-             f"rod lengths is {p.lab_fill_rods()} rods, --n-rods {p.n_rods}); give one of them")
+             f"rod lengths is {proto.rods(p)} rods, --n-rods {p.n_rods}); give one of them")
     _check_drives(p)
     if p.imc_stiffness is not None:
         _check_imc_stiffness(p)
@@ -164,8 +163,7 @@ def _check_options(p, explicit: frozenset):
                  f"decides {'it' if len(given) == 1 else 'them'}); drop {opts}")
 
     _check_protocol_fields(p)
-    if (proto := plugin(p.protocol)) is not None:
-        proto.check(p)
+    proto.check(p)
 
     # consistency of durations, intervals and the step
     stages = plan(p)
@@ -187,7 +185,7 @@ def _check_options(p, explicit: frozenset):
                  f"steps ({p.steps_per_period:g} per period), more than {MAX_STEPS:.0e}; lower the frequency or the duration")
     height = box[2] * p.length
     for opt, a in (("--amplitude", p.amplitude), ("--entangle-amplitude", p.entangle_amplitude)):
-        if not lab and 2 * a >= 0.5 * height:
+        if not poured and 2 * a >= 0.5 * height:
             fail(f"{opt} {a:g} m (a stroke of {2 * a:g} m) does not fit the box: its height is {height:g} m ({box[2]:g} "
                  f"rod lengths of --length {p.length:g} m) and a stroke may take at most half of it; lower {opt}, "
                  f"or raise --length or the box's Z")
@@ -198,8 +196,11 @@ def _check_drives(p) -> None:
     """Each drive's strength (a/g) and stroke against what the scene can take."""
     from rodwarp.experiments._params import MAX_A_OVER_G, MAX_PLATE_AMPLITUDE_LENGTHS
 
+    from rodwarp.experiments.protocols import protocol
+
+    poured = protocol(p.protocol).poured
     drives = [("--freq", "--amplitude", p.freq, p.amplitude)]
-    if p.protocol == "paper" and p.entangle_duration > 0:
+    if not poured and p.entangle_duration > 0:
         drives.append(("--entangle-freq", "--entangle-amplitude", p.entangle_freq, p.entangle_amplitude))
     for fopt, aopt, f, a in drives:
         a_g = 4 * math.pi**2 * f * f * a / p.gravity
@@ -207,7 +208,7 @@ def _check_drives(p) -> None:
             fail(f"{fopt} {f:g} Hz and {aopt} {a:g} m make a/g = {a_g:.3g} at --gravity {p.gravity:g} m/s^2, above "
                  f"{MAX_A_OVER_G:g}: a drive that tears any packing apart (the paper's entangling drive is a/g ~ 400, "
                  f"its tests 0.3 to 7.9); lower {aopt} or {fopt}")
-    if p.protocol != "paper" and p.amplitude > MAX_PLATE_AMPLITUDE_LENGTHS * p.length:
+    if poured and p.amplitude > MAX_PLATE_AMPLITUDE_LENGTHS * p.length:
         fail(f"--amplitude {p.amplitude:g} m is more than {MAX_PLATE_AMPLITUDE_LENGTHS:g} rod lengths (l = "
              f"{p.length:g} m): the plate would throw the rods out of any container (the paper's strokes are 1 to "
              f"25 mm); lower --amplitude")
@@ -232,27 +233,18 @@ def _check_imc_stiffness(p) -> None:
              f"; use {1000 * weight / delta:.3g} N/m (1000 rod weights per delta, the default) or leave it out")
 
 
-#: the laboratory protocol's own options, and the paper protocol's that it does not use
-LAB_FIELDS = ("container_radius", "fill_height", "pour_duration", "strains", "press_duration", "lift_duration",
-              "wall_mu")
-PAPER_ONLY_FIELDS = ("box", "entangle_duration", "entangle_freq", "entangle_amplitude", "initial", "entangle")
-#: the options each protocol takes beyond the shared ones (the rest are refused when given)
-PROTOCOL_FIELDS = {
-    "paper": PAPER_ONLY_FIELDS,
-    "lab": LAB_FIELDS,
-    "excitation": ("container_diameter", "container_height", "tube_diameter", "pour_duration", "lift_duration"),
-}
-
-
 def _check_protocol_fields(p) -> None:
-    """Refuse, in one line, options of another protocol than ``p.protocol``."""
-    mine = set(PROTOCOL_FIELDS[p.protocol])
-    others = [k for proto, ks in PROTOCOL_FIELDS.items() if proto != p.protocol for k in ks if k not in mine]
+    """Refuse, in one line, options of another protocol than ``p.protocol`` (each protocol's
+    ``fields``, :data:`rodwarp.experiments.protocols.PROTOCOLS`)."""
+    from rodwarp.experiments.protocols import PROTOCOLS
+
+    mine = set(PROTOCOLS[p.protocol].fields)
+    others = [k for name, proto in PROTOCOLS.items() if name != p.protocol for k in proto.fields if k not in mine]
     given = _changed(p, dict.fromkeys(others))
     if not given:
         return
     opts = ", ".join(f"--{k.replace('_', '-')}" for k in given)
-    owners = sorted({proto for proto, ks in PROTOCOL_FIELDS.items() for k in given if k in ks})
+    owners = sorted({name for name, proto in PROTOCOLS.items() for k in given if k in proto.fields})
     fail(f"{opts} do{'es' if len(given) == 1 else ''} not apply with --protocol {p.protocol} (only with "
          f"--protocol {' or '.join(owners)}); drop {opts}")
 
@@ -264,21 +256,13 @@ def _changed(p, names) -> list[str]:
     return [n for n in names if getattr(p, n) != defaults[n] and not (n == "box" and list(p.box) == list(defaults[n]))]
 
 
-def _check_lab_options(p) -> None:
-    """The lab protocol's own checks (one line each)."""
-    if p.duration == 0 and p.lift_duration == 0:
-        fail("--duration 0 and --lift-duration 0 leave the lab protocol without a test; give the shaking a "
-             "--duration or the lifted packing a --lift-duration")
-    strains = tuple(p.strains)
-    if any(b < a for a, b in zip(strains, strains[1:])):
-        fail(f"--strains must not decrease (the piston presses further at each), got {','.join(f'{e:g}' for e in strains)}")
-
-
 def _check_packing(p) -> int:
     """The random packing's checks (the box holds a rod, memory, density); its vertex count."""
     box = tuple(p.box)
     n = p.rods
-    if p.protocol != "paper":  # the pour column is dilute by construction (ProtocolParams.pour_height)
+    from rodwarp.experiments.protocols import protocol
+
+    if protocol(p.protocol).poured:  # the pour column is dilute by construction (ProtocolParams.pour_height)
         n_vertices = n * p.n_vertices
         memory_fits(f"{n} rods x {p.n_vertices} vertices", BASE_BYTES + BYTES_PER_VERTEX * n_vertices,
                     "lower --n-rods, --fill-height, --container-radius or --vertices")

@@ -9,7 +9,8 @@ import math
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
-from rodwarp._util import option, option_table  # noqa: F401 (option_table re-exported)
+from rodwarp._util import option_table  # noqa: F401 (option_table re-exported)
+from rodwarp.experiments._option import param as _param
 from rodwarp.validation import MAX_MU, Range
 
 import numpy as np
@@ -17,16 +18,13 @@ import numpy as np
 #: rods per unit aspect ratio: the paper's packings hold N = round(5.4 alpha) rods (its
 #: "Materials and Methods"; docs/protocol.md). A number of rods, not a contact number.
 RODS_PER_ALPHA = 5.4
-#: volume fraction of a random packing of long rods, phi alpha = 5.4 (Philipse 1996; docs/experiments.md):
-#: the laboratory protocol fills its cylinder with the rods that take its fill height at this fraction
-PHI_ALPHA = 5.4
 #: the pour: rods released in a column above the floor at this phi alpha (dilute: they fall freely)
 POUR_PHI_ALPHA = 2.0
 #: rigid rods when the self-weight sag of a simply supported rod, 5 q l^4 / (384 E I), is below
 #: this fraction of a diameter (the knee of benchmarks/bench_rigid.py; docs/physics.md)
 RIGID_SAG = 0.01
 #: elastic rods' resolution (:func:`rod_resolution`): the fewest and the most vertices the rule
-#: picks; the most is the resolution every elastic run used before the rule (issue 45)
+#: picks
 MIN_VERTICES, MAX_VERTICES = 3, 10
 #: a drive is quasi-static for the rods' bending when its frequency is below this fraction of
 #: their first free-free bending frequency (the static response is then amplified by under 1%)
@@ -47,23 +45,11 @@ MAX_PLATE_AMPLITUDE_LENGTHS = 2.0
 IMC_STIFFNESS_WEIGHTS_RANGE = (1.0, 1e6)
 
 
-def _param(default, help: str, short: str | None = None, range: Range | None = None, **metadata):
-    """A :class:`ProtocolParams` field: its default, its ``rodwarp simulate --help`` line, its
-    abbreviation in default folder names (:func:`default_run_name`; the name when None) and the
-    :class:`~rodwarp.validation.Range` of values it takes (checked by :meth:`ProtocolParams.validate`
-    and the CLI alike)."""
-    return option(default, help, short=short, range=range, **metadata)
-
-
 @dataclass(frozen=True)
-class ProtocolParams:
-    """Parameters of :func:`run_protocol` (SI units; box in rod lengths), frozen.
-
-    Every field's default and help text are stated here once; ``rodwarp simulate`` takes its
-    options from them (:func:`option_table`). :meth:`validate` checks them and returns the
-    parameters a run uses (:class:`~rodwarp.experiments.CheckedProtocol`); a variant is
-    ``dataclasses.replace(params, ...)``.
-    """
+class ExperimentParams:
+    """What every protocol shares (SI units): the protocol, the rods, their material, gravity,
+    and the test's drive and duration. Frozen; each protocol adds its own parameters
+    (:mod:`rodwarp.experiments.protocols`) and every run :class:`RunParams`."""
 
     protocol: str = _param("paper", "paper (random packing in a box, entangling, the vibration test; "
                                     "docs/protocol.md) or lab (rods poured into a cylinder, pressed by a piston to "
@@ -81,12 +67,6 @@ class ProtocolParams:
           range=Range(ge=1e-3, le=1000, unit="m/s^2", hint="the paper rescales g to 0.5; 1000 is 100 Earth g"))
     duration: float = _param(5.0, "Stability-test duration (s).", "dur",
           range=Range(ge=0, le=1e5, unit="s", hint="the run's step count is checked as well"))
-    entangle_duration: float = _param(5.0, "Entangling duration (s); 0 skips entangling.", "edur",
-          range=Range(ge=0, le=1e5, unit="s", hint="0 skips entangling"))
-    entangle_freq: float = _param(10.0, "Entangling vibration frequency (Hz).", "efreq",
-          range=Range(ge=0, le=1000, unit="Hz", hint="the paper entangles at 10 Hz"))
-    entangle_amplitude: float = _param(0.05, "Entangling vibration amplitude (m).", "eamp",
-          range=Range(ge=0, le=100, unit="m", hint="the stroke is also checked against the box"))
     static_load: float = _param(0.0, "Extra downward body load F~ in units of a rod's weight rho g d^2 l.", "F",
           range=Range(ge=0, le=1e4, hint="in units of a rod's weight rho g d^2 l (the paper's F~ is 0 to 12)"))
     n_rods: int | None = _param(None, f"Number of rods (default round({RODS_PER_ALPHA:g} alpha); lab: the rods "
@@ -100,43 +80,19 @@ class ProtocolParams:
                                         f"of the beam's where every drive is quasi-static, else {MAX_VERTICES}; "
                                         "docs/physics.md).", "v",
           range=Range(ge=2, le=10_000, whole=True))
-    box: tuple = _param((1.0, 1.0, 2.5), "Container size in rod lengths, 'X,Y,Z'.",
-          range=Range(gt=0, le=1000, each=True, hint="the box is 'X,Y,Z' in rod lengths"))
-    container_radius: float = _param(1.0, "lab: radius of the cylinder the rods are poured into, in rod lengths.",
-                                     "Rc",
-          range=Range(ge=0.6, le=100, hint="in rod lengths: a rod must fit across the cylinder in any direction"))
-    fill_height: float = _param(1.0, f"lab: without --n-rods, as many rods as fill the cylinder to this height (rod "
-                                     f"lengths) at a random packing's phi = {PHI_ALPHA:g} / alpha.", "H",
-          range=Range(gt=0, le=100, hint="in rod lengths"))
-    container_diameter: float | None = _param(None, "excitation: diameter of the shaken container (m; default the "
-                                                    "paper's 0.15; 0: an open plate).", "Dc",
-          range=Range(ge=0, le=10, unit="m", hint="0 shakes the packing on an open plate"))
-    container_height: float | None = _param(None, "excitation: height of the container (m; default the paper's "
-                                                  "0.15): no rod may rise above its rim.", "Hc",
-          range=Range(gt=0, le=10, unit="m"))
-    tube_diameter: float | None = _param(None, "excitation: diameter of the inner tube the rods are poured into "
-                                               "(m; default 0.06, the paper gives none: docs/experiments.md).", "Dt",
-          range=Range(gt=0, le=10, unit="m"))
-    pour_duration: float = _param(1.0, "lab: time the poured rods fall and settle in the cylinder (s).", "pdur",
-          range=Range(gt=0, le=100, unit="s", hint="the rods need time to fall and settle"))
-    strains: tuple = _param((), "lab: compressive strains the piston presses the poured packing to in turn, "
-                                "'E1,E2,...' (e.g. 0,0.05,0.1,0.15); the fields at each in summary.json.", "eps",
-          range=Range(ge=0, lt=0.5, each=True, hint="compressive strains are fractions of the packing's height (the paper's 0 to 0.15)"))
-    press_duration: float = _param(0.5, "lab: time of each strain (s): pressed over its first half, held over "
-                                        "the second.", "prdur",
-          range=Range(gt=0, le=1000, unit="s"))
-    lift_duration: float = _param(1.0, "lab: time the packing stands (or spreads) after the cylinder is lifted "
-                                       "away, before the shaking (s); the test when --duration is 0.", "ldur",
-          range=Range(ge=0, le=1000, unit="s", hint="0 shakes right after the lift"))
     mu: float = _param(0.2, "Friction coefficient (rod-rod and walls).",
           range=Range(ge=0, le=MAX_MU, hint="friction coefficients of real materials are below about 2 (steel on steel 0.2 to 0.8, rubber up to about 2)"))
-    wall_mu: float | None = _param(None, "lab: friction coefficient of the cylinder's wall and the piston "
-                                         "(default --mu; the plate keeps --mu).", "muw",
-          range=Range(ge=0, le=MAX_MU, hint="0 makes the container's wall and the piston frictionless"))
     young: float = _param(200e9, "Young's modulus (Pa).", "E",
           range=Range(ge=1e3, le=1e13, unit="Pa", hint="from soft gels (1 kPa) to diamond (1.2e12 Pa)"))
     density: float = _param(7850.0, "Density (kg/m^3).", "rho",
           range=Range(ge=1, le=1e5, unit="kg/m^3", hint="from aerogels to osmium (22600 kg/m^3)"))
+
+
+@dataclass(frozen=True)
+class RunParams:
+    """How a run steps and records, whatever the protocol: the step and its effort, the rod
+    model and the contact law, the sampling, checkpoints, seed and device. Frozen."""
+
     dt: float | None = _param(None, "Time step (s); default from the scene's step bound.",
           range=Range(gt=0, le=1, unit="s", hint="leave it out for the default step"))
     iterations: int = _param(10, "Most Gauss-Seidel sweeps per step (10: the knee of the effort benchmark).",
@@ -177,14 +133,11 @@ class ProtocolParams:
     seed: int = _param(0, "Random seed of the packing.",
           range=Range(ge=0, le=2**63 - 1, whole=True))
     device: str = _param("auto", "auto, cpu or cuda.")
-    initial: str | None = _param(None, "Start from this rod set (npz, zarr or CSV) instead of a random packing.")
-    # a CSV does not record its unit: without this it is read as metres (the simulation runs in SI)
-    units: str | None = _param(None, "Length unit of a CSV --initial rod set: m (the default), mm or um; "
-                                     "converted to metres. An npz/zarr records its own.")
-    initial_diameter: float | None = _param(None, "Rod diameter (in --units) for a CSV --initial rod set without a "
-                                                  "radius column.", "d",
-          range=Range(gt=0, le=1e6, hint="in --units of the CSV"), flag="--diameter")
-    entangle: bool = _param(False, "With --initial: run the entangling stage too.")
+
+
+class _Derived:
+    """What :class:`ProtocolParams` derives from its fields: the checks, the rod count and
+    resolution, the contact law object, the drive's strength."""
 
     def validate(self, explicit=None):
         """Raise :class:`RodwarpError` (one line) for any impossible, inconsistent or oversized
@@ -206,6 +159,11 @@ class ProtocolParams:
         from rodwarp.experiments._checks import check_protocol
 
         return check_protocol(self, explicit)
+
+    @property
+    def run_params(self) -> RunParams:
+        """The run's :class:`RunParams` (step, sampling, model, contact law, seed, device)."""
+        return RunParams(**{f.name: getattr(self, f.name) for f in fields(RunParams)})
 
     @property
     def law(self) -> str:
@@ -232,7 +190,7 @@ class ProtocolParams:
     def n_vertices(self) -> int:
         """Vertices per rod of the packing: ``vertices``; else, for elastic rods, the resolution
         rule's (:func:`rod_resolution`), and for rigid rods ``MAX_VERTICES`` (the packing's
-        polylines, as before the rule; the model holds each as two vertices)."""
+        polylines; the model holds each as two vertices)."""
         if self.vertices is not None:
             return int(self.vertices)
         if rod_model_rule(self)["rod_model"] == "rigid":
@@ -246,28 +204,21 @@ class ProtocolParams:
 
     @property
     def rods(self) -> int:
-        """Number of rods: ``n_rods``, else round(5.4 alpha) (lab: :meth:`lab_fill_rods`;
+        """Number of rods: ``n_rods``, else round(5.4 alpha) (lab: the rods that fill its cylinder;
         excitation: the paper's N = 1.25e6 / (d l^2), d and l in mm)."""
         if self.n_rods is not None:
             return self.n_rods
-        from rodwarp.experiments._protocols import plugin
+        from rodwarp.experiments.protocols import protocol
 
-        if (proto := plugin(self.protocol)) is not None:
-            return proto.rods(self)
-        return int(round(RODS_PER_ALPHA * self.alpha))
-
-    def lab_fill_rods(self) -> int:
-        """Rods that fill the lab's cylinder (radius ``container_radius`` l) to ``fill_height`` l
-        at phi = 5.4 / alpha: pi Rc^2 H phi / (pi d^2 l / 4) = 4 (Rc/l)^2 (H/l) 5.4 alpha."""
-        return max(1, int(round(4.0 * self.container_radius**2 * self.fill_height * PHI_ALPHA * self.alpha)))
+        return protocol(self.protocol).rods(self)
 
     @property
     def pour_radius(self) -> float:
         """Radius (m) of the cylinder the rods are poured into: the lab's container
         (``container_radius`` rod lengths), the excitation experiment's tube."""
-        if self.protocol == "excitation":
-            return 0.5 * self.tube_diameter
-        return self.container_radius * self.length
+        from rodwarp.experiments.protocols import protocol
+
+        return protocol(self.protocol).pour_radius(self)
 
     def pour_height(self) -> float:
         """Height (m) of the column the poured rods are released in: they take it at phi alpha =
@@ -286,7 +237,6 @@ class ProtocolParams:
         """Gravity with the static load as an extra body load, g (1 + 4 F~ / pi) (m/s^2;
         docs/protocol.md, "The experiment")."""
         return self.gravity * (1.0 + 4.0 * self.static_load / math.pi)
-
 
 def _straight(rods, tol: float = 1e-3) -> bool:
     """Every rod's vertices (and rest vertices) lie within ``tol`` radii of its chord."""
@@ -388,10 +338,9 @@ def rod_resolution(params: ProtocolParams, sag_over_d: float | None = None) -> d
     if sag_over_d is None:
         sag_over_d = _sag_over_d(params)
     f1 = first_bending_frequency(params)
-    drives = [params.freq] if params.duration > 0 else []
-    if params.protocol == "paper" and params.entangle_duration > 0 and (not params.initial or params.entangle):
-        drives.append(params.entangle_freq)
-    drive = max(drives, default=0.0)
+    from rodwarp.experiments._plan import plan
+
+    drive = max((s.freq for s in plan(params) if s.duration > 0), default=0.0)
     quasi = drive <= QUASI_STATIC * f1
     n = MAX_VERTICES
     if quasi:
@@ -416,6 +365,17 @@ def _sag_over_d(params: ProtocolParams) -> float:
     q = params.density * math.pi * r**2 * params.effective_gravity
     EI = params.young * math.pi * r**4 / 4
     return 5 * q * params.length**4 / (384 * EI) / d
+
+
+#: the order default folder names list non-default parameters in (the order of the options before
+#: they were grouped by protocol; a parameter not listed comes after, in field order)
+_NAME_ORDER = ("protocol", "alpha", "freq", "amplitude", "gravity", "duration", "entangle_duration", "entangle_freq",
+               "entangle_amplitude", "static_load", "n_rods", "length", "vertices", "box", "container_radius",
+               "fill_height", "container_diameter", "container_height", "tube_diameter", "pour_duration", "strains",
+               "press_duration", "lift_duration", "mu", "wall_mu", "young", "density", "dt", "iterations", "rod_model",
+               "step_safety", "steps_per_period", "rolling", "contact_law", "imc_delta", "imc_nu", "imc_stiffness",
+               "save_every", "checkpoint_every", "fields_every", "seed", "device", "initial", "units",
+               "initial_diameter", "entangle")
 
 
 def default_run_name(params: ProtocolParams) -> str:
@@ -449,8 +409,51 @@ def default_run_name(params: ProtocolParams) -> str:
             return list(v) != list(dv)
         return v != dv
 
-    extra = [f"{short[k]}{fmt(v)}" for k, v in d.items() if k not in skip and differs(k, v)]
+    # the parameters in the order folder names have always listed them (new ones after), so a
+    # run's default folder keeps its name however the dataclasses group their fields
+    rank = {k: i for i, k in enumerate(_NAME_ORDER)}
+    keys = sorted(d, key=lambda k: rank.get(k, len(rank)))
+    extra = [f"{short[k]}{fmt(d[k])}" for k in keys if k not in skip and differs(k, d[k])]
     name = "_".join([head, *extra])
     if len(name) > 120:
         name = head + "_" + hashlib.sha1("_".join(extra).encode()).hexdigest()[:10]
     return name.replace("/", "-")
+
+
+def _compose():
+    """:class:`ProtocolParams`: the fields of :class:`ExperimentParams`, of every registered
+    protocol's own parameters (``Protocol.Params``, in the registry's order) and of
+    :class:`RunParams`, with :class:`_Derived`'s methods; frozen."""
+    from dataclasses import field, make_dataclass
+
+    from rodwarp.experiments.protocols import PROTOCOLS
+
+    groups = [ExperimentParams, *dict.fromkeys(p.Params for p in PROTOCOLS.values() if p.Params is not None),
+              RunParams]
+    specs, seen = [], set()
+    for group in groups:
+        hints = group.__annotations__
+        for f in fields(group):
+            if f.name in seen:
+                raise TypeError(f"parameter {f.name} is declared twice ({group.__name__})")
+            seen.add(f.name)
+            meta = dict(f.metadata)
+            if f.name == "protocol":  # the choices and what each does, from the registry
+                meta["help"] = " or ".join(f"{p.name} ({p.help})" for p in PROTOCOLS.values()) + "."
+            specs.append((f.name, hints[f.name], field(default=f.default, metadata=meta)))
+    cls = make_dataclass("ProtocolParams", specs, bases=(_Derived,), frozen=True)
+    cls.__module__ = __name__
+    cls.__doc__ = _DOC
+    return cls
+
+
+_DOC = """Parameters of :func:`run_protocol` (SI units; box in rod lengths), frozen: one flat record of
+:class:`ExperimentParams`, each protocol's own parameters and :class:`RunParams`.
+
+Every field's default and help text are stated once, in the dataclass that owns it;
+``rodwarp simulate`` takes its options from them (:func:`option_table`), in this order.
+:meth:`validate` checks them and returns the parameters a run uses
+(:class:`~rodwarp.experiments.CheckedProtocol`); a variant is ``dataclasses.replace(params, ...)``.
+"""
+
+ProtocolParams = _compose()

@@ -15,7 +15,7 @@ import math
 from pathlib import Path
 
 from rodwarp.errors import RodwarpError
-from rodwarp.experiments._plan import ENTANGLE, TEST
+from rodwarp.experiments.protocols.paper import ENTANGLE, TEST
 from rodwarp.rodset.files import save_figure
 
 #: colours of stable and unstable points

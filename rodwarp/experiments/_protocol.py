@@ -1,25 +1,14 @@
-"""The paper's numerical experiment: random packing, entangling, vibration stability test.
+"""A protocol run: the plan of its protocol's stages stepped by one loop, and its outputs.
 
-Stages (the seed paper's "Numerical simulations of rod packings"; docs/protocol.md):
-
-1. random packing of N = round(5.4 alpha) straight steel rods in a 1 x 1 x 2.5 l box;
-2. entangling: the closed container vibrated vertically (10 Hz, 0.05 m) for 5 s;
-3. stability: side walls and lid removed, the floor vibrated at ``freq`` with ``amplitude``
-   for ``duration``; f = largest contact cluster / all rods measured over time.
-
-The stages are a run plan (:func:`rodwarp.experiments._plan.plan`) stepped by one loop
-(:func:`run_protocol`): each stage is a drive and a set of walls (``Stage.control``) on the
-same model and states; the loop takes adaptive steps that
-land exactly on the sample times, and a :class:`~rodwarp.experiments._recorder.Recorder` takes
-the samples (metrics row, trajectory and VTK frames) and the checkpoints, which also hold the
-loop's own position (:class:`LoopPosition`), so a resumed run is bit-identical.
-
-Stability verdict (:mod:`rodwarp.experiments._verdict`, docs/verdict.md): every
-``save_every`` of the test, the height kept h(t) (mass centroid above the floor over its
-value at the test start), the largest contact cluster f(t) and the rods that left the pile
-are recorded; ``stable`` when the packing is still entangled (h and f above their thresholds)
-at the end and was entangled for at least the threshold fraction of the test (the
-persistence tau).
+:func:`run_protocol` builds the scene its protocol plug-in describes
+(:mod:`rodwarp.experiments.protocols`: packing, walls, stages, columns, summary block), steps
+the stages on one model with :func:`rodwarp.experiments._loop.step_stages`, which takes
+adaptive steps that land exactly on the sample times while a
+:class:`~rodwarp.experiments._recorder.Recorder` takes the samples and the checkpoints, and
+writes the outputs. A checkpoint holds the loop's own position, so a resumed run is
+bit-identical. The stability verdict (:mod:`rodwarp.experiments._verdict`, docs/verdict.md)
+judges the samples of the plan's test stage; the paper's protocol is docs/protocol.md, the
+others docs/experiments.md.
 """
 
 from __future__ import annotations
@@ -34,117 +23,38 @@ import numpy as np
 
 from rodwarp.errors import RodwarpError
 
-from rodwarp.experiments._outputs import SIMULATE_OUTPUTS  # noqa: E402
-from rodwarp.experiments._plan import ENTANGLE, SIDE_WALLS, frames, plan  # noqa: E402
+from rodwarp.experiments._loop import Engine, LoopPosition, StepMemory, step_stages
+from rodwarp.rodset.rundir import SIMULATE_OUTPUTS
+from rodwarp.experiments._plan import check_plan, frames, plan
+from rodwarp.experiments._recorder import ENTANGLED
 
 from rodwarp.experiments._params import (RIGID_SAG, RODS_PER_ALPHA, ProtocolParams, _straight,  # noqa: E402,F401
                                          option_table, rod_model_rule, rod_resolution)
 
 
-def _build(params: ProtocolParams, rods, device, rod_model: str):
-    """Model and solver of the experiment (deterministic given the parameters and rods)."""
+def _build(params: ProtocolParams, rods, device, rod_model: str, proto=None):
+    """Model and solver of the run, the scene's walls from its protocol (``proto``, default
+    ``params.protocol``'s; deterministic given the parameters and rods); also the scene's box
+    (lo, hi) in m."""
+    from rodwarp.experiments.protocols import protocol
     from rodwarp.sim import Material, ModelBuilder, RodSolver
 
+    proto = proto or protocol(params.protocol)
     g_eff = params.effective_gravity
     builder = ModelBuilder(rods, Material(params.young, params.density), gravity=(0.0, 0.0, -g_eff), mu=params.mu,
                            rod_model=rod_model, rolling=params.spin, contact_law=params.contact_law_object(),
                            device=device)
-    from rodwarp.experiments._protocols import plugin
-
-    if (proto := plugin(params.protocol)) is not None:
-        box = proto.walls(builder, params, rods)
-        model = builder.finalize()
-        return model, RodSolver(model, iterations=params.iterations, steps_per_period=params.steps_per_period), box
-    bb = rods.bounding_box()
-    if rods.box is not None:
-        # the input's container, widened to its rods: rods lying on (or sunk into) the box's
-        # floor get the floor under their lowest point, never a floor above it
-        lo = np.minimum(np.asarray(rods.box[0], float), bb[0])
-        hi = np.maximum(np.asarray(rods.box[1], float), bb[1])
-    else:  # an input without a container: the floor under its lowest point, walls around it
-        lo, hi = bb[0], bb[1]
-    builder.add_box(lo, hi + np.array([0, 0, 0.5 * params.length]), walls=("floor", *SIDE_WALLS), moving=True)
+    box = proto.walls(builder, params, rods)
     model = builder.finalize()
-    return model, RodSolver(model, iterations=params.iterations, steps_per_period=params.steps_per_period), (lo, hi)
-
-
-#: walls removed for the stability test (the floor stays and vibrates; docs/protocol.md)
-def _check_plan(stages):
-    """Refuse a plan without exactly one test stage or with a name twice (one line)."""
-    names = [s.name for s in stages]
-    if sum(s.test for s in stages) != 1:
-        raise RodwarpError(f"a run plan needs exactly one test stage (Stage(test=True)); got {names}")
-    if len(set(names)) != len(names):
-        raise RodwarpError(f"stage names must be unique in a run plan; got {names}")
-    return stages
+    return model, RodSolver(model, iterations=params.iterations, steps_per_period=params.steps_per_period), box
 
 
 def _default_dt(stages, model, solver) -> float:
     """The worst-case step of the run (s): the smallest of the solver's default steps under the
-    drives of its stages, at the scene's characteristic speed.
-
-    A run takes adaptive steps (:meth:`RodSolver.adaptive_dt`); this step only sizes the run
-    before it starts (:func:`~rodwarp.experiments._checks.check_step_count` refuses a run of
-    too many steps). It was the fixed step of the run before the adaptive one: the stability
-    test alone would allow a step set by its drive (1/(40 f)), but a pile resting under
-    gravity needs the finer step of the entangling stage to keep Gauss-Seidel converged (at
-    alpha = 100, f = 10 Hz, 2.5e-3 s let rods overlap by 0.25 d where 1e-3 s kept the largest
-    overlap at 0.015 d).
-    """
+    drives of its stages, at the scene's characteristic speed. It sizes the run before it
+    starts (:func:`~rodwarp.experiments._checks.check_step_count` refuses a run of too many
+    steps); the run itself takes adaptive steps (:meth:`RodSolver.adaptive_dt`)."""
     return min(solver.default_dt(stage.control(model, 0.0)) for stage in stages)
-
-
-@dataclass
-class LoopPosition:
-    """Where the stepping loop stands: what a checkpoint restores besides the engine state and
-    the samples (those are the :class:`~rodwarp.experiments._recorder.Recorder`'s).
-
-    Attributes
-    ----------
-    start_stage, start_j, mid_stage
-        Where the loop starts: the stage index, the samples of that stage already taken, and
-        whether that stage is under way (a resumed run) or starts afresh.
-    steps : int
-        Steps taken so far.
-    y0 : float
-        Mass centroid height above the floor at t = 0 (m), the reference of y_c(t)/y_c(0).
-    pile_ref : PileReference or None
-        The pile when the stability test started (the verdict's reference).
-    stage_t0 : dict
-        Start time of each stage begun (s).
-    stepper : dict
-        The adaptive step's memory: the last step ``dt`` (s) and the fastest vertex speed
-        ``vmax`` (m/s) after it; checkpointed, so a resumed run picks the same steps.
-    dts : dict
-        Per stage: step count, min, max, mean and sum of the steps (s), for summary.json.
-    next_ck : float
-        Simulated time of the next checkpoint (s).
-    marks : dict
-        What stages measured for later ones and for summary.json (the lab's packing height
-        when pressing began, ``height0``; its results at each strain, ``strains``).
-    """
-
-    y0: float
-    stepper: dict
-    next_ck: float
-    steps: int = 0
-    pile_ref: object = None
-    stage_t0: dict = field(default_factory=dict)
-    dts: dict = field(default_factory=dict)
-    start_stage: int = 0
-    start_j: int = 0
-    mid_stage: bool = False
-    marks: dict = field(default_factory=dict)
-
-    @classmethod
-    def from_checkpoint(cls, meta: dict) -> "LoopPosition":
-        from rodwarp.experiments._verdict import PileReference
-
-        return cls(y0=meta["y0"], stepper=dict(meta["stepper"]), next_ck=float(meta["next_ck"]), steps=meta["steps"],
-                   pile_ref=PileReference.from_dict(meta["pile_ref"]) if meta.get("pile_ref") else None,
-                   stage_t0={k: float(v) for k, v in meta["stage_t0"].items()}, dts=meta["dts"],
-                   start_stage=meta["stage"], start_j=meta["j"], mid_stage=meta["mid_stage"],
-                   marks=dict(meta.get("marks", {})))
 
 
 def _resume_point(params: ProtocolParams, ckdir: Path):
@@ -168,10 +78,6 @@ def _resume_point(params: ProtocolParams, ckdir: Path):
     return ck
 
 
-#: the file a run writes when its entangling stage ends: the checkpoint at the stage boundary,
-#: kept (the rolling checkpoints are not), from which other stability tests of the same
-#: entangled packing start (``entangled_from``)
-ENTANGLED = "entangled.npz"
 #: the stability test's own parameters: a run may take its entangled packing from a run that
 #: differs from it in these alone (and in the device)
 TEST_FIELDS = ("freq", "amplitude", "duration")
@@ -195,9 +101,9 @@ def _effective(parameters: dict) -> dict:
         out["rolling"] = not imc
     if out.get("contact_law") == "exact":
         out["contact_law"] = None
-    # before issue 45 every drive took at least 40 steps a period, and every rod 10 vertices
-    # unless given: a checkpoint of then compares by what it ran with, a run of now by the
-    # resolution rule's count
+    # checkpoints from before the resolution rule ran every drive at 40 steps a period or more and
+    # every rod at 10 vertices unless given: such a checkpoint compares by what it ran with, a run
+    # of now by the resolution rule's count
     if out.get("steps_per_period") is None:
         out["steps_per_period"] = 40.0
     if out.get("vertices") is None:
@@ -209,7 +115,9 @@ def _effective(parameters: dict) -> dict:
 
 def check_branch_protocol(params: ProtocolParams) -> None:
     """Refuse ``--entangled-from`` for a protocol without an entangling stage (one line)."""
-    if params.protocol != "paper":
+    from rodwarp.experiments.protocols import protocol
+
+    if not protocol(params.protocol).branch:
         raise RodwarpError(f"--entangled-from applies only with --protocol paper (it starts the stability test "
                            f"from another run's entangled packing); --protocol {params.protocol} pours its packing "
                            f"and has no entangling stage: drop --entangled-from")
@@ -221,7 +129,7 @@ def _entangled_point(params: ProtocolParams, donor: Path, outdir: Path):
     from rodwarp.rodset.trajectory import read_checkpoint_file
 
     check_branch_protocol(params)
-    if plan(params)[0].name != ENTANGLE:
+    if not plan(params)[0].keep:
         raise RodwarpError("--entangled-from: this run has no entangling stage (entangle duration 0, or --initial "
                            "without --entangle); drop --entangled-from")
     if donor.resolve() == outdir.resolve():
@@ -308,9 +216,8 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
     entangling ends (docs/protocol.md, "One entangled packing, several tests"). summary.json
     records the donor under ``entangled_from``; ``wall_time_s`` is this run's own time.
 
-    ``stages`` (a run plan, :mod:`rodwarp.experiments._plan`) replaces the paper's
-    :func:`~rodwarp.experiments._plan.plan` of ``params``: one stage with ``test`` set, names
-    unique.
+    ``stages`` (a run plan, :mod:`rodwarp.experiments._plan`) replaces the protocol's own
+    plan of ``params``: one stage with ``test`` set, names unique.
 
     Returns
     -------
@@ -320,7 +227,7 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
     from rodwarp import _warp
     from rodwarp.experiments import _verdict as vd
     from rodwarp.experiments._checks import CheckedProtocol, check_step_count, output_bytes
-    from rodwarp.experiments._packing import orientation_statistics, random_packing
+    from rodwarp.experiments._packing import orientation_statistics
     from rodwarp.experiments._recorder import Recorder, plot_metrics
     from rodwarp.rodset import load, rundir
     from rodwarp.rodset.files import write_json
@@ -329,9 +236,9 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
 
     checked = params if isinstance(params, CheckedProtocol) else params.validate()
     params = checked.params  # with --initial: the input's alpha and length
-    from rodwarp.experiments._protocols import plugin
+    from rodwarp.experiments.protocols import protocol
 
-    proto = plugin(params.protocol)  # None: the paper's protocol, this loop's own
+    proto = protocol(params.protocol)
     thresholds = thresholds or vd.DEFAULT_THRESHOLDS
     outdir = Path(outdir)
     donor = Path(entangled_from) if entangled_from is not None and not resume else None
@@ -358,16 +265,13 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
         ck = branch
         for name in ("initial.npz", ENTANGLED):
             _copy_file(donor / name, outdir / name)
-        donor_rec = _donor_record(donor, ck[1])
+        donor_rec = _donor_record(donor, ck[1], plan(params)[0].name)
         write_json(outdir / ENTANGLED_FROM, donor_rec)
         rods = load(outdir / "initial.npz")
     elif params.initial:
         rods = checked.input_rods  # loaded, in metres, and checked by validate()
-    elif proto is not None:
-        rods = proto.packing(params, device)
     else:
-        rods = random_packing(params.rods, params.length, params.diameter, np.asarray(params.box) * params.length,
-                              n_vertices=params.n_vertices, seed=params.seed, device=device)
+        rods = proto.packing(params, device)
     if not resume:
         for old in ckdir.glob("ckpt_*.npz"):
             old.unlink()
@@ -380,9 +284,9 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
     if rule["rod_model"] == "elastic" and not params.initial:
         # the vertices per rod the packing was made with, and why (the input's own with --initial)
         rule["resolution"] = rod_resolution(params)
-    model, solver, (box_lo, box_hi) = _build(params, rods, device, rule["rod_model"])
+    model, solver, (box_lo, box_hi) = _build(params, rods, device, rule["rod_model"], proto)
     sim_rods = model.rods  # the simulated rods (two vertices per rod for rigid rods)
-    stages = _check_plan(tuple(stages) if stages is not None else plan(params))
+    stages = check_plan(tuple(stages) if stages is not None else plan(params))
     protocol_dt = _default_dt(stages, model, solver)
     check_step_count(params, params.dt or protocol_dt, "--dt" if params.dt else "the default step")
 
@@ -393,8 +297,8 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
     if ck is None:
         floor0 = model.control().floor_height(0.0)
         loop = LoopPosition(y0=centroid_height(model, state, 0.0 if floor0 is None else floor0),
-                            stepper={"dt": None, "vmax": float(np.linalg.norm(state.velocities(), axis=1)
-                                                               .max(initial=0.0))},
+                            stepper=StepMemory(None, float(np.linalg.norm(state.velocities(), axis=1)
+                                                           .max(initial=0.0))),
                             next_ck=params.checkpoint_every)
     else:
         arrays, meta = ck
@@ -409,14 +313,14 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
     if branch is not None:
         _take_entangling(donor, outdir, ck[1], n_frames, sim_rods)
     rec = Recorder(outdir, model, solver, sim_rods, n_frames, checkpoint=ck,
-                   done=[s.name for s in stages[:loop.start_stage]], fields_every=params.fields_every,
-                   columns=proto.columns if proto is not None else None)
+                   done=stages[:loop.start_stage], fields_every=params.fields_every, columns=proto.columns,
+                   kept_snapshot=next((s.snapshot for s in stages if s.keep), ""))
 
     # the verdict's pile reference measures the input rods (a rigid rod's two-vertex chord may
     # differ from its polyline's length in the last bits)
     longest = float(np.max(rods.rod_lengths()))
-    state, control = _step_stages(params, model, solver, stages, (state, other, points), control, loop, rec, longest,
-                                  progress)
+    state, control = step_stages(params, model, solver, stages, Engine(state, other, points), control, loop, rec,
+                                 longest, progress)
 
     wall = time.perf_counter() - t_wall
     c = rod_contacts(model, state, points)
@@ -434,9 +338,8 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
                        {"device": device, "wall_time_s": wall, "resumed": bool(resume), "initial_orientation": orient,
                         "fields_wall_s": rec.fields_wall_s,
                         "entangled_from": donor_rec})
-    if proto is not None:
-        key, block = proto.summary(params, model, rec.rows, loop, stages, thresholds)
-        summary[key] = block
+    if (block := proto.summary(params, model, rec.rows, loop, stages, thresholds)) is not None:
+        summary[block[0]] = block[1]
     rec.write_metrics()
     write_json(outdir / "summary.json", summary)
     plot_metrics(outdir / "metrics.png", rec.rows, summary)
@@ -445,13 +348,13 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
     return summary
 
 
-def _donor_record(donor: Path, meta: dict) -> dict:
+def _donor_record(donor: Path, meta: dict, kept: str) -> dict:
     """summary.json's ``entangled_from``: the run whose entangled packing this run's test took."""
     from rodwarp.rodset import rundir
 
     m = rundir._read_manifest(donor) or {}
     return {"run": str(donor.resolve()), "run_id": m.get("run_id"), "time": meta["rows"][-1]["time"],
-            "steps": meta["steps"], "entangle_wall_s": meta["dts"].get(ENTANGLE, {}).get("wall_s")}
+            "steps": meta["steps"], "entangle_wall_s": meta["dts"].get(kept, {}).get("wall_s")}
 
 
 def _read_donor_record(outdir: Path):
@@ -463,121 +366,6 @@ def _read_donor_record(outdir: Path):
 #: where a branched run keeps its ``entangled_from`` record until summary.json is written (a
 #: resumed branch reports its donor too)
 ENTANGLED_FROM = "entangled_from.json"
-
-
-def _step_stages(params, model, solver, stages, engine, control, loop, rec, longest: float, progress: bool):
-    """Step through ``stages`` from ``loop``'s position, sampling and checkpointing on the way.
-
-    Every step is the adaptive step (:meth:`RodSolver.adaptive_dt`, or ``params.dt``),
-    shortened so that equal steps land exactly on the next sample time; a sample is taken on
-    landing and a checkpoint whenever ``checkpoint_every`` of simulated time has passed.
-    ``engine`` is (state, the other state it ping-pongs with, the contact points);
-    ``longest`` is the longest rod (m), for the pile reference at the start of the test.
-
-    Returns
-    -------
-    (State, Control)
-        The final state and the last stage's control.
-    """
-    from rodwarp._util import progress_bar
-    from rodwarp.experiments import _verdict as vd
-    from rodwarp.experiments._recorder import AFTER_ENTANGLING
-
-    parameters = asdict(params)
-    state, other, points = engine
-    with progress_bar(progress, seconds=True, remaining=True, note=True) as update:
-        for si, stage in enumerate(stages):
-            name, dur = stage.name, stage.duration
-            if si < loop.start_stage:
-                continue
-            resuming = si == loop.start_stage and loop.mid_stage
-            j0 = loop.start_j if si == loop.start_stage else 0  # samples of this stage already taken
-            if not resuming:
-                loop.stage_t0[name] = state.time
-                if stage.strain is not None and "height0" not in loop.marks:
-                    from rodwarp.experiments._lab import packing_top
-
-                    loop.marks["height0"] = packing_top(model, state.positions())
-                control = stage.control(model, state.time, loop.marks)
-                loop.dts[name] = {"steps": 0, "min": None, "max": None, "mean": None, "sum": 0.0, "refused": 0}
-                loop.next_ck = state.time + params.checkpoint_every
-                if stage.test:
-                    points.clear_wall_impulses()
-                    floor = control.floor_height(state.time)
-                    loop.pile_ref = vd.pile_reference(state.time, state.positions(), model.vertex_rod_np,
-                                                      model.mass_np, model.n_rods, 0.0 if floor is None else floor,
-                                                      longest, model.min_diameter)
-            t_s0 = loop.stage_t0[name]
-            t_end = t_s0 + dur
-            n_samples = max(1, int(math.ceil(dur / params.save_every - 1e-9)))
-            update(name, state.time - t_s0, dur)
-            if si == 0 and j0 == 0 and not loop.mid_stage:
-                rec.sample(name, state, points, None, control, loop, test=stage.test)
-            t0 = t_mark = time.perf_counter()
-            steps0 = loop.steps
-            j = j0 + 1
-            while j <= n_samples:
-                target = t_end if j == n_samples else t_s0 + j * params.save_every
-                dt = params.dt or solver.adaptive_dt(control, loop.stepper["vmax"], loop.stepper["dt"],
-                                                     safety=params.step_safety,
-                                                     overlap=loop.stepper.get("overlap"))
-                left = target - state.time
-                # reach the sample time exactly, in equal steps no longer than dt
-                n_left = max(1, int(math.ceil(left / dt - 1e-6)))
-                landing = n_left == 1
-                dt = left / n_left
-                if params.dt:
-                    solver.collide(state, control, dt, points)
-                    info, dt_taken, refused = solver.step(state, other, control, points, dt), dt, 0
-                else:
-                    info, dt_taken, refused = solver.adaptive_step(state, other, control, points, dt)
-                if refused:
-                    # the guard refused dt at the predictor's speeds: a shorter step, not on the sample
-                    landing, dt = False, dt_taken
-                state, other = other, state
-                if landing:
-                    state.time = target
-                loop.steps += 1
-                st = loop.dts[name]
-                st["steps"] += 1
-                st["refused"] = st.get("refused", 0) + refused  # steps the guard refused and retried shorter
-                st["sum"] += dt
-                st["min"] = dt if st["min"] is None else min(st["min"], dt)
-                st["max"] = dt if st["max"] is None else max(st["max"], dt)
-                loop.stepper["vmax"] = info.max_speed
-                loop.stepper["dt"] = dt
-                loop.stepper["overlap"] = info.max_overlap
-                if landing:
-                    rec.sample(name, state, points, info, control, loop, test=stage.test)
-                    j += 1
-                    rate = (loop.steps - steps0) / max(time.perf_counter() - t0, 1e-9)
-                    update(name, state.time - t_s0, dur, note=f"{rate:.0f} steps/s")
-                if state.time >= loop.next_ck - 1e-12 and j <= n_samples:
-                    loop.next_ck += params.checkpoint_every
-                    t_mark = _add_wall(st, t_mark)
-                    rec.checkpoint(state, points, loop, si, j - 1, True, parameters)
-            loop.dts[name]["mean"] = loop.dts[name]["sum"] / max(loop.dts[name]["steps"], 1)
-            if stage.strain is not None:
-                loop.marks.setdefault("strains", []).append(rec.strain_result(stage, state, points, control, params,
-                                                                              loop.marks["height0"]))
-            if stage.snapshot:
-                rec.snapshot(AFTER_ENTANGLING if name == ENTANGLE else f"after {name}", state.positions())
-            if si + 1 < len(stages):
-                loop.next_ck = state.time + params.checkpoint_every
-                _add_wall(loop.dts[name], t_mark)
-                rec.checkpoint(state, points, loop, si + 1, 0, False, parameters,
-                               keep_as=rec.outdir / ENTANGLED if stage.keep else None)
-            else:
-                _add_wall(loop.dts[name], t_mark)
-    return state, control
-
-
-def _add_wall(st: dict, since: float) -> float:
-    """Add the wall time since ``since`` to a stage's record (``wall_s``: this stage's time in
-    the processes that ran it, so a resumed stage counts both parts); returns now."""
-    now = time.perf_counter()
-    st["wall_s"] = st.get("wall_s", 0.0) + (now - since)
-    return now
 
 
 def _last(rows, key):
@@ -607,7 +395,7 @@ def _summary(params, model, rows, loop, verdict, contacts, centroid_height, rule
         "max_penetration_over_d": max(r["max_penetration_over_d"] for r in rows),
         "rod_model": rule["rod_model"], "rod_model_rule": rule,
         "contact_law": model.contact_law.to_dict(), "rolling": model.rolling,
-        "seed": params.seed, "device": run["device"], "dt": loop.dts, "steps": loop.steps,
+        "seed": params.seed, "device": run["device"], "dt": loop.dts_dict(), "steps": loop.steps,
         "wall_time_s": run["wall_time_s"], "resumed": run["resumed"], "entangled_from": run.get("entangled_from"),
         "initial_orientation": run["initial_orientation"],
         # time spent on the fields series (this process; a resumed run counts its own part)

@@ -5,7 +5,7 @@ packing's contacts, its largest contact cluster, the verdict's height kept and r
 kinetic energy, the largest overlap and the step's diagnostics), a frame of
 ``trajectory.zarr`` and a VTK frame listed in ``trajectory.pvd``.  A *checkpoint* holds the
 engine state, the samples so far and where the stepping loop stands
-(:class:`~rodwarp.experiments._protocol.LoopPosition`), so that a resumed run continues bit for
+(:class:`~rodwarp.experiments._loop.LoopPosition`), so that a resumed run continues bit for
 bit.  :func:`plot_metrics` draws ``metrics.png`` from the rows at the end.
 """
 
@@ -19,12 +19,15 @@ from pathlib import Path
 import numpy as np
 
 from rodwarp.experiments import _verdict as vd
-from rodwarp.experiments._plan import ENTANGLE, TEST
 from rodwarp.rodset import contacts_per_rod, largest_cluster
 from rodwarp.rodset.files import atomic_path, save_figure
 
-#: title of the snapshot taken when entangling ends (kept in checkpoints as ``after_entangle``)
-AFTER_ENTANGLING = "after entangling"
+#: the file a run writes when its kept stage (``Stage.keep``: the paper's entangling) ends: the
+#: checkpoint at the stage boundary, kept (the rolling checkpoints are not), from which other
+#: tests of the same packing start (``--entangled-from``)
+ENTANGLED = "entangled.npz"
+#: the array under which a checkpoint holds the kept stage's snapshot
+KEPT_SNAPSHOT = "after_entangle"
 
 
 class Recorder:
@@ -42,8 +45,8 @@ class Recorder:
         Frames the trajectory holds at most (every sample of every stage, plus the start).
     checkpoint : (dict, dict), optional
         ``(arrays, meta)`` of the checkpoint a resumed run continues from.
-    done : sequence of str
-        With ``checkpoint``: the stages it had finished (their snapshots come back).
+    done : sequence of Stage
+        With ``checkpoint``: the stages it had finished (the kept stage's snapshot comes back).
     fields_every : float
         Interval (s) of the entanglement fields: at the first sample of each such interval the
         Warp field kernels of :func:`rodwarp.analysis.compute_fields` run on the sample's rods
@@ -52,10 +55,12 @@ class Recorder:
     columns : callable or None
         A protocol's own columns: ``columns(model, x, control, t)`` returns a dict added to
         each row (the lab's piston height and spread radius, docs/experiments.md).
+    kept_snapshot : str
+        The snapshot title of the plan's kept stage (``Stage.keep``), which checkpoints carry.
     """
 
     def __init__(self, outdir: Path, model, solver, rods, n_frames: int, checkpoint=None, done=(),
-                 fields_every: float = 0.0, columns=None):
+                 fields_every: float = 0.0, columns=None, kept_snapshot: str = ""):
         from rodwarp.rodset.trajectory import Trajectory
 
         self.outdir = Path(outdir)
@@ -67,24 +72,26 @@ class Recorder:
         self.fields_every = float(fields_every)
         self.fields_wall_s = 0.0
         self.columns = columns
+        self.kept_snapshot = kept_snapshot
         if checkpoint is not None:
             arrays, meta = checkpoint
             self.rows = meta["rows"]
             self.vtk = [tuple(e) for e in meta["vtk"]]
             self.frame = meta["frame"]
-            if ENTANGLE in done and "after_entangle" in arrays:
-                self.snapshots.append((AFTER_ENTANGLING, arrays["after_entangle"]))
+            kept = next((s for s in done if s.keep and s.snapshot), None)
+            if kept is not None and KEPT_SNAPSHOT in arrays:
+                self.snapshots.append((kept.snapshot, arrays[KEPT_SNAPSHOT]))
         self.trajectory = Trajectory(self.outdir / "trajectory.zarr", n_frames, rods.offsets, rods.radii,
                                      resume=checkpoint is not None)
         (self.outdir / "vtk").mkdir(exist_ok=True)
 
-    def sample(self, stage: str, state, points, info, control, loop, test: bool | None = None) -> None:
+    def sample(self, stage: str, state, points, info, control, loop, test: bool) -> None:
         """Take the sample of ``state`` (the state just reached, at a sample time).
 
         Parameters
         ----------
         stage : str
-            The stage's name (``experiments.ENTANGLE``, ``experiments.TEST``, ...).
+            The stage's name.
         points : ContactPoints
             The contact points of the step that reached ``state``.
         info : StepInfo or None
@@ -93,8 +100,8 @@ class Recorder:
             The stage's control (its floor is the reference of heights).
         loop : LoopPosition
             The run's position: the step count, y_c(0) and the pile at the test start.
-        test : bool, optional
-            Whether the stage is the test (default: it is named ``experiments.TEST``).
+        test : bool
+            Whether the stage is the test (its samples are judged against ``loop.pile_ref``).
         """
         from rodwarp.rodset.trajectory import write_pvd, write_vtp
         from rodwarp.sim import rod_contacts
@@ -107,7 +114,7 @@ class Recorder:
         floor = 0.0 if floor is None else floor
         in_big = largest_cluster(model.n_rods, c)
         h = vd.centroid_height_above(x, model.mass_np, floor)
-        test = (stage == TEST if test is None else test) and pile_ref is not None
+        test = test and pile_ref is not None
         self.rows.append({
             "time": state.time, "stage": stage,
             "contacts_per_rod": contacts_per_rod(model.n_rods, c),
@@ -162,43 +169,12 @@ class Recorder:
         num = lambda v: "" if v is None else float(v)  # noqa: E731
         return {"cv_e": num(st.get("cv_e")), "mean_e": num(st.get("mean_e")), "mean_phi": num(st.get("mean_phi"))}
 
-    def strain_result(self, stage, state, points, control, params, height0: float) -> dict:
-        """At the end of a piston stage: the strain reached, the rest it came to, and the fields
-        of the pressed packing (written to ``fields_<stage>.npz``, its rods and contacts to
-        ``rods_<stage>.npz``; statistics returned)."""
-        from rodwarp.experiments._lab import packing_top, piston_height, strain_fields
-        from rodwarp.sim import rod_contacts
-
-        x = state.positions()
-        c = rod_contacts(self.model, state, points)
-        top = piston_height(self.model, control, state.time)
-        f, stats = strain_fields(self.model, self.rods, x, c, params, top, self.model.device)
-        name = f"fields_{stage.name}.npz"
-        if f is not None:
-            f.save(self.outdir / name)
-        # the pressed packing itself (rods and contacts, m): its fields can be recomputed under
-        # any convention, grid or region (scripts/ct_like_for_like.py)
-        pressed = self.rods.with_points(x)
-        pressed.contacts = c
-        pressed.attrs.update({"stage": stage.name, "strain": float(stage.strain[1]),
-                              "piston_height_m": float(top), "time_s": float(state.time)})
-        pressed.save(self.outdir / f"rods_{stage.name}.npz")
-        speed = np.linalg.norm(state.velocities(), axis=1)
-        num = lambda v: None if v is None else float(v)  # noqa: E731
-        return {"stage": stage.name, "strain": float(stage.strain[1]), "height0": float(height0),
-                "piston_height": float(top), "strain_reached": 1.0 - float(top) / float(height0),
-                "packing_top": packing_top(self.model, x),
-                "max_speed": float(speed.max()), "kinetic_energy": float(self.solver.energy(state)["kinetic"]),
-                "contacts_per_rod": contacts_per_rod(self.model.n_rods, c),
-                "fields": name if f is not None else None, "rods": f"rods_{stage.name}.npz", **{k: num(v) if not isinstance(v, str) else v
-                                                              for k, v in stats.items()}}
-
     def snapshot(self, title: str, x: np.ndarray) -> None:
         """Keep the positions ``x`` (V, 3) m for ``snapshots.png`` under ``title``."""
         self.snapshots.append((title, x))
 
     def checkpoint(self, state, points, loop, stage: int, j: int, mid_stage: bool, parameters: dict,
-                   keep_as=None) -> None:
+                   keep: bool = False) -> None:
         """Write a checkpoint: the engine state and its contact points (the warm start), the
         samples so far and the loop's position.
 
@@ -209,25 +185,27 @@ class Recorder:
             whether the stage is under way (else it starts afresh).
         parameters : dict
             Every parameter of the run (a resume must repeat them).
-        keep_as : path-like, optional
-            Also write the same checkpoint to this file, which the rolling checkpoints never
-            remove (the state when entangling ends: ``entangled.npz``).
+        keep : bool
+            Also write the same checkpoint to :data:`ENTANGLED`, which the rolling checkpoints
+            never remove (the state when the kept stage ends).
         """
         from rodwarp.rodset.trajectory import save_checkpoint, write_checkpoint_file
 
         # the contact points keep the names they had inside the state, so every checkpoint loads
         arrays = {f"state_{key}": val for key, val in {**state.to_numpy(), **points.to_numpy()}.items()}
-        for title, x in self.snapshots:
-            if title == AFTER_ENTANGLING:
-                arrays["after_entangle"] = x
+        if self.kept_snapshot:
+            for title, x in self.snapshots:
+                if title == self.kept_snapshot:
+                    arrays[KEPT_SNAPSHOT] = x
         meta = {"stage": stage, "j": j, "mid_stage": mid_stage, "steps": loop.steps, "y0": loop.y0, "rows": self.rows,
                 "pile_ref": loop.pile_ref.to_dict() if loop.pile_ref is not None else None,
                 "stage_t0": loop.stage_t0, "frame": self.frame, "vtk": self.vtk,
-                "parameters": json.loads(json.dumps(parameters)), "stepper": loop.stepper, "dts": loop.dts,
+                "parameters": json.loads(json.dumps(parameters)), "stepper": loop.stepper.to_dict(),
+                "dts": loop.dts_dict(),
                 "next_ck": loop.next_ck, "marks": loop.marks}
         save_checkpoint(self.outdir / "checkpoints", loop.steps, arrays, meta)
-        if keep_as is not None:
-            write_checkpoint_file(keep_as, arrays, meta)
+        if keep:
+            write_checkpoint_file(self.outdir / ENTANGLED, arrays, meta)
         self.write_metrics()
 
     def write_metrics(self) -> None:
@@ -264,7 +242,7 @@ def plot_metrics(path, rows, summary):
 
     t = col("time")
     thr = summary["thresholds"]
-    test = [r for r in rows if r["stage"] == TEST and r["height_kept"] != ""]
+    test = [r for r in rows if r["height_kept"] != ""]  # the test stage's judged samples
     t0 = summary["test_start"]["time"]
     tt = np.concatenate([[t0], col("time", test)])
     fig, ax = plt.subplots(4, 2, figsize=(10, 11), sharex=True)
@@ -296,7 +274,7 @@ def plot_metrics(path, rows, summary):
         for k in np.flatnonzero(ent):  # sample k covers the interval since the previous sample
             for a in (ax[0, 1], ax[1, 0]):
                 a.axvspan(tt[k], tt[k + 1], color="tab:green", alpha=0.12, lw=0)
-    if any(r["stage"] == TEST for r in rows) and any(r["stage"] == ENTANGLE for r in rows):
+    if test and rows[0]["stage"] != test[0]["stage"]:  # a stage came before the test
         # the test starts at test_start (the pile reference's time), not at its first sample,
         # which comes one save interval later: the marker and its label both sit at t0
         for a in ax.ravel():

@@ -34,7 +34,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from rodwarp.errors import RodwarpError
-from rodwarp.experiments._plan import TEST
+from rodwarp.experiments.protocols.paper import TEST
 
 
 @dataclass(frozen=True)

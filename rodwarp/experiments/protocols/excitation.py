@@ -6,7 +6,7 @@ Everything the protocol is lives here: its defaults and where each comes from
 :func:`excitation_walls`), its stages (:func:`excitation_plan`), its checks
 (:func:`check_excitation`), its columns in metrics.csv (:func:`excitation_columns`) and its
 block of summary.json with the paper's measures (:func:`excitation_summary`, :func:`tau_rule`).
-The stepping loop, checkpoints and outputs are the paper protocol's
+The stepping loop, checkpoints and outputs are every protocol's
 (:func:`rodwarp.experiments.run_protocol`), reached through :data:`EXCITATION`.
 
 The experiment, from the paper's Materials and Methods, "Mechanical Testing" (docs/experiments.md):
@@ -23,7 +23,11 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from rodwarp.experiments._plan import FLOOR, TUBE, Stage
+from rodwarp.experiments._option import param
+from rodwarp.experiments._plan import Stage, Vibrate
+from rodwarp.experiments.protocols.base import Protocol
+from rodwarp.validation import MAX_MU, Range
+from rodwarp.experiments.protocols.lab import FLOOR, TUBE
 
 #: the name of the shaken container's side wall (the floor is :data:`FLOOR`)
 CONTAINER = "container"
@@ -57,7 +61,7 @@ PAPER_DEFAULTS = {
     "container_diameter": (0.15, "paper", "Methods, Mechanical Testing: 'a diameter of 150 mm'"),
     "container_height": (0.15, "paper", "Methods, Mechanical Testing: 'a height of 150 mm'"),
     "tube_diameter": (TUBE_DIAMETER, "rodwarp", "not in the paper: the packing's fixed volume made as tall as wide "
-                                     "(rodwarp.experiments._excitation.TUBE_DIAMETER)"),
+                                     "(rodwarp.experiments.protocols.excitation.TUBE_DIAMETER)"),
     "mu": (0.2, "paper", "the paper's simulations (Results: 'a fixed friction coefficient mu = 0.2'); not given for "
                      "the experiment's steel"),
     "young": (200e9, "paper", "steel rods (Methods, Packing preparation: stainless steel)"),
@@ -86,6 +90,22 @@ TAU_HEIGHT_RANGE = (0.4, 0.6)
 #: judged not entangled for FORM_CYCLES cycles, is judged entangled for FORM_CYCLES again
 FORM_RISE = 0.1
 FORM_CYCLES = 5
+
+
+@dataclass(frozen=True)
+class ExcitationParams:
+    """The excitation experiment's own parameters (with the lab's ``pour_duration`` and
+    ``lift_duration``): the shaken container and the inner tube."""
+
+    container_diameter: float | None = param(None, "excitation: diameter of the shaken container (m; default the "
+                                                    "paper's 0.15; 0: an open plate).", "Dc",
+          range=Range(ge=0, le=10, unit="m", hint="0 shakes the packing on an open plate"))
+    container_height: float | None = param(None, "excitation: height of the container (m; default the paper's "
+                                                  "0.15): no rod may rise above its rim.", "Hc",
+          range=Range(gt=0, le=10, unit="m"))
+    tube_diameter: float | None = param(None, "excitation: diameter of the inner tube the rods are poured into "
+                                               "(m; default 0.06, the paper gives none: docs/experiments.md).", "Dt",
+          range=Range(gt=0, le=10, unit="m"))
 
 
 def paper_length(alpha: float) -> float:
@@ -175,14 +195,15 @@ def excitation_plan(params) -> tuple:
     at its lowest point, ``freq``, ``amplitude``, ``duration``: the test). Without shaking
     (``duration`` 0) the release is the test (Fig. 1A-B)."""
     shake = params.duration > 0
-    out = [Stage(POUR, params.pour_duration, moving=(), snapshot=True, title="pour", option="--pour-duration")]
+    out = [Stage(POUR, params.pour_duration, moving=(), snapshot=f"after {POUR}", title="pour",
+                 option="--pour-duration")]
     if params.lift_duration > 0:
-        out.append(Stage(RELEASE, params.lift_duration, walls_out=(TUBE,), moving=(), test=not shake, snapshot=True,
-                         title="tube removed", option="--lift-duration"))
+        out.append(Stage(RELEASE, params.lift_duration, walls_out=(TUBE,), moving=(), test=not shake,
+                         snapshot=f"after {RELEASE}", title="tube removed", option="--lift-duration"))
     if shake:
         moving = (FLOOR, CONTAINER) if params.container_diameter > 0 else (FLOOR,)  # 0: an open plate
-        out.append(Stage(SHAKE, params.duration, params.amplitude, params.freq, walls_out=(TUBE,),
-                         moving=moving, test=True, from_rest=True, title="shaking", option="--duration"))
+        out.append(Stage(SHAKE, params.duration, Vibrate(params.amplitude, params.freq, from_rest=True),
+                         walls_out=(TUBE,), moving=moving, test=True, title="shaking", option="--duration"))
     return tuple(out)
 
 
@@ -190,8 +211,8 @@ def excitation_packing(params, device):
     """The rods released for the pour: the paper's N (:meth:`~rodwarp.experiments.
     ProtocolParams.rods`) at random positions and isotropic directions, each wholly inside the
     tube, in a column dilute enough (phi alpha = 2) that they fall as through the experiment's
-    sieve (:func:`~rodwarp.experiments._lab.lab_packing`, the lab protocol's pour)."""
-    from rodwarp.experiments._lab import lab_packing
+    sieve (:func:`~rodwarp.experiments.protocols.lab.lab_packing`, the lab protocol's pour)."""
+    from rodwarp.experiments.protocols.lab import lab_packing
 
     return lab_packing(params, device, label="tube")
 
@@ -216,10 +237,10 @@ def excitation_walls(builder, params, rods):
 
 def excitation_columns(model, x, control, t) -> dict:
     """metrics.csv's columns of the experiment: the spread radius (m, :func:`~rodwarp.experiments.
-    _lab.spread_radius`), the highest surface point above the floor (m, ``top_height``) and the
+    protocols.lab.spread_radius`), the highest surface point above the floor (m, ``top_height``) and the
     highest rod's lowest point above the floor (m, ``highest_rod_bottom``: a rod wholly above
     the container's rim could leave a real container)."""
-    from rodwarp.experiments._lab import spread_radius
+    from rodwarp.experiments.protocols.lab import spread_radius
 
     floor = control.floor_height(t)
     floor = 0.0 if floor is None else floor
@@ -332,13 +353,13 @@ def excitation_shake(params, rows, t0: float, thresholds) -> dict:
     Returns
     -------
     dict
-        :func:`~rodwarp.experiments._lab.shake_result` (y_c / y_c(0) at each sample and landed
+        :func:`~rodwarp.experiments.protocols.lab.shake_result` (y_c / y_c(0) at each sample and landed
         per cycle, the cohesion verdict) with the landed cluster share f and the entangled flag
         per cycle, ``tau`` (:func:`tau_rule`, :func:`tau_series`), ``formed``
         (:func:`formation_events`), ``landed_height_after_cycles`` (10, 50, 100, 500; None
         before), ``highest_rod_bottom_max_m`` and ``warnings``.
     """
-    from rodwarp.experiments._lab import landed_samples, shake_result
+    from rodwarp.experiments.protocols.lab import landed_samples, shake_result
 
     sh = shake_result(params, rows, t0, thresholds)
     shake = [r for r in _rows(rows, SHAKE) if float(r["time"]) > t0]
@@ -411,25 +432,42 @@ def excitation_summary(params, model, rows, loop, stages, thresholds) -> tuple[s
     return "excitation", out
 
 
-class ExcitationProtocol:
-    """The excitation experiment as a protocol plug-in of :func:`rodwarp.experiments.run_protocol`:
-    the hooks the loop calls (the paper protocol is the loop's own)."""
+class ExcitationProtocol(Protocol):
+    """The excitation experiment as a protocol plug-in of :func:`rodwarp.experiments.run_protocol`."""
 
     name = "excitation"
-    fields = EXCITATION_FIELDS
+    help = "the paper's excitation experiment, Fig. 1C-F: its rods, N, container and drive by default; docs/experiments.md"
+    Params = ExcitationParams
+    fields = (*EXCITATION_FIELDS, "pour_duration", "lift_duration")
+    poured = True
 
-    resolve = staticmethod(resolve_defaults)
-    plan = staticmethod(excitation_plan)
-    packing = staticmethod(excitation_packing)
-    walls = staticmethod(excitation_walls)
-    check = staticmethod(check_excitation)
-    columns = staticmethod(excitation_columns)
-    summary = staticmethod(excitation_summary)
-    rods = staticmethod(rod_count)
+    def resolve(self, params, explicit=None):
+        return resolve_defaults(params, explicit)
 
-    @staticmethod
-    def notes(params) -> list[str]:
-        return []
+    def plan(self, params):
+        return excitation_plan(params)
+
+    def packing(self, params, device):
+        return excitation_packing(params, device)
+
+    def walls(self, builder, params, rods):
+        return excitation_walls(builder, params, rods)
+
+    def check(self, p) -> None:
+        check_excitation(p)
+
+    def columns(self, model, x, control, t) -> dict:
+        return excitation_columns(model, x, control, t)
+
+    def summary(self, params, model, rows, loop, stages, thresholds):
+        return excitation_summary(params, model, rows, loop, stages, thresholds)
+
+    def rods(self, params) -> int:
+        return rod_count(params)
+
+    def pour_radius(self, params) -> float:
+        """The inner tube's radius (m)."""
+        return 0.5 * params.tube_diameter
 
 
 EXCITATION = ExcitationProtocol()

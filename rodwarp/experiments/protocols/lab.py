@@ -1,24 +1,62 @@
-"""The laboratory protocol's scene (docs/experiments.md): rods poured into a cylinder on a
-plate, a piston above them, and what it measures that the paper's protocol does not (the
-fields at each compressive strain, the lifted packing's spread).
-
-The stages are :func:`rodwarp.experiments._plan.lab_plan`; the loop, checkpoints and outputs
-are the paper protocol's (:func:`rodwarp.experiments.run_protocol`).
+"""The laboratory protocol (docs/experiments.md): rods poured into a cylinder on a plate,
+pressed by a piston to each of ``strains``, the cylinder lifted away, the plate shaken; and
+what it measures that the paper's protocol does not (the fields at each compressive strain,
+the lifted packing's spread, cohesion under shaking).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, fields
 
 import numpy as np
 
-from rodwarp.experiments._plan import FLOOR, PISTON, TUBE
+from rodwarp.experiments._option import param
+from rodwarp.experiments._plan import Stage, Vibrate
+from rodwarp.experiments.protocols.base import Protocol
+from rodwarp.validation import MAX_MU, Range
+
+#: the stages, by the names metrics.csv's ``stage`` column carries (a press stage is PRESS and
+#: its strain, e.g. ``press0.05``)
+POUR, LIFT, SHAKE, PRESS = "pour", "lift", "shake", "press"
+#: the walls: the floor (the shaken plate), the cylinder the rods are poured into, the piston
+FLOOR, TUBE, PISTON = "floor", "tube", "piston"
+#: volume fraction of a random packing of long rods, phi alpha = 5.4 (Philipse 1996; docs/experiments.md):
+#: the laboratory protocol fills its cylinder with the rods that take its fill height at this fraction
+PHI_ALPHA = 5.4
 
 #: the piston starts this many rod lengths above the top of the pour column
 PISTON_CLEARANCE = 0.5
 #: what summary.json keeps of each strain's field statistics (rodwarp.analysis.field_statistics)
 STRAIN_STATS = ("mean_phi", "mean_S", "mean_c", "mean_e", "mean_n", "std_e", "cv_e", "median_e", "q1_e", "q3_e",
                 "iqr_e", "e_lb", "outlier_fraction", "n_valid_voxels", "radius", "spacing")
+
+
+@dataclass(frozen=True)
+class LabParams:
+    """The laboratory protocol's own parameters: the cylinder and its fill, the pour, the
+    strains and their durations, the lift, the container's friction."""
+
+    container_radius: float = param(1.0, "lab: radius of the cylinder the rods are poured into, in rod lengths.",
+                                     "Rc",
+          range=Range(ge=0.6, le=100, hint="in rod lengths: a rod must fit across the cylinder in any direction"))
+    fill_height: float = param(1.0, f"lab: without --n-rods, as many rods as fill the cylinder to this height (rod "
+                                     f"lengths) at a random packing's phi = {PHI_ALPHA:g} / alpha.", "H",
+          range=Range(gt=0, le=100, hint="in rod lengths"))
+    pour_duration: float = param(1.0, "lab: time the poured rods fall and settle in the cylinder (s).", "pdur",
+          range=Range(gt=0, le=100, unit="s", hint="the rods need time to fall and settle"))
+    strains: tuple = param((), "lab: compressive strains the piston presses the poured packing to in turn, "
+                                "'E1,E2,...' (e.g. 0,0.05,0.1,0.15); the fields at each in summary.json.", "eps",
+          range=Range(ge=0, lt=0.5, each=True, hint="compressive strains are fractions of the packing's height (the paper's 0 to 0.15)"))
+    press_duration: float = param(0.5, "lab: time of each strain (s): pressed over its first half, held over "
+                                        "the second.", "prdur",
+          range=Range(gt=0, le=1000, unit="s"))
+    lift_duration: float = param(1.0, "lab: time the packing stands (or spreads) after the cylinder is lifted "
+                                       "away, before the shaking (s); the test when --duration is 0.", "ldur",
+          range=Range(ge=0, le=1000, unit="s", hint="0 shakes right after the lift"))
+    wall_mu: float | None = param(None, "lab: friction coefficient of the cylinder's wall and the piston "
+                                         "(default --mu; the plate keeps --mu).", "muw",
+          range=Range(ge=0, le=MAX_MU, hint="0 makes the container's wall and the piston frictionless"))
 
 
 def lab_packing(params, device, label: str = "cylinder"):
@@ -189,8 +227,6 @@ def lab_summary(params, model, rows, loop, stages, thresholds) -> dict:
     the packing: at A = 25 mm, 5 Hz (a/g = 2.5) it leaves the plate every cycle.
     """
     from rodwarp.experiments import _verdict as vd
-    from rodwarp.experiments._plan import LIFT, POUR, SHAKE
-
     num = lambda r, k: None if r is None or r.get(k) in ("", None) else float(r[k])  # noqa: E731
     names = [s.name for s in stages]
     pour = _stage_rows(rows, POUR)
@@ -225,7 +261,6 @@ def shake_result(params, rows, t0: float, thresholds) -> dict:
     verdict's cluster threshold) and the rods separated from it at the last sample, 1 - f. A
     run still going gives the shaking so far."""
     from rodwarp.experiments import _verdict as vd
-    from rodwarp.experiments._plan import SHAKE
 
     shake = [r for r in _stage_rows(rows, SHAKE) if float(r["time"]) > t0]
     y0 = float([r for r in rows if float(r["time"]) <= t0][-1]["centroid_height"])
@@ -259,41 +294,145 @@ def lab_columns(model, x, control, t) -> dict:
     return {"piston_height": "" if top is None else top, "spread_radius": spread_radius(model, x)}
 
 
-class LabProtocol:
+def lab_plan(params) -> tuple[Stage, ...]:
+    """The laboratory protocol's stages: the rods poured into the cylinder settle
+    (``pour_duration``); pressed by the piston to each of ``strains`` in turn, each held until
+    the end of its ``press_duration``; the cylinder (and piston) lifted away, the packing left
+    to stand or spread (``lift_duration``); the plate (the floor) shaken at ``freq``,
+    ``amplitude`` for ``duration``, the test. Without shaking the lift is the test. Stages of
+    zero duration are left out."""
+    stages = [Stage(POUR, params.pour_duration, walls_out=(PISTON,), moving=(), snapshot=f"after {POUR}",
+                    title="pour", option="--pour-duration")]
+    prev = 0.0
+    for e in params.strains:
+        name = f"{PRESS}{e:g}"
+        stages.append(Stage(name, params.press_duration, PressTo(prev, float(e)), moving=(PISTON,),
+                            snapshot=f"after {name}", title=f"press to strain {e:g}", option="--press-duration"))
+        prev = float(e)
+    shake = params.duration > 0
+    if params.lift_duration > 0:
+        stages.append(Stage(LIFT, params.lift_duration, walls_out=(TUBE, PISTON), moving=(), test=not shake,
+                            snapshot=f"after {LIFT}", title="container lifted", option="--lift-duration"))
+    if shake:
+        stages.append(Stage(SHAKE, params.duration, Vibrate(params.amplitude, params.freq, from_rest=True),
+                            walls_out=(TUBE, PISTON), moving=(FLOOR,), test=True, title="shaking",
+                            option="--duration"))
+    return tuple(stages)
+
+
+def piston_travel(model, height0: float, strain: float) -> float:
+    """How far the piston has come down (m) when the packing, ``height0`` tall (m, above the
+    floor) when pressing began, is at compressive ``strain``."""
+    top = next(w for w in model.walls if w.name == PISTON)
+    return -top.offset - height0 * (1.0 - strain)  # the piston is the half-space z <= -offset
+
+
+@dataclass(frozen=True)
+class PressTo:
+    """The piston presses the packing from compressive strain ``start`` to ``strain`` over the
+    first half of its stage, then holds: strains of the packing's height when the first press
+    began (``marks["height0"]``, measured by :meth:`begin`). At its end the pressed packing's
+    fields, rods and contacts are written (:func:`strain_record`)."""
+
+    start: float
+    strain: float
+
+    def apply(self, control, model, duration: float, t0: float, marks: dict | None) -> None:
+        if marks is None or "height0" not in marks:  # sizing a run: at rest
+            control.set_ramp(0.0, duration, direction=(0.0, 0.0, -1.0), start_time=t0)
+            return
+        d0, d1 = (piston_travel(model, marks["height0"], e) for e in (self.start, self.strain))
+        ramp = 0.5 * duration
+        control.set_ramp((d1 - d0) / ramp, ramp, direction=(0.0, 0.0, -1.0), start_time=t0, start=d0)
+
+    def begin(self, model, state, marks: dict) -> None:
+        if "height0" not in marks:
+            marks["height0"] = packing_top(model, state.positions())
+
+    def end(self, stage, run) -> None:
+        run.marks.setdefault("strains", []).append(strain_record(stage, self.strain, run))
+
+
+def strain_record(stage, strain: float, run) -> dict:
+    """At the end of a press stage: the strain reached, the rest it came to, and the fields
+    of the pressed packing (written to ``fields_<stage>.npz``, its rods and contacts to
+    ``rods_<stage>.npz``; statistics returned). ``run`` is the loop's
+    :class:`~rodwarp.experiments._loop.StageEnd`."""
+    from rodwarp.rodset import contacts_per_rod
+    from rodwarp.sim import rod_contacts
+
+    model, state, params, height0 = run.model, run.state, run.params, run.marks["height0"]
+    x = state.positions()
+    c = rod_contacts(model, state, run.points)
+    top = piston_height(model, run.control, state.time)
+    f, stats = strain_fields(model, run.rods, x, c, params, top, model.device)
+    name = f"fields_{stage.name}.npz"
+    if f is not None:
+        f.save(run.outdir / name)
+    # the pressed packing itself (rods and contacts, m): its fields can be recomputed under
+    # any convention, grid or region (scripts/ct_like_for_like.py)
+    pressed = run.rods.with_points(x)
+    pressed.contacts = c
+    pressed.attrs.update({"stage": stage.name, "strain": float(strain),
+                          "piston_height_m": float(top), "time_s": float(state.time)})
+    pressed.save(run.outdir / f"rods_{stage.name}.npz")
+    speed = np.linalg.norm(state.velocities(), axis=1)
+    num = lambda v: None if v is None else float(v)  # noqa: E731
+    return {"stage": stage.name, "strain": float(strain), "height0": float(height0),
+            "piston_height": float(top), "strain_reached": 1.0 - float(top) / float(height0),
+            "packing_top": packing_top(model, x),
+            "max_speed": float(speed.max()), "kinetic_energy": float(run.solver.energy(state)["kinetic"]),
+            "contacts_per_rod": contacts_per_rod(model.n_rods, c),
+            "fields": name if f is not None else None, "rods": f"rods_{stage.name}.npz",
+            **{k: num(v) if not isinstance(v, str) else v for k, v in stats.items()}}
+
+
+class LabProtocol(Protocol):
     """The laboratory protocol as a plug-in of :func:`rodwarp.experiments.run_protocol`."""
 
     name = "lab"
+    help = "rods poured into a cylinder, pressed by a piston to --strains, the cylinder lifted away, the plate shaken at --freq, --amplitude for --duration; docs/experiments.md"
+    Params = LabParams
+    fields = tuple(f.name for f in fields(LabParams))
+    poured = True
 
-    @staticmethod
-    def resolve(params, explicit=None):
-        return params  # its defaults are ProtocolParams' own
-
-    @staticmethod
-    def plan(params):
-        from rodwarp.experiments._plan import lab_plan
-
+    def plan(self, params):
         return lab_plan(params)
 
-    packing = staticmethod(lab_packing)
-    walls = staticmethod(lab_walls)
-    columns = staticmethod(lab_columns)
+    def packing(self, params, device):
+        return lab_packing(params, device)
 
-    @staticmethod
-    def check(p) -> None:
-        from rodwarp.experiments._checks import _check_lab_options
+    def walls(self, builder, params, rods):
+        return lab_walls(builder, params, rods)
 
-        _check_lab_options(p)
+    def columns(self, model, x, control, t) -> dict:
+        return lab_columns(model, x, control, t)
 
-    @staticmethod
-    def rods(params) -> int:
-        return params.lab_fill_rods()
+    def check(self, p) -> None:
+        """The lab protocol's own checks (one line each)."""
+        from rodwarp.validation import fail
 
-    @staticmethod
-    def summary(params, model, rows, loop, stages, thresholds):
+        if p.duration == 0 and p.lift_duration == 0:
+            fail("--duration 0 and --lift-duration 0 leave the lab protocol without a test; give the shaking a "
+                 "--duration or the lifted packing a --lift-duration")
+        strains = tuple(p.strains)
+        if any(b < a for a, b in zip(strains, strains[1:])):
+            fail(f"--strains must not decrease (the piston presses further at each), got "
+                 f"{','.join(f'{e:g}' for e in strains)}")
+
+    def rods(self, params) -> int:
+        """Rods that fill the cylinder (radius ``container_radius`` l) to ``fill_height`` l at
+        phi = 5.4 / alpha: pi Rc^2 H phi / (pi d^2 l / 4) = 4 (Rc/l)^2 (H/l) 5.4 alpha."""
+        return max(1, int(round(4.0 * params.container_radius**2 * params.fill_height * PHI_ALPHA * params.alpha)))
+
+    def pour_radius(self, params) -> float:
+        """The container's radius, ``container_radius`` rod lengths (m)."""
+        return params.container_radius * params.length
+
+    def summary(self, params, model, rows, loop, stages, thresholds):
         return "lab", lab_summary(params, model, rows, loop, stages, thresholds)
 
-    @staticmethod
-    def notes(params) -> list[str]:
+    def notes(self, params) -> list[str]:
         why = landed_sampling_warning(params)
         return [] if why is None else [why]
 

@@ -1,0 +1,58 @@
+"""The protocols ``rodwarp simulate --protocol`` runs: one module and one plug-in object each
+(:class:`~rodwarp.experiments.protocols.base.Protocol`), registered in :data:`PROTOCOLS`, the
+one table ``--protocol``, its checks and its help read.
+
+=============  ===============================================================================
+``paper``      the seed paper's numerical protocol (docs/protocol.md)
+``lab``        rods poured into a cylinder, pressed by a piston, the cylinder lifted away, the
+               plate shaken (docs/experiments.md)
+``excitation`` the paper's excitation experiment, Fig. 1C-F (docs/experiments.md)
+=============  ===============================================================================
+
+A new protocol is one module here and one row in :data:`PROTOCOLS` (docs/extending.md).
+"""
+
+from __future__ import annotations
+
+from rodwarp.errors import RodwarpError
+from rodwarp.experiments.protocols.base import Protocol
+from rodwarp.experiments.protocols.excitation import EXCITATION
+from rodwarp.experiments.protocols.lab import LAB
+from rodwarp.experiments.protocols.paper import PAPER
+
+#: every protocol by its ``--protocol`` name, the paper's first (the default)
+PROTOCOLS: dict[str, Protocol] = {p.name: p for p in (PAPER, LAB, EXCITATION)}
+
+
+def register_protocol(proto: Protocol) -> Protocol:
+    """Add a protocol plug-in defined outside this package (a user's own experiment) to
+    :data:`PROTOCOLS`; returns it. Its parameters must be :class:`~rodwarp.experiments.
+    ProtocolParams` fields already (``Params`` None): a protocol with options of its own is a
+    module here and a row in the table above, which puts its fields on the command line."""
+    from dataclasses import fields
+
+    if not isinstance(proto, Protocol) or not proto.name:
+        raise RodwarpError("register_protocol takes a Protocol object with a name")
+    if proto.name in PROTOCOLS and PROTOCOLS[proto.name] is not proto:
+        raise RodwarpError(f"protocol {proto.name!r} is registered already")
+    if proto.Params is not None:
+        raise RodwarpError(f"protocol {proto.name!r} has parameters of its own ({proto.Params.__name__}): add its "
+                           "module to rodwarp.experiments.protocols.PROTOCOLS instead")
+    from rodwarp.experiments._params import ProtocolParams
+
+    known = {f.name for f in fields(ProtocolParams)}
+    if unknown := sorted(set(proto.fields) - known):
+        raise RodwarpError(f"protocol {proto.name!r} claims fields ProtocolParams lacks: {', '.join(unknown)}")
+    PROTOCOLS[proto.name] = proto
+    return proto
+
+
+def protocol(name: str) -> Protocol:
+    """The plug-in of protocol ``name`` (a one-line RodwarpError for an unknown name)."""
+    try:
+        return PROTOCOLS[name]
+    except KeyError:
+        raise RodwarpError(f"--protocol must be one of {', '.join(PROTOCOLS)}, got '{name}'") from None
+
+
+__all__ = ["PROTOCOLS", "Protocol", "protocol", "register_protocol", "PAPER", "LAB", "EXCITATION"]
