@@ -10,17 +10,19 @@ once all have run.  Adding a stage takes one file::
 
     from rodwarp.ct import DEFAULT_STAGES, Stage, insert_stage, segment_volume
 
-    class CountRods(Stage):
-        name = "count"
+    class RodLengths(Stage):
+        name = "rod_lengths"
         paths = ("straight",)
 
         def run(self, ctx):
-            self.n = len(ctx.rod_list)
+            ctx.extra["mean_length"] = sum(r.length for r in ctx.rod_list) / len(ctx.rod_list)
 
         def quality(self, ctx):
-            return {"rods_counted": self.n}
+            return {"mean_length_voxels": ctx.extra["mean_length"]}
 
-    result = segment_volume(volume, stages=insert_stage(DEFAULT_STAGES, CountRods(), after="refine"))
+    result = segment_volume(volume, stages=insert_stage(DEFAULT_STAGES, RodLengths(), after="refine"))
+
+To make a stage a default one, define it here and list it in :data:`DEFAULT_STAGES`.
 
 The default stages, in order (``paths``: straight rods, curved filaments or both):
 
