@@ -153,7 +153,7 @@ def pentadiagonal_substitute(a: int, b: int, dinv: wp.array(dtype=wp.float64), o
 def bending_factor(model: RodModel, dt: wp.float64, factors: RodFactors):
     """One thread per straight rod: LDL^T of J W J^T + alpha / dt^2 of its bending constraints.
 
-    Also stores each constraint's stencil and alpha / dt^2 in ``bcoef`` so the iterations
+    Also stores each constraint's stencil and alpha / dt^2 in ``bend_stencil`` so the iterations
     need no divisions. kappa_i is linear in x, so this matrix depends only on masses, rest
     lengths, E I and dt: factored once per step size and reused by every step.
     """
@@ -169,17 +169,17 @@ def bending_factor(model: RodModel, dt: wp.float64, factors: RodFactors):
         w0 = model.inv_mass[i]
         wq = model.inv_mass[i + 1]
         at = inv_dt2 / (EI * wl)
-        factors.bcoef[i] = wp.vec4d(cm, c0, cp, at)
-        factors.bdinv[i] = cm * cm * model.inv_mass[i - 1] + c0 * c0 * w0 + cp * cp * wq + at
-        factors.boff1[i] = F0
-        factors.boff2[i] = F0
+        factors.bend_stencil[i] = wp.vec4d(cm, c0, cp, at)
+        factors.bend_inv_pivot[i] = cm * cm * model.inv_mass[i - 1] + c0 * c0 * w0 + cp * cp * wq + at
+        factors.bend_lower1[i] = F0
+        factors.bend_lower2[i] = F0
         if i + 1 < b - 1:
             dm, d0, dp, wl1 = bend_coeffs(model.rest_length, i + 1)
-            factors.boff1[i] = c0 * dm * w0 + cp * d0 * wq
+            factors.bend_lower1[i] = c0 * dm * w0 + cp * d0 * wq
         if i + 2 < b - 1:
             em, e0, ep, wl2 = bend_coeffs(model.rest_length, i + 2)
-            factors.boff2[i] = cp * em * wq
-    pentadiagonal_factor(a + 1, b - 1, factors.bdinv, factors.boff1, factors.boff2)
+            factors.bend_lower2[i] = cp * em * wq
+    pentadiagonal_factor(a + 1, b - 1, factors.bend_inv_pivot, factors.bend_lower1, factors.bend_lower2)
 
 
 @wp.kernel
@@ -202,22 +202,22 @@ def stretch_twist_factor(model: RodModel, x: wp.array(dtype=wp.vec3d), dt: wp.fl
         nj = wp.vec3d(F0, F0, F0)
         if l0 > F0:
             nj = e0 / l0
-        factors.sdir[j] = nj
+        factors.stretch_dir[j] = nj
     off_prev = F0
     for j in range(a, b - 1):
         d = model.inv_mass[j] + model.inv_mass[j + 1] - wp.float64(2.0) * model.cross_inv_mass[j] + \
             model.compliance[j] * inv_dt2
         off = F0
         if j + 1 < b - 1:
-            off = -model.inv_mass[j + 1] * wp.dot(factors.sdir[j], factors.sdir[j + 1])
+            off = -model.inv_mass[j + 1] * wp.dot(factors.stretch_dir[j], factors.stretch_dir[j + 1])
         if d <= wp.float64(1.0e-300):
             # both ends pinned: a row that changes nothing
             d = F1
             off = F0
         if j > a:
-            d = d - off_prev * factors.sl[j - 1]
-        factors.sdinv[j] = F1 / d
-        factors.sl[j] = off / d
+            d = d - off_prev * factors.stretch_lower[j - 1]
+        factors.stretch_inv_pivot[j] = F1 / d
+        factors.stretch_lower[j] = off / d
         off_prev = off
     if model.curved[r] != 0:
         return
@@ -228,9 +228,9 @@ def stretch_twist_factor(model: RodModel, x: wp.array(dtype=wp.vec3d), dt: wp.fl
         if i + 1 < b - 1:
             off = -model.inv_inertia[i]
         if i > a + 1:
-            d = d - off_prev * factors.tl[i - 1]
-        factors.tdinv[i] = F1 / d
-        factors.tl[i] = off / d
+            d = d - off_prev * factors.twist_lower[i - 1]
+        factors.twist_inv_pivot[i] = F1 / d
+        factors.twist_lower[i] = off / d
         off_prev = off
 
 
@@ -240,7 +240,7 @@ def coupled_block(model: RodModel, factors: RodFactors, inv_dt2: wp.float64, i: 
     and twist (row 3) constraints of interior vertices i and k of a curved rod."""
     A = wp.mat44d()
     cm, c0, cp, wl = bend_coeffs(model.rest_length, i)
-    g = factors.gcouple[i]
+    g = factors.curved_coupling[i]
     if k == i:
         xs = cm * cm * model.inv_mass[i - 1] + c0 * c0 * model.inv_mass[i] + cp * cp * model.inv_mass[i + 1]
         wm = model.inv_inertia[i - 1]
@@ -257,7 +257,7 @@ def coupled_block(model: RodModel, factors: RodFactors, inv_dt2: wp.float64, i: 
         A[3, 3] = tt
     elif k == i + 1:
         dm, d0, dp, wl1 = bend_coeffs(model.rest_length, k)
-        gk = factors.gcouple[k]
+        gk = factors.curved_coupling[k]
         wq = model.inv_inertia[i]  # the edge the two vertices share
         xs = c0 * dm * model.inv_mass[i] + cp * d0 * model.inv_mass[i + 1]
         bb = wp.diag(wp.vec3d(xs, xs, xs)) + wp.outer(g, gk) * wq
@@ -290,22 +290,22 @@ def curved_factor(model: RodModel, dt: wp.float64, factors: RodFactors):
     for i in range(a, b):
         D = coupled_block(model, factors, inv_dt2, i, i)
         if i - 1 >= a:
-            L1 = factors.cl1[i - 1]
-            D = D - L1 * factors.cd[i - 1] * wp.transpose(L1)
+            L1 = factors.curved_lower1[i - 1]
+            D = D - L1 * factors.curved_pivot[i - 1] * wp.transpose(L1)
         if i - 2 >= a:
-            L2 = factors.cl2[i - 2]
-            D = D - L2 * factors.cd[i - 2] * wp.transpose(L2)
+            L2 = factors.curved_lower2[i - 2]
+            D = D - L2 * factors.curved_pivot[i - 2] * wp.transpose(L2)
         Dinv = wp.inverse(D)
-        factors.cd[i] = D
-        factors.cinv[i] = Dinv
+        factors.curved_pivot[i] = D
+        factors.curved_inv_pivot[i] = Dinv
         if i + 1 < b:
             # A[i+1, i] = A[i, i+1]^T
             T = wp.transpose(coupled_block(model, factors, inv_dt2, i, i + 1))
             if i - 1 >= a:
-                T = T - factors.cl2[i - 1] * factors.cd[i - 1] * wp.transpose(factors.cl1[i - 1])
-            factors.cl1[i] = T * Dinv
+                T = T - factors.curved_lower2[i - 1] * factors.curved_pivot[i - 1] * wp.transpose(factors.curved_lower1[i - 1])
+            factors.curved_lower1[i] = T * Dinv
         if i + 2 < b:
-            factors.cl2[i] = wp.transpose(coupled_block(model, factors, inv_dt2, i, i + 2)) * Dinv
+            factors.curved_lower2[i] = wp.transpose(coupled_block(model, factors, inv_dt2, i, i + 2)) * Dinv
 
 
 # ----------------------------------------------------------------------------- projections
@@ -315,15 +315,15 @@ def curved_factor(model: RodModel, dt: wp.float64, factors: RodFactors):
 def project_straight_bending(r: int, a: int, b: int, model: RodModel, state: RodState, v: wp.array(dtype=wp.vec3d),
                              factors: RodFactors, dt: wp.float64, inv_dt: wp.float64):
     for i in range(a + 1, b - 1):
-        c = factors.bcoef[i]
+        c = factors.bend_stencil[i]
         Cb = (state.x[i - 1] + v[i - 1] * dt) * c[0] + (state.x[i] + v[i] * dt) * c[1] + \
             (state.x[i + 1] + v[i + 1] * dt) * c[2]
-        factors.brhs[i] = -(Cb - factors.btarget[i]) - factors.blam[i] * c[3]
-    pentadiagonal_substitute(a + 1, b - 1, factors.bdinv, factors.boff1, factors.boff2, factors.brhs, factors.bdl)
+        factors.bend_rhs[i] = -(Cb - factors.bend_target[i]) - factors.bend_lambda[i] * c[3]
+    pentadiagonal_substitute(a + 1, b - 1, factors.bend_inv_pivot, factors.bend_lower1, factors.bend_lower2, factors.bend_rhs, factors.bend_dlambda)
     for i in range(a + 1, b - 1):
-        c = factors.bcoef[i]
-        dlb = factors.bdl[i]
-        factors.blam[i] = factors.blam[i] + dlb
+        c = factors.bend_stencil[i]
+        dlb = factors.bend_dlambda[i]
+        factors.bend_lambda[i] = factors.bend_lambda[i] + dlb
         g = dlb * inv_dt
         v[i - 1] = v[i - 1] + g * (c[0] * model.inv_mass[i - 1])
         v[i] = v[i] + g * (c[1] * model.inv_mass[i])
@@ -366,12 +366,12 @@ def back_substitute(dinv: wp.array(dtype=wp.float64), l: wp.array(dtype=wp.float
 def project_straight_twist(a: int, b: int, model: RodModel, state: RodState, spin: wp.array(dtype=wp.float64),
                            factors: RodFactors, dt: wp.float64, inv_dt: wp.float64, inv_dt2: wp.float64):
     for i in range(a + 1, b - 1):
-        rj = -twist_residual(model, state, spin, factors, dt, i) - model.twist_compliance[i] * inv_dt2 * factors.tlam[i]
-        factors.trhs[i] = eliminated(rj, factors.tl, factors.trhs, i, a + 1)
-    back_substitute(factors.tdinv, factors.tl, factors.trhs, a + 1, b - 1)
+        rj = -twist_residual(model, state, spin, factors, dt, i) - model.twist_compliance[i] * inv_dt2 * factors.twist_lambda[i]
+        factors.twist_rhs[i] = eliminated(rj, factors.twist_lower, factors.twist_rhs, i, a + 1)
+    back_substitute(factors.twist_inv_pivot, factors.twist_lower, factors.twist_rhs, a + 1, b - 1)
     for i in range(a + 1, b - 1):
-        dl = factors.trhs[i]
-        factors.tlam[i] = factors.tlam[i] + dl
+        dl = factors.twist_rhs[i]
+        factors.twist_lambda[i] = factors.twist_lambda[i] + dl
         spin[i - 1] = spin[i - 1] - dl * inv_dt * model.inv_inertia[i - 1]
         spin[i] = spin[i] + dl * inv_dt * model.inv_inertia[i]
     return 0
@@ -387,37 +387,37 @@ def project_curved(a: int, b: int, model: RodModel, state: RodState, v: wp.array
     EI = model.bend_stiffness[model.vertex_rod[a]]
     for i in range(i0, i1):
         cm, c0, cp, wl = bend_coeffs(model.rest_length, i)
-        g = factors.gcouple[i]
+        g = factors.curved_coupling[i]
         kap = (state.x[i - 1] + v[i - 1] * dt) * cm + (state.x[i] + v[i] * dt) * c0 + (state.x[i + 1] + v[i + 1] * dt) * cp
-        T = factors.btarget[i] + g * ((spin[i - 1] + spin[i]) * dt)
-        lam = factors.clam[i]
+        T = factors.bend_target[i] + g * ((spin[i - 1] + spin[i]) * dt)
+        lam = factors.curved_lambda[i]
         ab = inv_dt2 / (EI * wl)
         cb = -(kap - T) - wp.vec3d(lam[0], lam[1], lam[2]) * ab
         ct = -twist_residual(model, state, spin, factors, dt, i) - model.twist_compliance[i] * inv_dt2 * lam[3]
         z = wp.vec4d(cb[0], cb[1], cb[2], ct)
         if i - 1 >= i0:
-            z = z - factors.cl1[i - 1] * factors.crhs[i - 1]
+            z = z - factors.curved_lower1[i - 1] * factors.curved_rhs[i - 1]
         if i - 2 >= i0:
-            z = z - factors.cl2[i - 2] * factors.crhs[i - 2]
-        factors.crhs[i] = z
+            z = z - factors.curved_lower2[i - 2] * factors.curved_rhs[i - 2]
+        factors.curved_rhs[i] = z
     for k in range(i1 - i0):
         i = i1 - 1 - k
-        y = factors.cinv[i] * factors.crhs[i]
+        y = factors.curved_inv_pivot[i] * factors.curved_rhs[i]
         if i + 1 < i1:
-            y = y - wp.transpose(factors.cl1[i]) * factors.cdl[i + 1]
+            y = y - wp.transpose(factors.curved_lower1[i]) * factors.curved_dlambda[i + 1]
         if i + 2 < i1:
-            y = y - wp.transpose(factors.cl2[i]) * factors.cdl[i + 2]
-        factors.cdl[i] = y
+            y = y - wp.transpose(factors.curved_lower2[i]) * factors.curved_dlambda[i + 2]
+        factors.curved_dlambda[i] = y
     for i in range(i0, i1):
         cm, c0, cp, wl = bend_coeffs(model.rest_length, i)
-        dl = factors.cdl[i]
-        factors.clam[i] = factors.clam[i] + dl
+        dl = factors.curved_dlambda[i]
+        factors.curved_lambda[i] = factors.curved_lambda[i] + dl
         db = wp.vec3d(dl[0], dl[1], dl[2]) * inv_dt
         v[i - 1] = v[i - 1] + db * (cm * model.inv_mass[i - 1])
         v[i] = v[i] + db * (c0 * model.inv_mass[i])
         v[i + 1] = v[i + 1] + db * (cp * model.inv_mass[i + 1])
         # dC_b / dtheta = -g for both edges, dC_t / dtheta_{i-1, i} = -1, +1
-        gb = wp.dot(factors.gcouple[i], db)
+        gb = wp.dot(factors.curved_coupling[i], db)
         spin[i - 1] = spin[i - 1] + (-gb - dl[3] * inv_dt) * model.inv_inertia[i - 1]
         spin[i] = spin[i] + (-gb + dl[3] * inv_dt) * model.inv_inertia[i]
     return 0
@@ -433,13 +433,13 @@ def project_stretch(a: int, b: int, model: RodModel, state: RodState, v: wp.arra
         e = (state.x[j + 1] + v[j + 1] * dt) - (state.x[j] + v[j] * dt)
         cval = wp.length(e) - model.rest_length[j]
         worst = wp.max(worst, wp.abs(cval))
-        rj = -cval - model.compliance[j] * inv_dt2 * factors.slam[j]
-        factors.srhs[j] = eliminated(rj, factors.sl, factors.srhs, j, a)
-    back_substitute(factors.sdinv, factors.sl, factors.srhs, a, b - 1)
+        rj = -cval - model.compliance[j] * inv_dt2 * factors.stretch_lambda[j]
+        factors.stretch_rhs[j] = eliminated(rj, factors.stretch_lower, factors.stretch_rhs, j, a)
+    back_substitute(factors.stretch_inv_pivot, factors.stretch_lower, factors.stretch_rhs, a, b - 1)
     for j in range(a, b - 1):
-        dl = factors.srhs[j]
-        factors.slam[j] = factors.slam[j] + dl
-        imp = factors.sdir[j] * (dl * inv_dt)
+        dl = factors.stretch_rhs[j]
+        factors.stretch_lambda[j] = factors.stretch_lambda[j] + dl
+        imp = factors.stretch_dir[j] * (dl * inv_dt)
         c = model.cross_inv_mass[j]
         v[j] = v[j] - imp * (model.inv_mass[j] - c)
         v[j + 1] = v[j + 1] + imp * (model.inv_mass[j + 1] - c)

@@ -93,11 +93,11 @@ def step_frames(model: RodModel, state: RodState, factors: RodFactors):
             d1m = material_d1(state.director[i - 1], tm, state.theta[i - 1])
             d1p = material_d1(state.director[i], tp, state.theta[i])
             T, bis = rest_target(model.rest_kappa[i], d1m, tm, d1p, tp)
-            factors.btarget[i] = T
-            factors.gcouple[i] = wp.cross(bis, T) * HALF
+            factors.bend_target[i] = T
+            factors.curved_coupling[i] = wp.cross(bis, T) * HALF
         else:
-            factors.btarget[i] = wp.vec3d(F0, F0, F0)
-            factors.gcouple[i] = wp.vec3d(F0, F0, F0)
+            factors.bend_target[i] = wp.vec3d(F0, F0, F0)
+            factors.curved_coupling[i] = wp.vec3d(F0, F0, F0)
 
 
 @wp.kernel

@@ -142,43 +142,48 @@ class WallContacts:
 
 @wp.struct
 class RodFactors:
-    """Per-step factors and multipliers of every rod's internal constraints."""
+    """Per-step factors and multipliers of every rod's internal constraints.
+
+    Each constraint family (bending, stretching, twist, curved rods' coupled bending and twist)
+    keeps the LDL^T factors of its banded system (``*_inv_pivot`` = 1 / D, ``*_lower*`` the
+    sub-diagonals of L), its multipliers (``*_lambda``) and a sweep's scratch (``*_rhs``,
+    ``*_dlambda``)."""
 
     implicit_bending: int
     # straight rods: bending (scalar pentadiagonal, three right-hand sides)
-    bcoef: wp.array(dtype=wp.vec4d)  # stencil (c-, c0, c+) and compliance / dt^2
-    btarget: wp.array(dtype=wp.vec3d)  # rest curvature vector in the current frame
-    bdinv: wp.array(dtype=wp.float64)  # LDL^T: 1 / D_i (reciprocals: the sweeps multiply, never divide)
-    boff1: wp.array(dtype=wp.float64)  # L[i+1, i]
-    boff2: wp.array(dtype=wp.float64)  # L[i+2, i]
-    blam: wp.array(dtype=wp.vec3d)
-    brhs: wp.array(dtype=wp.vec3d)
-    bdl: wp.array(dtype=wp.vec3d)
+    bend_stencil: wp.array(dtype=wp.vec4d)  # stencil (c-, c0, c+) and compliance / dt^2
+    bend_target: wp.array(dtype=wp.vec3d)  # rest curvature vector in the current frame
+    bend_inv_pivot: wp.array(dtype=wp.float64)  # LDL^T: 1 / D_i (reciprocals: the sweeps multiply, never divide)
+    bend_lower1: wp.array(dtype=wp.float64)  # L[i+1, i]
+    bend_lower2: wp.array(dtype=wp.float64)  # L[i+2, i]
+    bend_lambda: wp.array(dtype=wp.vec3d)  # the step's accumulated multipliers
+    bend_rhs: wp.array(dtype=wp.vec3d)  # a sweep's right-hand side (the constraint's residual)
+    bend_dlambda: wp.array(dtype=wp.vec3d)  # a sweep's multiplier change (the solve's output)
     # stretching (tridiagonal per rod)
-    sdir: wp.array(dtype=wp.vec3d)
-    sdinv: wp.array(dtype=wp.float64)  # LDL^T of the tridiagonal system: 1 / D_j
-    sl: wp.array(dtype=wp.float64)  # L[j+1, j]
-    slam: wp.array(dtype=wp.float64)
-    srhs: wp.array(dtype=wp.float64)
+    stretch_dir: wp.array(dtype=wp.vec3d)  # edge direction at the start of the step (the constraint's gradient)
+    stretch_inv_pivot: wp.array(dtype=wp.float64)  # LDL^T of the tridiagonal system: 1 / D_j
+    stretch_lower: wp.array(dtype=wp.float64)  # L[j+1, j]
+    stretch_lambda: wp.array(dtype=wp.float64)  # the step's accumulated multipliers
+    stretch_rhs: wp.array(dtype=wp.float64)  # a sweep's right-hand side
     # rigid rods inside the sweeps: (v_1 - v_0) . t, the part of the ends' relative velocity
     # a rigid body's velocity does not hold (stretching, set by the length constraint alone)
     axial: wp.array(dtype=wp.float64)
     # twist (tridiagonal per rod, straight rods)
     tangent: wp.array(dtype=wp.vec3d)  # edge tangent at the start of the step
     ref_twist: wp.array(dtype=wp.float64)  # interior vertex: reference twist at the start of the step
-    tdinv: wp.array(dtype=wp.float64)  # 1 / D_i
-    tl: wp.array(dtype=wp.float64)  # L[i+1, i]
-    tlam: wp.array(dtype=wp.float64)
-    trhs: wp.array(dtype=wp.float64)
+    twist_inv_pivot: wp.array(dtype=wp.float64)  # 1 / D_i
+    twist_lower: wp.array(dtype=wp.float64)  # L[i+1, i]
+    twist_lambda: wp.array(dtype=wp.float64)  # the step's accumulated multipliers
+    twist_rhs: wp.array(dtype=wp.float64)  # a sweep's right-hand side
     # curved rods: bending and twist as one block-pentadiagonal system of 4 x 4 blocks
-    gcouple: wp.array(dtype=wp.vec3d)  # d(target) / d(theta) of each adjacent edge
-    cd: wp.array(dtype=wp.mat44d)  # D_i
-    cinv: wp.array(dtype=wp.mat44d)  # D_i^-1
-    cl1: wp.array(dtype=wp.mat44d)  # L[i+1, i]
-    cl2: wp.array(dtype=wp.mat44d)  # L[i+2, i]
-    clam: wp.array(dtype=wp.vec4d)  # multipliers (bending xyz, twist)
-    crhs: wp.array(dtype=wp.vec4d)
-    cdl: wp.array(dtype=wp.vec4d)
+    curved_coupling: wp.array(dtype=wp.vec3d)  # d(target) / d(theta) of each adjacent edge
+    curved_pivot: wp.array(dtype=wp.mat44d)  # D_i
+    curved_inv_pivot: wp.array(dtype=wp.mat44d)  # D_i^-1
+    curved_lower1: wp.array(dtype=wp.mat44d)  # L[i+1, i]
+    curved_lower2: wp.array(dtype=wp.mat44d)  # L[i+2, i]
+    curved_lambda: wp.array(dtype=wp.vec4d)  # multipliers (bending xyz, twist)
+    curved_rhs: wp.array(dtype=wp.vec4d)  # a sweep's right-hand side
+    curved_dlambda: wp.array(dtype=wp.vec4d)  # a sweep's multiplier change
 
 
 @wp.struct

@@ -32,7 +32,7 @@ def plane_surface(walls: Walls, p: int, x: wp.vec3d, disp: wp.float64):
     """Plane: geom0 = (n, offset)."""
     g = walls.geom0[p]
     n = wp.vec3d(g[0], g[1], g[2])
-    # the plane's offset first, then the distance: the same operations as before walls had kinds
+    # the plane's offset first, then the distance: this order of operations is part of the results
     return wp.dot(n, x) - (g[3] + walls.shift[p] * disp), n
 
 

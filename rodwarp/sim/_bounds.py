@@ -136,7 +136,7 @@ class StepBounds:
 
     def max_stable_dt(self, bending: str | None = None, control=None, speed: float | None = None,
                       reach: float = 1.0) -> float:
-        """The step bound (s): the former name of :meth:`step_bound`, kept for existing code."""
+        """The step bound (s): an alias of :meth:`step_bound`."""
         return self.step_bound(bending, control, speed, reach)
 
     def default_dt(self, control=None, safety: float = 0.5, speed: float | None = None,
@@ -156,11 +156,10 @@ class StepBounds:
             dt = min(dt, 1.0 / (self.steps_per_period * f))
         return dt
 
-    #: overlap (in diameters of the thinnest rod) above which the adaptive step shrinks. At
-    #: 0.05 d the elastic pile at alpha 300, g = 10 kept overlaps of 0.076 d and sank 9% lower
-    #: than at safety 0.5 (h 0.716 against 0.784-0.800); at 0.02 d it kept 0.039 d and h 0.752,
-    #: for 4% more time (9% at alpha 200). The shaken rigid pile of the main job sits at
-    #: 0.010-0.018 d: 28 of its 5151 steps change.
+    #: overlap (in diameters of the thinnest rod) above which the adaptive step shrinks: a
+    #: larger target lets an elastic pile sink measurably into itself, a smaller one costs
+    #: time (docs/physics.md, "Step bounds and the adaptive step"); a shaken rigid pile rarely
+    #: reaches it
     OVERLAP_TARGET = 0.02
 
     def adaptive_dt(self, control, speed: float, previous: float | None = None, safety: float = 1.0,

@@ -96,7 +96,7 @@ class SolverChecks:
         self._launch("checks", frames.step_frames, dim=m.n_rods, device=m.device, inputs=[m.arrays, rs, self.factors])
         self._energy_out.zero_()
         self._launch("checks", elastics.elastic_energy, dim=m.n_rods, device=m.device, inputs=[
-            m.arrays, rs, self.factors.btarget, self.factors.ref_twist, wp.vec3d(*m.gravity), self._energy_out])
+            m.arrays, rs, self.factors.bend_target, self.factors.ref_twist, wp.vec3d(*m.gravity), self._energy_out])
         k, p, b, s, tw = (float(x) for x in self._energy_out.numpy())
         return {"kinetic": k, "potential": p, "bending": b, "stretching": s, "twist": tw,
                 "total": k + p + b + s + tw}

@@ -1,6 +1,6 @@
 """What a simulation state measures: the contacts of the packing and the centroid height.
 
-The *contacts of the packing* (:func:`rod_contacts`) are touching rod pairs, one per pair: the
+The *contacts of the packing* (:func:`packing_contacts`) are touching rod pairs, one per pair: the
 surface gap of the pair's closest segments below the contact distance (d / 10 by default,
 docs/protocol.md).  They are not the solver's *contact points* (``StepInfo.n_contacts``: every
 segment pair a step solves, speculative ones included) nor its *contact candidates* (the
@@ -22,7 +22,7 @@ from rodwarp.sim.model import Model
 from rodwarp.sim.state import State
 
 
-def rod_contacts(model: Model, state: State, points, tolerance: float | None = None) -> Contacts:
+def packing_contacts(model: Model, state: State, points, tolerance: float | None = None) -> Contacts:
     """The contacts of the packing in ``state``: rod pairs whose surface gap is below ``tolerance``.
 
     Gaps are re-evaluated at the state's positions for the pairs the last step detected
@@ -77,6 +77,10 @@ def rod_contacts(model: Model, state: State, points, tolerance: float | None = N
     first = np.ones(len(lo), bool)
     first[1:] = (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])
     return Contacts(lo[first].astype(np.int64), hi[first].astype(np.int64), pts[first], g[first])
+
+
+#: the name :func:`packing_contacts` had first (``Model``'s ``rod_contacts`` is the switch of rod-rod contact points)
+rod_contacts = packing_contacts
 
 
 def centroid_height(model: Model, state: State, floor: float = 0.0) -> float:

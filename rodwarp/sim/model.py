@@ -261,41 +261,28 @@ class Model:
         self.rods = rods
         self.pinned = pin_in
 
+        self._precompute(rods, material, pin_in, extensible, rod_model, rolling)
+        self._resolve_contact(contact_distance, contact_law)
+        self._allocate()
+
+    # ------------------------------------------------------------------ precomputation (once, at finalize)
+    def _precompute(self, rods: RodSet, material: Material, pin_in: np.ndarray, extensible: bool, rod_model: str,
+                    rolling: bool) -> None:
+        """Host arrays of the rods (the ``*_np`` attributes): edges, masses, inertias,
+        compliances, rest curvatures and directors."""
         N, V = rods.n_rods, rods.n_vertices
         offsets = rods.offsets.astype(np.int64)
         rest = rods.rest_points if rods.rest_points is not None else rods.points
-        edge = np.linalg.norm(np.diff(rest, axis=0), axis=1)
-        last = np.zeros(V, dtype=bool)
-        last[offsets[1:] - 1] = True
-        first = np.zeros(V, dtype=bool)
-        first[offsets[:-1]] = True
-        rest_length = np.zeros(V)
-        rest_length[:-1] = np.where(last[:-1], 0.0, edge)
-        if np.any(rest_length[~last] <= 0):
-            raise RodwarpError("a rod has two coincident consecutive vertices; remove duplicate points")
+        rest_length, first, last = _edges(rest, offsets, V)
         vertex_rod = np.repeat(np.arange(N), np.diff(offsets))
         r = rods.radii
         area = math.pi * r**2
         inertia_area = math.pi * r**4 / 4.0
         edge_mass = rest_length * area[vertex_rod] * material.density  # 0 in the last-vertex slots
-        cross_mass = np.zeros(V)
-        cross_inv = np.zeros(V)
         if rod_model == "rigid":
-            m = edge_mass[offsets[:-1]]
-            L = rest_length[offsets[:-1]]
-            a = m / 3.0 + m * r**2 / (4.0 * L**2)
-            b = m / 6.0 - m * r**2 / (4.0 * L**2)
-            mass = np.repeat(a, 2)
-            cross_mass[offsets[:-1]] = b
-            det = a * a - b * b
-            fixed = pin_in[offsets[:-1]]
-            inv_mass = np.repeat(np.where(fixed, 0.0, a / det), 2)
-            cross_inv[offsets[:-1]] = np.where(fixed, 0.0, -b / det)
+            mass, cross_mass, inv_mass, cross_inv = _rigid_masses(edge_mass, rest_length, r, offsets, pin_in, V)
         else:
-            # lumped masses: each vertex carries half of each adjacent edge
-            mass = 0.5 * edge_mass
-            mass[1:] += 0.5 * edge_mass[:-1]
-            inv_mass = np.where(pin_in, 0.0, 1.0 / mass)
+            mass, cross_mass, inv_mass, cross_inv = _lumped_masses(edge_mass, pin_in, V)
         compliance = np.where(last | (not extensible), 0.0, rest_length / (material.young * area[vertex_rod]))
         inertia = 0.5 * edge_mass * r[vertex_rod] ** 2
         clamped = last | (pin_in & np.roll(pin_in, -1)) | (not rolling)
@@ -305,37 +292,14 @@ class Model:
         l_int = np.zeros(V)
         l_int[1:] = 0.5 * (rest_length[:-1] + rest_length[1:])
         twist_compliance = np.where(interior, l_int / (material.shear * 2.0 * inertia_area[vertex_rod]), 0.0)
+        rest_kappa, curved, director = _rest_frames(rods.points, rest, offsets, interior, vertex_rod, N, V)
 
-        # rest frames: curvature components (k1, k2) in the vertex material frames
-        rest_kappa = np.zeros((V, 2))
-        curved = np.zeros(N, dtype=np.int32)
-        x0 = rods.points
-        t_r, u_r = _space_parallel_directors(rest, offsets)
-        kap_rest = np.zeros((V, 3))
-        kap_rest[interior] = t_r[np.flatnonzero(interior)] - t_r[np.flatnonzero(interior) - 1]
-        np.maximum.at(curved, vertex_rod, (np.linalg.norm(kap_rest, axis=1) > 1e-9).astype(np.int32))
-        director = _space_parallel_directors(x0, offsets)[1]
-        for k in np.flatnonzero(curved):
-            a_, b_ = offsets[k], offsets[k + 1]
-            tk, uk = t_r[a_:b_ - 1], u_r[a_:b_ - 1]
-            _, m1, m2 = _vertex_frame(tk, uk)
-            kap = kap_rest[a_ + 1:b_ - 1]
-            rest_kappa[a_ + 1:b_ - 1, 0] = np.sum(kap * m1, axis=1)
-            rest_kappa[a_ + 1:b_ - 1, 1] = np.sum(kap * m2, axis=1)
-            if np.allclose(x0[a_:b_], rest[a_:b_], rtol=0, atol=1e-12):
-                director[a_:b_ - 1] = uk
-            else:  # carry the rest directors onto the current shape edge by edge
-                t_c = _unit(np.diff(x0[a_:b_], axis=0))
-                u_c = np.stack([_window_rotation(x0[a_:b_], rest[a_:b_], j) @ uk[j] for j in range(len(t_c))])
-                u_c -= t_c * np.sum(u_c * t_c, axis=1, keepdims=True)
-                director[a_:b_ - 1] = _unit(u_c)
-            director[b_ - 1] = director[b_ - 2]
         self.curved = bool(curved.any())
         self.curved_rods_np = curved
         self.rest_kappa_np = rest_kappa
         self.director0_np = director
-
         self.n_rods, self.n_vertices = N, V
+        self.offsets_np = offsets
         self.seg_vertex_np = np.flatnonzero(~last).astype(np.int32)
         self.n_segments = int(self.seg_vertex_np.size)
         self.mass_np = mass
@@ -348,14 +312,30 @@ class Model:
         self.vertex_rod_np = vertex_rod.astype(np.int32)
         self.bend_stiffness_np = material.young * inertia_area
         self.radius_np = r.astype(np.float64)
+        self.compliance_np = compliance
+        self.twist_compliance_np = twist_compliance
+        self.edge_mass_np = edge_mass
+
+    def _resolve_contact(self, contact_distance, contact_law) -> None:
+        """The contact distance (m) and the contact law with its defaults filled in."""
+        r = self.rods.radii
         self.contact_distance = float(contact_distance) if contact_distance is not None else 0.1 * float(2 * r.min())
         law = ContactLaw.from_tag(contact_law) if isinstance(contact_law, str) else contact_law
         g_mag = float(np.linalg.norm(self.gravity)) or 9.81
-        rod_mass = np.bincount(vertex_rod, weights=edge_mass, minlength=N) if V else np.zeros(1)
+        rod_mass = (np.bincount(self.vertex_rod_np, weights=self.edge_mass_np, minlength=self.n_rods)
+                    if self.n_vertices else np.zeros(1))
         self.contact_law = law.resolved(float(2 * r.min()), float(rod_mass.max()) * g_mag)
         # contacts must be found wherever the law acts
         self.contact_distance = max(self.contact_distance, self.contact_law.reach())
 
+    def _allocate(self) -> None:
+        """The device bundle of the model (:class:`~rodwarp.kernels.structs.RodModel`, ``arrays``)."""
+        N, V = self.n_rods, self.n_vertices
+        offsets = self.offsets_np
+        rest_length = self.rest_length_np
+        vertex_rod = self.vertex_rod_np
+        r = self.rods.radii
+        pin_in = self.pinned
         d = self.device
         st = self.arrays = _structs().RodModel()
         st.n_rods = N
@@ -364,28 +344,28 @@ class Model:
         st.vertex_rod = wp.array(self.vertex_rod_np, dtype=wp.int32, device=d)
         st.seg_vertex = wp.array(self.seg_vertex_np, dtype=wp.int32, device=d)
         f64 = lambda a: wp.array(np.ascontiguousarray(a, dtype=np.float64), dtype=wp.float64, device=d)  # noqa: E731
-        st.mass = f64(mass)
-        st.cross_mass = f64(cross_mass)
-        st.inv_mass = f64(inv_mass)
-        st.cross_inv_mass = f64(cross_inv)
+        st.mass = f64(self.mass_np)
+        st.cross_mass = f64(self.cross_mass_np)
+        st.inv_mass = f64(self.inv_mass_np)
+        st.cross_inv_mass = f64(self.cross_inv_mass_np)
         st.rest_length = f64(rest_length)
         cum = np.concatenate([[0.0], np.cumsum(rest_length)])[:-1]
         st.arc = f64(cum - cum[offsets[:-1]][vertex_rod] if V else cum)
-        st.compliance = f64(compliance)
+        st.compliance = f64(self.compliance_np)
         st.bend_stiffness = f64(self.bend_stiffness_np)
         st.radius = f64(self.radius_np)
-        st.inertia = f64(inertia)
-        st.inv_inertia = f64(inv_inertia)
-        st.twist_compliance = f64(twist_compliance)
+        st.inertia = f64(self.inertia_np)
+        st.inv_inertia = f64(self.inv_inertia_np)
+        st.twist_compliance = f64(self.twist_compliance_np)
         st.rest_twist = f64(np.zeros(V))
-        st.rest_kappa = wp.array(rest_kappa, dtype=wp.vec2d, device=d)
-        st.curved = wp.array(curved, dtype=wp.int32, device=d)
-        rigid = np.full(N, 1 if rod_model == "rigid" else 0, dtype=np.int32)
+        st.rest_kappa = wp.array(self.rest_kappa_np, dtype=wp.vec2d, device=d)
+        st.curved = wp.array(self.curved_rods_np, dtype=wp.int32, device=d)
+        rigid = np.full(N, 1 if self.rod_model == "rigid" else 0, dtype=np.int32)
         st.rigid = wp.array(rigid, dtype=wp.int32, device=d)
         rod_mass = self.rod_masses()
         fixed = np.logical_or.reduceat(pin_in, offsets[:-1]) if N else np.zeros(0, bool)
         st.rod_inv_mass = f64(np.where(fixed, 0.0, 1.0 / rod_mass))
-        if rod_model == "rigid":
+        if self.rod_model == "rigid":
             Lr = rest_length[offsets[:-1]]
             iperp = rod_mass * (Lr**2 / 12.0 + r**2 / 4.0)
             st.rod_inv_iperp = f64(np.where(fixed, 0.0, 1.0 / iperp))
@@ -481,6 +461,76 @@ class Model:
             s.v.assign(wp.array(self.rods.velocities, dtype=wp.vec3d, device=self.device))
         s.director.assign(wp.array(self.director0_np, dtype=wp.vec3d, device=self.device))
         return s
+
+
+def _edges(rest: np.ndarray, offsets: np.ndarray, V: int):
+    """Rest length (m) of each edge at its first vertex (0 in a rod's last-vertex slot), and the
+    masks of each rod's first and last vertices."""
+    edge = np.linalg.norm(np.diff(rest, axis=0), axis=1)
+    last = np.zeros(V, dtype=bool)
+    last[offsets[1:] - 1] = True
+    first = np.zeros(V, dtype=bool)
+    first[offsets[:-1]] = True
+    rest_length = np.zeros(V)
+    rest_length[:-1] = np.where(last[:-1], 0.0, edge)
+    if np.any(rest_length[~last] <= 0):
+        raise RodwarpError("a rod has two coincident consecutive vertices; remove duplicate points")
+    return rest_length, first, last
+
+
+def _rigid_masses(edge_mass, rest_length, r, offsets, pin_in, V: int):
+    """The consistent mass matrix of rigid bars [[a, b], [b, a]] and its inverse (kg, 1/kg):
+    diagonal per vertex, cross term at the first vertex; 0 inverse for a fixed rod."""
+    cross_mass = np.zeros(V)
+    cross_inv = np.zeros(V)
+    m = edge_mass[offsets[:-1]]
+    L = rest_length[offsets[:-1]]
+    a = m / 3.0 + m * r**2 / (4.0 * L**2)
+    b = m / 6.0 - m * r**2 / (4.0 * L**2)
+    mass = np.repeat(a, 2)
+    cross_mass[offsets[:-1]] = b
+    det = a * a - b * b
+    fixed = pin_in[offsets[:-1]]
+    inv_mass = np.repeat(np.where(fixed, 0.0, a / det), 2)
+    cross_inv[offsets[:-1]] = np.where(fixed, 0.0, -b / det)
+    return mass, cross_mass, inv_mass, cross_inv
+
+
+def _lumped_masses(edge_mass, pin_in, V: int):
+    """Lumped masses: each vertex carries half of each adjacent edge (no cross terms); 0
+    inverse for a pinned vertex."""
+    mass = 0.5 * edge_mass
+    mass[1:] += 0.5 * edge_mass[:-1]
+    inv_mass = np.where(pin_in, 0.0, 1.0 / mass)
+    return mass, np.zeros(V), inv_mass, np.zeros(V)
+
+
+def _rest_frames(x0, rest, offsets, interior, vertex_rod, N: int, V: int):
+    """Rest curvature (k1, k2) in the vertex material frames, which rods are curved, and the
+    initial reference directors (the rest directors carried onto the initial shape)."""
+    rest_kappa = np.zeros((V, 2))
+    curved = np.zeros(N, dtype=np.int32)
+    t_r, u_r = _space_parallel_directors(rest, offsets)
+    kap_rest = np.zeros((V, 3))
+    kap_rest[interior] = t_r[np.flatnonzero(interior)] - t_r[np.flatnonzero(interior) - 1]
+    np.maximum.at(curved, vertex_rod, (np.linalg.norm(kap_rest, axis=1) > 1e-9).astype(np.int32))
+    director = _space_parallel_directors(x0, offsets)[1]
+    for k in np.flatnonzero(curved):
+        a_, b_ = offsets[k], offsets[k + 1]
+        tk, uk = t_r[a_:b_ - 1], u_r[a_:b_ - 1]
+        _, m1, m2 = _vertex_frame(tk, uk)
+        kap = kap_rest[a_ + 1:b_ - 1]
+        rest_kappa[a_ + 1:b_ - 1, 0] = np.sum(kap * m1, axis=1)
+        rest_kappa[a_ + 1:b_ - 1, 1] = np.sum(kap * m2, axis=1)
+        if np.allclose(x0[a_:b_], rest[a_:b_], rtol=0, atol=1e-12):
+            director[a_:b_ - 1] = uk
+        else:  # carry the rest directors onto the current shape edge by edge
+            t_c = _unit(np.diff(x0[a_:b_], axis=0))
+            u_c = np.stack([_window_rotation(x0[a_:b_], rest[a_:b_], j) @ uk[j] for j in range(len(t_c))])
+            u_c -= t_c * np.sum(u_c * t_c, axis=1, keepdims=True)
+            director[a_:b_ - 1] = _unit(u_c)
+        director[b_ - 1] = director[b_ - 2]
+    return rest_kappa, curved, director
 
 
 def checked_box(box, names=("box lower corner", "box upper corner")) -> np.ndarray:

@@ -149,11 +149,8 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
     position_tolerance : float
         The post-stabilisation stops after a sweep that found no overlap deeper than this, in
         diameters of the thinnest rod (0.015: halfway between the slop and the adaptive
-        step's overlap target, 0.02). In the shaken elastic pile at alpha 200, g = 10 the
-        former fixed 4 sweeps left overlaps of 0.03 d (median), which shrank the adaptive step
-        to 0.69 ms; up to 16 sweeps leave 0.02 d and the step is 1.0 ms (31% fewer steps for
-        21% less time, docs/engine.md); the shaken rigid pile of the main job stops after one
-        or two.
+        step's overlap target, 0.02, so that the overlaps left do not shrink the adaptive step;
+        a shaken rigid pile stops after one or two sweeps).
     slop : float
         Overlap left alone, in units of the smallest diameter: a resting contact is not
         pushed apart, so its velocity problem repeats from step to step, warm starting holds
@@ -247,15 +244,18 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         V = model.n_vertices
         f = self.factors = RodFactors()
         f.implicit_bending = 1
-        for name, dtype in (("bcoef", wp.vec4d), ("btarget", wp.vec3d), ("bdinv", wp.float64), ("boff1", wp.float64),
-                            ("boff2", wp.float64), ("blam", wp.vec3d), ("brhs", wp.vec3d), ("bdl", wp.vec3d),
-                            ("sdir", wp.vec3d), ("sdinv", wp.float64), ("sl", wp.float64), ("slam", wp.float64),
-                            ("srhs", wp.float64), ("axial", wp.float64), ("tangent", wp.vec3d), ("ref_twist", wp.float64),
-                            ("tdinv", wp.float64), ("tl", wp.float64), ("tlam", wp.float64), ("trhs", wp.float64),
-                            ("gcouple", wp.vec3d), ("clam", wp.vec4d), ("crhs", wp.vec4d), ("cdl", wp.vec4d)):
+        for name, dtype in (("bend_stencil", wp.vec4d), ("bend_target", wp.vec3d), ("bend_inv_pivot", wp.float64),
+                            ("bend_lower1", wp.float64), ("bend_lower2", wp.float64), ("bend_lambda", wp.vec3d),
+                            ("bend_rhs", wp.vec3d), ("bend_dlambda", wp.vec3d), ("stretch_dir", wp.vec3d),
+                            ("stretch_inv_pivot", wp.float64), ("stretch_lower", wp.float64),
+                            ("stretch_lambda", wp.float64), ("stretch_rhs", wp.float64), ("axial", wp.float64),
+                            ("tangent", wp.vec3d), ("ref_twist", wp.float64), ("twist_inv_pivot", wp.float64),
+                            ("twist_lower", wp.float64), ("twist_lambda", wp.float64), ("twist_rhs", wp.float64),
+                            ("curved_coupling", wp.vec3d), ("curved_lambda", wp.vec4d), ("curved_rhs", wp.vec4d),
+                            ("curved_dlambda", wp.vec4d)):
             setattr(f, name, wp.zeros(V, dtype=dtype, device=d))
         Vc = V if model.curved else 1
-        for name in ("cd", "cinv", "cl1", "cl2"):
+        for name in ("curved_pivot", "curved_inv_pivot", "curved_lower1", "curved_lower2"):
             setattr(f, name, wp.zeros(Vc, dtype=wp.mat44d, device=d))
         self._bfactor_dt = None
         self._scalar = wp.zeros(4, dtype=wp.float64, device=d)
@@ -315,17 +315,27 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         """Force the broadphase to rebuild its pair list at the next collide (benchmarks)."""
         self.collision.pairs_n = None
 
-    def contacts(self, capacity: int = 16) -> ContactPoints:
-        """New, empty :class:`~rodwarp.sim.contacts.ContactPoints` for this solver's model."""
+    def contact_points(self, capacity: int = 16) -> ContactPoints:
+        """New, empty :class:`~rodwarp.sim.contacts.ContactPoints` for this solver's model
+        (room for ``capacity`` points; they grow as needed)."""
         return ContactPoints(self.model, capacity)
 
+    def contacts(self, capacity: int = 16) -> ContactPoints:
+        """:meth:`contact_points` (its first name)."""
+        return self.contact_points(capacity)
+
     @property
-    def default_contacts(self) -> ContactPoints:
+    def default_contact_points(self) -> ContactPoints:
         """The contact points :meth:`step` collides into and solves when it is given none (their
         warm start carries over from one such step to the next)."""
         if self._own_contacts is None:
-            self._own_contacts = self.contacts()
+            self._own_contacts = self.contact_points()
         return self._own_contacts
+
+    @property
+    def default_contacts(self) -> ContactPoints:
+        """:attr:`default_contact_points` (its first name)."""
+        return self.default_contact_points
 
     def _control(self, control):
         if control is not None:
@@ -374,7 +384,7 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
             The step (s) about to be taken.
         contacts : ContactPoints, optional
             Where to put them (their last step's impulses warm-start the coming step); default
-            a new :meth:`contacts`.
+            a new :meth:`contact_points`.
 
         Returns
         -------
@@ -386,9 +396,9 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         m = self.model
         dev = m.device
         control = self._control(control)
-        contacts = self.contacts() if contacts is None else contacts
+        contacts = self.contact_points() if contacts is None else contacts
         if contacts.model is not m:
-            raise RodwarpError("these contacts belong to another model: make them with solver.contacts()")
+            raise RodwarpError("these contacts belong to another model: make them with solver.contact_points()")
         theta = self.theta_for(dt, self._touching(contacts, control))
         self._launch("elastics", elastics.velocity_predictor, dim=m.n_rods, device=dev, inputs=[
             m.arrays, state.rod_state(), self._zero_target, control.torque(), wp.vec3d(*m.gravity),
@@ -433,25 +443,8 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
             ``penetration_limit`` diameters; ``state_in`` and the contacts' last step are left
             untouched.
         """
-        if isinstance(contacts, (int, float)):
-            raise RodwarpError("step(state_in, state_out, control, contacts, dt): the fourth argument is the "
-                               "contacts from solver.collide(...); pass the step as dt=")
-        if dt is None:
-            raise RodwarpError("step needs a time step dt (s)")
+        control, contacts = self._step_inputs(state_in, control, contacts, dt, check)
         m = self.model
-        dev = m.device
-        control = self._control(control)
-        if check and not (dt > 0 and math.isfinite(dt)):
-            raise RodwarpError(f"time step must be a positive number, got {dt}")
-        if contacts is None:
-            contacts = self.collide(state_in, control, dt, self.default_contacts)
-        elif contacts.collided_for != (id(state_in), state_in.step_index, state_in.time, id(control), dt):
-            raise RodwarpError("these contacts were not collided for this step: call "
-                               "solver.collide(state_in, control, dt, contacts) right before solver.step")
-        if check and self._v_elastic is None:
-            e = self.energy(state_in)
-            self._v_elastic = math.sqrt(2.0 * (e["bending"] + e["stretching"] + e["twist"]) / m.total_mass())
-        P = len(m.walls)
         touching = self._touching(contacts, control)
         theta = self.theta_for(dt, touching)
         if theta == 0.0 and touching and not self._warned_explicit:
@@ -459,17 +452,62 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
             warnings.warn("explicit (symplectic) bending with contacts: inelastic contacts pump energy into the "
                           "rods' bending (docs/physics.md, 'Bending integration'); use bending='auto' or 'implicit'",
                           stacklevel=2)
-        fdt = wp.float64(dt)
-        V, N = m.n_vertices, m.n_rods
-        last, cur = contacts.last, contacts.next
+        cur = contacts.next
+        n_contacts = cur.count
+        contacts_view = cur.view()
+        self._predict(state_in, state_out, control, contacts, dt, theta, check)
+        params = self._step_params(control, dt)
+        if n_contacts:
+            self._prepare_rod_contacts(state_in, state_out, contacts, contacts_view, params)
+        walls = self._walls(control, state_in.time, dt)
+        wc = self._prepare_wall_contacts(state_in, state_out, contacts, contacts_view, walls, params)
+        self._factor_rods(state_in, dt, theta)
+        res, sres, used = self._solve(state_in, state_out, contacts_view, walls, wc, params)
+        passes = self._advance(state_in, state_out, contacts_view, walls, wc, params, dt)
+        vmax_out, depth = self._check_step(state_in, state_out, cur, control, dt, theta, check)
+        contacts.commit()  # the step passed its checks: its impulses warm-start the next
+        info = StepInfo(state_out.step_index, state_out.time, dt, used, n_contacts,
+                        float(res), float(sres), vmax_out, theta, max(depth, 0.0), passes)
+        self.last_info = info
+        return info
+
+    # the phases of a step, in order (each launches on the model's device)
+    def _step_inputs(self, state_in: State, control, contacts, dt, check: bool):
+        """Phase 0: the step's control and contacts, checked (collided now when none are given);
+        the elastic speed of ``state_in`` measured once for the speed limit."""
+        if isinstance(contacts, (int, float)):
+            raise RodwarpError("step(state_in, state_out, control, contacts, dt): the fourth argument is the "
+                               "contacts from solver.collide(...); pass the step as dt=")
+        if dt is None:
+            raise RodwarpError("step needs a time step dt (s)")
+        m = self.model
+        control = self._control(control)
+        if check and not (dt > 0 and math.isfinite(dt)):
+            raise RodwarpError(f"time step must be a positive number, got {dt}")
+        if contacts is None:
+            contacts = self.collide(state_in, control, dt, self.default_contact_points)
+        elif contacts.collided_for != (id(state_in), state_in.step_index, state_in.time, id(control), dt):
+            raise RodwarpError("these contacts were not collided for this step: call "
+                               "solver.collide(state_in, control, dt, contacts) right before solver.step")
+        if check and self._v_elastic is None:
+            e = self.energy(state_in)
+            self._v_elastic = math.sqrt(2.0 * (e["bending"] + e["stretching"] + e["twist"]) / m.total_mass())
+        return control, contacts
+
+    def _predict(self, state_in: State, state_out: State, control, contacts: ContactPoints, dt: float, theta: float,
+                 check: bool) -> None:
+        """Phase 1: the frames at the start of the step (tangents, reference twists, curved
+        rods' targets) and the velocity predictor into ``state_out`` (damping, gravity,
+        torques, explicit bending when ``theta`` is 0); the step guard at the predicted speed."""
+        m = self.model
+        dev = m.device
         f = self.factors
         f.implicit_bending = int(theta != 0.0)
         rs_in = state_in.rod_state()
-
-        self._launch("elastics", frames.step_frames, dim=N, device=dev, inputs=[m.arrays, rs_in, f])
-        self._launch("elastics", elastics.velocity_predictor, dim=N, device=dev, inputs=[
-            m.arrays, rs_in, f.btarget, control.torque(), wp.vec3d(*m.gravity), wp.float64(m.damping), fdt,
-            int(theta == 0.0), state_out.v, state_out.spin])
+        self._launch("elastics", frames.step_frames, dim=m.n_rods, device=dev, inputs=[m.arrays, rs_in, f])
+        self._launch("elastics", elastics.velocity_predictor, dim=m.n_rods, device=dev, inputs=[
+            m.arrays, rs_in, f.bend_target, control.torque(), wp.vec3d(*m.gravity), wp.float64(m.damping),
+            wp.float64(dt), int(theta == 0.0), state_out.v, state_out.spin])
         # the predictor's fastest speed was measured by collide (the same kernel on the same input)
         vmax = contacts.predicted_speed
         if not math.isfinite(vmax):
@@ -478,11 +516,11 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
             # the guard follows the motion: the bound at the speeds this step starts from
             self.check_dt(dt, control, speed=vmax)
 
-        n_contacts = cur.count
-        contacts_view = cur.view()
-
+    def _step_params(self, control, dt: float) -> StepParams:
+        """Phase 2: the scalars of this step (the solver's one :class:`StepParams`, refilled)."""
+        m = self.model
         params = self._params
-        params.dt = fdt
+        params.dt = wp.float64(dt)
         params.mu = wp.float64(m.mu)
         params.beta = wp.float64(self.baumgarte)
         params.slop = wp.float64(self.slop * m.min_diameter)
@@ -495,26 +533,44 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         params.length_tolerance = wp.float64(self.length_tolerance)
         params.law = self._law_tag
         params.law_params = self._law_params
+        return params
 
-        if n_contacts:
-            if self._frames.shape[0] < n_contacts:
-                self._frames = wp.empty(2 * n_contacts, dtype=ContactFrame, device=dev)
-            self._launch("friction", friction.prepare_rod_contacts, dim=n_contacts, device=dev, inputs=[
-                m.arrays, state_in.x, contacts_view, f.tangent, params, self._frames])
-            self.collision.warm_start(last, cur, n_contacts, self.warm_start)
-            self._launch("friction", friction.apply_rod_impulses, dim=n_contacts, device=dev, inputs=[
-                contacts_view, self._frames, state_in.x, f.tangent, state_out.v, state_out.spin])
-            if self.coloring:
-                self.collision.color(cur, n_contacts)
+    def _prepare_rod_contacts(self, state_in: State, state_out: State, contacts: ContactPoints, contacts_view,
+                              params: StepParams) -> None:
+        """Phase 3: the rod-rod contact points' frames (sides, mobility, tangent basis, normal
+        target), their warm-start impulses applied to ``state_out``, and their colours (parallel
+        devices)."""
+        m = self.model
+        dev = m.device
+        f = self.factors
+        last, cur = contacts.last, contacts.next
+        n_contacts = cur.count
+        if self._frames.shape[0] < n_contacts:
+            self._frames = wp.empty(2 * n_contacts, dtype=ContactFrame, device=dev)
+        self._launch("friction", friction.prepare_rod_contacts, dim=n_contacts, device=dev, inputs=[
+            m.arrays, state_in.x, contacts_view, f.tangent, params, self._frames])
+        self.collision.warm_start(last, cur, n_contacts, self.warm_start)
+        self._launch("friction", friction.apply_rod_impulses, dim=n_contacts, device=dev, inputs=[
+            contacts_view, self._frames, state_in.x, f.tangent, state_out.v, state_out.spin])
+        if self.coloring:
+            self.collision.color(cur, n_contacts)
 
-        walls = self._walls(control, state_in.time, dt)
+    def _prepare_wall_contacts(self, state_in: State, state_out: State, contacts: ContactPoints, contacts_view,
+                               walls, params: StepParams):
+        """Phase 4: the wall contacts within reach of the walls in place, found, warm-started
+        and framed in one pass per rod (the frame list grown when it overflows). Returns the
+        wall contacts' view."""
+        m = self.model
+        dev = m.device
+        f = self.factors
+        last, cur = contacts.last, contacts.next
         wc = self._wall_contacts(cur)
         self._last_solve = (contacts_view, params, walls, wc)
         self._n_active.zero_()
         self._n_wall_frames.zero_()
-        if P:
+        if m.walls:
             cur.wall_impulse.assign(last.wall_impulse)
-            self._launch("friction", wall_contacts.prepare_wall_contacts, dim=N, device=dev, inputs=[
+            self._launch("friction", wall_contacts.prepare_wall_contacts, dim=m.n_rods, device=dev, inputs=[
                 m.arrays, state_in.x, f.tangent, walls, params, wc, state_out.v, state_out.spin])
             needed = int(self._n_wall_frames.numpy()[0])
             if needed > self._wall_frames.shape[0]:
@@ -525,41 +581,71 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
                 self._last_solve = (contacts_view, params, walls, wc)
                 self._launch("friction", wall_contacts.fill_wall_frames, dim=int(self._n_active.numpy()[0]), device=dev,
                              inputs=[m.arrays, state_in.x, f.tangent, walls, params, wc])
+        return wc
 
-        f.blam.zero_()
-        f.slam.zero_()
-        f.tlam.zero_()
+    def _factor_rods(self, state_in: State, dt: float, theta: float) -> None:
+        """Phase 5: the rods' internal constraints factored for this step (multipliers zeroed;
+        bending refactored only when the step changes)."""
+        m = self.model
+        dev = m.device
+        f = self.factors
+        fdt = wp.float64(dt)
+        f.bend_lambda.zero_()
+        f.stretch_lambda.zero_()
+        f.twist_lambda.zero_()
         if m.curved:
-            f.clam.zero_()
-            self._launch("elastics", elastics.curved_factor, dim=N, device=dev, inputs=[m.arrays, fdt, f])
+            f.curved_lambda.zero_()
+            self._launch("elastics", elastics.curved_factor, dim=m.n_rods, device=dev, inputs=[m.arrays, fdt, f])
         if theta != 0.0 and self._bfactor_dt != dt:
-            self._launch("elastics", elastics.bending_factor, dim=N, device=dev, inputs=[m.arrays, fdt, f])
+            self._launch("elastics", elastics.bending_factor, dim=m.n_rods, device=dev, inputs=[m.arrays, fdt, f])
             self._bfactor_dt = dt
-        self._launch("elastics", elastics.stretch_twist_factor, dim=N, device=dev, inputs=[
+        self._launch("elastics", elastics.stretch_twist_factor, dim=m.n_rods, device=dev, inputs=[
             m.arrays, state_in.x, fdt, f])
 
+    def _solve(self, state_in: State, state_out: State, contacts_view, walls, wc, params: StepParams):
+        """Phase 6: the Gauss-Seidel sweeps over contacts, walls and rods on ``state_out``'s
+        velocities (one launch on a sequential device). Returns (contact residual (m/s),
+        stretch residual (m), sweeps run)."""
+        m = self.model
+        rs_in = state_in.rod_state()
         if self.fused:
-            self._launch("solve", solve.gauss_seidel_sequential, dim=1, device=dev, inputs=[
+            self._launch("solve", solve.gauss_seidel_sequential, dim=1, device=m.device, inputs=[
                 m.arrays, rs_in,
-                contacts_view, self._frames, walls, wc, f, params, state_out.v, state_out.spin, self._solve_out])
+                contacts_view, self._frames, walls, wc, self.factors, params, state_out.v, state_out.spin,
+                self._solve_out])
             res, sres, used = (float(x) for x in self._solve_out.numpy())
-            used = int(used)
-        else:
-            res, sres, used = self._sweeps(rs_in, state_out, contacts_view, walls, wc, params, P)
+            return res, sres, int(used)
+        return self._sweeps(rs_in, state_out, contacts_view, walls, wc, params, len(m.walls))
 
-        self._launch("elastics", elastics.integrate_positions, dim=V, device=dev,
+    def _advance(self, state_in: State, state_out: State, contacts_view, walls, wc, params: StepParams,
+                 dt: float) -> int:
+        """Phase 7: x' = x + dt v', overlaps projected out when the law asks it, material angles
+        and directors carried along; the time advanced. Returns the projection sweeps run."""
+        m = self.model
+        dev = m.device
+        fdt = wp.float64(dt)
+        self._launch("elastics", elastics.integrate_positions, dim=m.n_vertices, device=dev,
                      inputs=[state_in.x, state_out.v, fdt, state_out.x])
         passes = 0
-        if self.position_sweeps and (n_contacts or P) and m.contact_law.projects_overlaps:
-            passes = self._project_positions(rs_in, state_out, contacts_view, walls, wc, params, P)
-        self._launch("elastics", frames.advance_frames, dim=V, device=dev, inputs=[
+        if self.position_sweeps and (contacts_view.count or m.walls) and m.contact_law.projects_overlaps:
+            passes = self._project_positions(state_in.rod_state(), state_out, contacts_view, walls, wc, params,
+                                             len(m.walls))
+        self._launch("elastics", frames.advance_frames, dim=m.n_vertices, device=dev, inputs=[
             m.arrays, state_in.x, state_out.x, state_in.director, state_in.theta, state_out.spin, fdt,
             state_out.director, state_out.theta])
         state_out.time = state_in.time + dt
         state_out.step_index = state_in.step_index + 1
+        return passes
 
+    def _check_step(self, state_in: State, state_out: State, cur, control, dt: float, theta: float, check: bool):
+        """Phase 8: the fastest speed and deepest rod overlap at the end of the step; with
+        ``check``, a blow-up (non-finite or runaway speed, deep overlap, energy jump) raises
+        before the contacts commit. Returns (fastest speed (m/s), deepest overlap (m))."""
+        m = self.model
+        dev = m.device
+        n_contacts = cur.count
         self._scalar.zero_()
-        self._launch("checks", broadphase.max_speed, dim=V, device=dev, inputs=[state_out.v, self._scalar])
+        self._launch("checks", broadphase.max_speed, dim=m.n_vertices, device=dev, inputs=[state_out.v, self._scalar])
         if n_contacts:
             self._launch("checks", narrowphase.contact_overlap, dim=n_contacts, device=dev, inputs=[
                 n_contacts, cur.seg, m.arrays.seg_vertex, m.arrays.vertex_rod, m.arrays.radius,
@@ -578,11 +664,8 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
                 raise self._blowup(state_in, dt, theta, f"rods overlap by {depth / m.min_diameter:.2f} d", control)
             if self.energy_check_every and state_out.step_index % self.energy_check_every == 0:
                 self._check_energy(state_in, state_out, dt, theta, control)
-        contacts.commit()  # the step passed its checks: its impulses warm-start the next
-        info = StepInfo(state_out.step_index, state_out.time, dt, used, n_contacts,
-                        float(res), float(sres), vmax_out, theta, max(depth, 0.0), passes)
-        self.last_info = info
-        return info
+        return vmax_out, depth
+
 
 def run(solver: RodSolver, state: State, duration: float, dt: float, *, control=None, callback=None,
         every: int = 1, contacts: ContactPoints | None = None) -> State:
@@ -594,7 +677,7 @@ def run(solver: RodSolver, state: State, duration: float, dt: float, *, control=
     """
     n = _step_count(duration, dt)
     whole("every", every, ge=1)
-    contacts = solver.contacts() if contacts is None else contacts
+    contacts = solver.contact_points() if contacts is None else contacts
     a = state
     b = State(solver.model)
     b.copy_from(a)
