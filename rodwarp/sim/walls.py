@@ -1,4 +1,4 @@
-"""Walls of a scene, one tagged type: :class:`Plane` and :class:`Cylinder`.
+"""Walls of a scene, one tagged type: :class:`Plane`, :class:`Cylinder` and :class:`Cone`.
 
 Each kind states its geometry once here, for the host (:meth:`distance`, used by checks and
 tests) and as a row of the device's :class:`~rodwarp.kernels.structs.Walls` bundle
@@ -10,6 +10,7 @@ tests) and as a row of the device's :class:`~rodwarp.kernels.structs.Walls` bund
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,7 +20,7 @@ from rodwarp.arguments import direction, real, vector
 from rodwarp.sim._limits import MAX_LENGTH_M, friction
 
 #: the device's kind codes (kernels/walls.py)
-KINDS = {"plane": 0, "cylinder": 1}
+KINDS = {"plane": 0, "cylinder": 1, "cone": 2}
 
 
 @dataclass
@@ -125,6 +126,63 @@ class Cylinder(_Wall):
         rel = np.asarray(x, float) - c
         rho = rel - np.outer(rel @ self.axis, self.axis).reshape(rel.shape)
         return self.radius - np.linalg.norm(rho, axis=-1)
+
+
+@dataclass
+class Cone(_Wall):
+    """The inside of a circular cone (a hopper, a funnel), {x : rho <= h tan(a)} with h = (x - p) . u
+    the height along the axis above the apex p and rho the distance from the axis: rods are kept
+    inside the cone opening from ``apex`` along ``axis`` (infinitely long: close it with planes).
+
+    The distance to the surface is (h tan(a) - rho) cos(a) = h sin(a) - rho cos(a), positive
+    inside. Its sign is right everywhere; its size is exact wherever the nearest surface point lies
+    on a generator, which is every point inside and every point outside except those behind the
+    apex (h cos(a) + rho sin(a) < 0, whose nearest surface point is the apex itself: there it
+    understates the distance; a rod is never there unless it has left the cone).
+
+    The distance is concave (linear in x minus cos(a) times the convex rho), so along a segment it
+    is smallest at an endpoint: a capsule inside the cone touches it first with a vertex sphere,
+    as for the cylinder. On the axis (rho = 0) a vertex sphere touches the cone along a circle and
+    the normal is taken along the axis (the mean of that circle's normals).
+
+    Parameters
+    ----------
+    apex : (3,) array
+        The cone's apex at rest (m).
+    axis : (3,) array
+        The direction the cone opens toward (normalised here).
+    half_angle : float
+        Half the opening angle (rad), in (0, pi/2).
+    mu, moving, name
+        As for :class:`Plane`; a moving cone's apex follows the drive.
+    """
+
+    apex: np.ndarray
+    axis: np.ndarray
+    half_angle: float
+    kind = "cone"
+
+    def device_row(self, drive_direction, moving: bool):
+        """(geom0, geom1, shift) of the device bundle (kernels/walls.py, ``cone_surface``; a moving
+        cone's apex is displaced there): (apex, sin a), (unit axis, cos a)."""
+        return (*self.apex, math.sin(self.half_angle)), (*self.axis, math.cos(self.half_angle)), 0.0
+
+    @classmethod
+    def make(cls, apex, axis, half_angle: float, *, mu: float | None = None, moving: bool = False,
+             name: str = "cone"):
+        """A cone with its axis normalised (any non-zero length); ``apex`` (m) within 1e6 m;
+        ``half_angle`` (rad) in (0, pi/2); ``mu`` in [0, 10], None takes the model's."""
+        p = vector("apex", apex, unit="m", limit=MAX_LENGTH_M)
+        a = real("half_angle", half_angle, gt=0.0, lt=math.pi / 2, unit="rad", hint="half the cone's opening angle")
+        return cls(p, direction("axis", axis), a, mu=_mu(mu), moving=bool(moving), name=_name(name))
+
+    def distance(self, x, displacement=0.0, direction=(0.0, 0.0, 1.0)):
+        """As :meth:`Plane.distance`: h sin(a) - rho cos(a) (m), exact except behind the apex."""
+        c = self.apex + (np.asarray(direction, float) * displacement if self.moving else 0.0)
+        rel = np.asarray(x, float) - c
+        h = rel @ self.axis
+        rho = rel - np.outer(h, self.axis).reshape(rel.shape)
+        return h * math.sin(self.half_angle) - np.linalg.norm(rho, axis=-1) * math.cos(self.half_angle)
 
 
 def _length(name: str, v) -> float:
