@@ -625,7 +625,7 @@ def _phase_diagram_folder(sweep_dir: Path, out: Path, overwrite: bool, draw) -> 
     phase diagram of the same sweep there is replaced, anything else (another sweep's diagram,
     another command's run, files of an earlier run) is refused unless ``overwrite``.
     """
-    from rodwarp.rodset.rundir import PHASE_DIAGRAM_OUTPUTS
+    from rodwarp.rodset.commands import PHASE_DIAGRAM_OUTPUTS
     from rodwarp.rodset import rundir
 
     source = str(sweep_dir.resolve())

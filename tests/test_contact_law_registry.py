@@ -2,7 +2,8 @@
 the registry (rodwarp/sim/contact_law.py).
 
 The toy law below, frictionless Signorini contact, is written as those two modules in a
-temporary folder and registered with one call (what the registry's line does for a built-in
+temporary folder (its class registered by the ``register_contact_law`` decorator, as the
+built-in laws' are) and imported by the scene (what the registry's line does for a built-in
 law); a rod lying across an incline then slides down it at exactly g sin(theta), where the
 exact law with the same friction coefficient holds it still. The toy law runs in a fresh
 process: the kernels that dispatch over the laws are built once there (two modules compile
@@ -60,9 +61,10 @@ TOY_HOST = '''
 from dataclasses import dataclass
 
 import toy_kernels
-from rodwarp.sim.contact_law import ContactLaw
+from rodwarp.sim.contact_law import ContactLaw, register_contact_law
 
 
+@register_contact_law
 @dataclass(frozen=True)
 class FrictionlessLaw(ContactLaw):
     """Signorini without friction."""
@@ -76,13 +78,10 @@ class FrictionlessLaw(ContactLaw):
 SCENE = '''
 import json, sys
 import numpy as np
-from toy_law import FrictionlessLaw
+import toy_law  # noqa: F401 (the registry's line for this law; rodwarp/sim/contact_law.py imports the built-in ones)
 from rodwarp.rodset import RodSet
 from rodwarp.sim import STEEL, ContactLaw, ModelBuilder, RodSolver, run
-from rodwarp.sim.contact_law import register_contact_law
 from rodwarp.testing.scenes import straight_rod, tilted_gravity
-
-register_contact_law(FrictionlessLaw)  # the registry's line for this law
 R, DT, STEPS = 0.01, 1e-3, 100
 out = {}
 for law in ("frictionless", "exact"):
@@ -123,6 +122,7 @@ def test_the_registry_names_builds_and_refuses_laws():
     assert ContactLaw.from_tag("exact") == ExactLaw()
     assert (ExactLaw().tag, ImcLaw().tag) == (0, 1)
     assert ImcLaw(delta=1e-3, nu=0.01, stiffness=2.0).device_params() == (2.0, 15e3, 1.5e3, 1e-3, 0.01)
+    assert ImcLaw.parameters() == {"delta": None, "nu": 1e-3, "stiffness": None} and ExactLaw.parameters() == {}
     with pytest.raises(RodwarpError, match="exact or imc"):
         ContactLaw("hertz")
     with pytest.raises(TypeError):

@@ -246,7 +246,7 @@ def test_phase_diagram_out_writes_there_and_leaves_the_sweep_folder_alone(tmp_pa
 
 
 def test_phase_diagram_out_refuses_another_runs_folder_without_overwrite(tmp_path):
-    from rodwarp.rodset.rundir import ANALYZE_OUTPUTS
+    from rodwarp.rodset.commands import ANALYZE_OUTPUTS
     from rodwarp.rodset import rundir
 
     sw, other, out = _sweep(tmp_path / "sw"), _sweep(tmp_path / "other"), tmp_path / "pd"

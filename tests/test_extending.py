@@ -64,7 +64,8 @@ def test_a_toy_protocol_is_one_class_and_one_registration(tmp_path):
         z0 = float(rows[0]["lowest_z"])
         assert z0 > 0.5 * d  # they started in the air
         assert abs(s["drop"]["lowest_z_m"]) < 0.05 * d
-        assert float(rows[-1]["kinetic_energy"]) < 1e-3 * float(rows[5]["kinetic_energy"])
+        # and the pile came down onto it: its mass centroid fell from mid-box to a few diameters
+        assert float(rows[-1]["centroid_height"]) < 0.25 * float(rows[0]["centroid_height"])
         # options of other protocols are refused with it, as with any protocol
         with pytest.raises(RodwarpError, match="--strains does not apply with --protocol drop"):
             dataclasses.replace(params, strains=(0.1,)).validate()

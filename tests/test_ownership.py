@@ -16,7 +16,7 @@ import pytest
 from typer.testing import CliRunner
 
 from rodwarp.cli import app
-from rodwarp.rodset.rundir import SIMULATE_OUTPUTS, SWEEP_OUTPUTS
+from rodwarp.rodset.commands import SIMULATE_OUTPUTS, SWEEP_OUTPUTS
 from rodwarp.rodset.rundir import MANIFEST
 
 runner = CliRunner()

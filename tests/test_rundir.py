@@ -267,8 +267,9 @@ def test_manifest_is_written_first(tmp_path, monkeypatch):
 
 
 def test_the_run_folder_layer_knows_no_command():
-    """Each command registers its folder contract; rundir itself names none (no string literal
-    outside docstrings is a command's name)."""
+    """The commands' folder contracts are one table of data (rodset/commands.py); rundir itself
+    names no command (no string literal outside docstrings is a command's name), and importing
+    it alone, with no command's module, knows every command's contract."""
     import ast
 
     from rodwarp.rodset import rundir
@@ -280,4 +281,11 @@ def test_the_run_folder_layer_knows_no_command():
     literals = {n.value for n in ast.walk(tree)
                 if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docstrings}
     assert not literals & {"simulate", "analyze", "segment", "sweep", "phantom", "phase-diagram"}
-    assert {"simulate", "analyze", "segment", "sweep"} <= set(rundir.OUTPUTS)  # registered on import
+    import subprocess
+    import sys
+
+    code = ("import sys; from rodwarp.rodset import rundir; "
+            "print(sorted(rundir.OUTPUTS), any(m.startswith(('rodwarp.experiments', 'rodwarp.analysis', "
+            "'rodwarp.ct')) for m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "['analyze', 'phase-diagram', 'segment', 'simulate', 'sweep'] False"

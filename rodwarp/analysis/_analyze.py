@@ -24,7 +24,7 @@ import numpy as np
 
 from rodwarp._util import option, progress_bar, slow_phase, versions
 from rodwarp.analysis._fieldset import Fields
-from rodwarp.rodset.rundir import ANALYZE_OUTPUTS
+from rodwarp.rodset.commands import ANALYZE_OUTPUTS
 from rodwarp.errors import RodwarpError
 from rodwarp.rodset import RodSet
 from rodwarp.rodset import load as load_rods

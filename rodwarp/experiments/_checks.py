@@ -184,12 +184,22 @@ def _check_options(p, explicit: frozenset):
             fail(f"{fq} {s.freq:g} Hz over {s.option} {s.duration:g} s needs at least {s.min_steps(p.steps_per_period):.3g} "
                  f"steps ({p.steps_per_period:g} per period), more than {MAX_STEPS:.0e}; lower the frequency or the duration")
     height = box[2] * p.length
-    for opt, a in (("--amplitude", p.amplitude), ("--entangle-amplitude", p.entangle_amplitude)):
-        if not poured and 2 * a >= 0.5 * height:
+    box_drives = {"--amplitude": p.amplitude} if not poured else {}
+    for st in stages if not poured else ():
+        if st.amplitude > 0 and st.option:
+            box_drives.setdefault(_drive_options(st)[1], st.amplitude)
+    for opt, a in box_drives.items():
+        if 2 * a >= 0.5 * height:
             fail(f"{opt} {a:g} m (a stroke of {2 * a:g} m) does not fit the box: its height is {height:g} m ({box[2]:g} "
                  f"rod lengths of --length {p.length:g} m) and a stroke may take at most half of it; lower {opt}, "
                  f"or raise --length or the box's Z")
     return stages
+
+
+def _drive_options(stage) -> tuple[str, str]:
+    """The options that set a stage's drive, from the option of its duration
+    (``--entangle-duration``: ``--entangle-freq``, ``--entangle-amplitude``)."""
+    return stage.option.replace("duration", "freq"), stage.option.replace("duration", "amplitude")
 
 
 def _check_drives(p) -> None:
@@ -199,10 +209,12 @@ def _check_drives(p) -> None:
     from rodwarp.experiments.protocols import protocol
 
     poured = protocol(p.protocol).poured
-    drives = [("--freq", "--amplitude", p.freq, p.amplitude)]
-    if not poured and p.entangle_duration > 0:
-        drives.append(("--entangle-freq", "--entangle-amplitude", p.entangle_freq, p.entangle_amplitude))
-    for fopt, aopt, f, a in drives:
+    # the test's drive always, and every other stage's drive of the plan (the paper's entangling)
+    drives = {("--freq", "--amplitude"): (p.freq, p.amplitude)}
+    for st in plan(p):
+        if st.amplitude > 0 and st.option:
+            drives.setdefault(_drive_options(st), (st.freq, st.amplitude))
+    for (fopt, aopt), (f, a) in drives.items():
         a_g = 4 * math.pi**2 * f * f * a / p.gravity
         if a_g > MAX_A_OVER_G:
             fail(f"{fopt} {f:g} Hz and {aopt} {a:g} m make a/g = {a_g:.3g} at --gravity {p.gravity:g} m/s^2, above "

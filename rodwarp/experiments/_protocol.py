@@ -24,7 +24,7 @@ import numpy as np
 from rodwarp.errors import RodwarpError
 
 from rodwarp.experiments._loop import Engine, LoopPosition, StepMemory, step_stages
-from rodwarp.rodset.rundir import SIMULATE_OUTPUTS
+from rodwarp.rodset.commands import SIMULATE_OUTPUTS
 from rodwarp.experiments._plan import check_plan, frames, plan
 from rodwarp.experiments._recorder import ENTANGLED
 

@@ -38,7 +38,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 from rodwarp.errors import RodwarpError
-from rodwarp.rodset.rundir import SWEEP_OUTPUTS
+from rodwarp.rodset.commands import SWEEP_OUTPUTS
 from rodwarp.experiments._cluster import LOCAL_CLUSTER, _connect, _local_cluster  # noqa: F401 (tests import them here)
 
 #: environment variable that names the sweep process (its pid) to the worker processes of its

@@ -6,8 +6,9 @@ the run writes, and ``complete`` (false while the run is going, true once its la
 written). One rule for every command that writes a folder:
 
 * the manifest's ``outputs`` are bare names from the command's own fixed list, declared in
-  one table here (:data:`OUTPUTS`, filled by :func:`register_command` below: data, so that
-  importing a command's module registers nothing); a manifest naming anything else (an absolute path, ``..``, a
+  one table of data (:data:`rodwarp.rodset.commands.COMMANDS`, read into :data:`OUTPUTS`):
+  this module names no command, and importing a command's module registers nothing; a
+  manifest naming anything else (an absolute path, ``..``, a
   subfolder, a name no command writes, an unknown command) makes the folder *refused*,
   whatever the options: rodwarp deletes only names it wrote itself, inside the folder;
 * a new run in a folder holding another run (a manifest, or outputs of a run from before
@@ -42,6 +43,7 @@ import uuid
 from pathlib import Path
 
 from rodwarp.errors import RodwarpError
+from rodwarp.rodset.commands import COMMANDS
 from rodwarp.rodset.files import write_json
 from rodwarp.validation import disk_fits, output_location
 
@@ -57,8 +59,8 @@ _TRAITS: dict[str, dict] = {}
 
 def register_command(kind: str, outputs, *, legacy_marker: str | None = None, exclusive=(),
                      resumable: bool = False, hosts: dict | None = None, inside_input: bool = False) -> None:
-    """Declare a command's folder contract (the table below this function holds every
-    command's; a new command adds its row there).
+    """Declare a command's folder contract (:data:`rodwarp.rodset.commands.COMMANDS` holds
+    every command's; a new command adds its row there).
 
     Parameters
     ----------
@@ -84,32 +86,10 @@ def register_command(kind: str, outputs, *, legacy_marker: str | None = None, ex
     OUTPUTS[kind] = tuple(outputs)
     _TRAITS[kind] = {"legacy_marker": legacy_marker, "exclusive": tuple(exclusive), "resumable": bool(resumable),
                      "hosts": dict(hosts or {}), "inside_input": bool(inside_input)}
-#: what ``rodwarp simulate`` writes in its folder (``analysis`` is a later analyze run of it)
-SIMULATE_OUTPUTS = ("summary.json", "metrics.csv", "metrics.png", "trajectory.zarr", "trajectory.pvd", "vtk",
-                    "initial.npz", "entangled.npz", "entangled_from.json", "final.npz", "snapshots.png",
-                    "checkpoints", "analysis", "fields_press*.npz", "rods_press*.npz")
-#: what ``rodwarp sweep`` writes in its folder, with the files of ``rodwarp phase-diagram``
-#: (names with ``*`` are patterns of bare names: one figure per group of points)
-SWEEP_OUTPUTS = ("sweep.json", "results.csv", "points", "alpha_star.csv", "power_law.csv", "phase_*.png")
-#: what ``rodwarp phase-diagram --out DIR`` writes in a folder of its own (in the sweep's folder,
-#: its default, these files are the sweep's)
-PHASE_DIAGRAM_OUTPUTS = ("alpha_star.csv", "power_law.csv", "phase_*.png")
-#: what ``rodwarp analyze`` writes in its folder
-ANALYZE_OUTPUTS = ("fields.zarr", "summary.json", "rods.npz", "histograms.png", "slices.png", "zprofiles.png",
-                   "tangles.png", "distributions.png")
-#: what ``rodwarp segment`` writes in its folder (``analysis`` is a later analyze run of it)
-SEGMENT_OUTPUTS = ("rods.npz", "rods.csv", "contacts.csv", "filaments.csv", "summary.json", "qa_slices.png",
-                   "qa_projection.png", "qa_confidence.png", "analysis")
+# every command's folder contract: one table of data (rodwarp.rodset.commands), read here
+for _kind, _contract in COMMANDS.items():
+    register_command(_kind, **_contract)
 
-# outputs only a simulation writes: an analysis never takes a folder holding them for its own
-register_command("simulate", SIMULATE_OUTPUTS, exclusive=("final.npz", "trajectory.zarr", "metrics.csv",
-                                                          "checkpoints"), resumable=True,
-                 hosts={"analysis": ("analyze",)})
-register_command("sweep", SWEEP_OUTPUTS, hosts={"points": ("simulate", "analyze")})
-register_command("phase-diagram", PHASE_DIAGRAM_OUTPUTS)
-# an analysis from before manifests is known by its fields
-register_command("analyze", ANALYZE_OUTPUTS, legacy_marker="fields.zarr", inside_input=True)
-register_command("segment", SEGMENT_OUTPUTS, hosts={"analysis": ("analyze",)})
 
 #: subfolders whose hidden temporary files are cleaned too
 _TEMP_DIRS = ("", "vtk", "checkpoints")

@@ -7,8 +7,8 @@ A contact law acts on rod-rod and rod-wall contacts alike. Each law is
   packing them for the device (:meth:`ContactLaw.device_params`);
 * a device module, ``kernels/<name>.py``: the law's ``wp.func`` s with the interface of
   :mod:`rodwarp.kernels.contact_laws`;
-* a line in the registry below (:func:`register_contact_law`), which also gives the law its
-  device tag.
+* its registration: the class decorated with :func:`register_contact_law` (which also gives
+  the law its device tag) and the module's import in the registry at the end of this file.
 
 Built in: ``exact`` (:class:`~rodwarp.sim.law_exact.ExactLaw`, the default: Signorini
 non-penetration and the Coulomb cone, sticking exactly; docs/physics.md, "Contact") and
@@ -21,7 +21,7 @@ ImcLaw(delta=None, nu=0.001, stiffness=None)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from types import ModuleType
 from typing import ClassVar
 
@@ -82,6 +82,12 @@ class ContactLaw(metaclass=_Tagged):
             raise RodwarpError(f"contact law must be {' or '.join(CONTACT_LAWS)}, got '{name}'")
         return CONTACT_LAWS[name](**parameters)
 
+    @classmethod
+    def parameters(cls) -> dict:
+        """The law's parameters and their defaults (None: filled in by :meth:`resolved`), for
+        option tables and ``from_tag``."""
+        return {f.name: f.default for f in fields(cls)}
+
     @property
     def tag(self) -> int:
         """The law's device tag (``StepParams.law``)."""
@@ -135,13 +141,12 @@ def register_contact_law(cls: type) -> type:
     return cls
 
 
-# the registry: one line per law, in device-tag order
-from rodwarp.sim.law_exact import ExactLaw  # noqa: E402
-from rodwarp.sim.law_imc import (IMC_DELTA_DIAMETERS, IMC_MAX_STIFFNESS, IMC_NU, IMC_SHARPNESS,  # noqa: E402,F401
-                                 IMC_STIFFNESS_WEIGHTS, ImcLaw, imc_creep_speed, imc_force)
+# the registry: one line per law, in device-tag order (each module registers its class)
+from rodwarp.sim import law_exact, law_imc  # noqa: E402,F401
 
-register_contact_law(ExactLaw)
-register_contact_law(ImcLaw)
-
-#: the registered laws' names (kept for callers that list them)
+#: the built-in laws' names (callers that list them; CONTACT_LAWS holds any registered later too)
 LAWS = tuple(CONTACT_LAWS)
+
+# IMC's constants and host formulas, where callers first found them (their home: law_imc)
+from rodwarp.sim.law_imc import (IMC_DELTA_DIAMETERS, IMC_MAX_STIFFNESS, IMC_NU, IMC_SHARPNESS,  # noqa: E402,F401
+                                 IMC_STIFFNESS_WEIGHTS, imc_creep_speed, imc_force)

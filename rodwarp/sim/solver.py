@@ -1,19 +1,26 @@
-"""Projected Gauss-Seidel solver: implicit elastics, exact Coulomb contact at the rods' surfaces.
+"""Projected Gauss-Seidel solver: implicit elastics, contact at the rods' surfaces under the model's law.
 
-One step of :meth:`RodSolver.step` (all on the model's device):
+One step of :meth:`RodSolver.step` (all on the model's device), one method per phase:
 
-1. frames at the start of the step: edge tangents, reference twists, and the rest
-   curvature of curved rods in the current material frame;
-2. velocity predictor, one thread per rod: damping, gravity, applied torques and, for
-   symplectic (explicit) bending, the bending force;
-3. the rod-rod contacts that :meth:`RodSolver.collide` found at the start-of-step positions
-   (:class:`~rodwarp.sim.contacts.ContactPoints`: speculative, sorted), warm-started; walls of the
-   control within reach, found and warm-started here (one fused pass per rod);
-4. ``iterations`` Gauss-Seidel sweeps over rod-rod contacts, wall contacts and exact per-rod
-   solves of bending, twist and edge-length constraints; every block uses the same mass
-   metric, so the converged step is implicit Euler with exact Coulomb contact and its fixed
-   point is the static equilibrium;
-5. x' = x + dt v', theta' = theta + dt omega', directors transported with their edges.
+1. ``_predict``: frames at the start of the step (edge tangents, reference twists, the rest
+   curvature of curved rods in the current material frame) and the velocity predictor, one
+   thread per rod: damping, gravity, applied torques and, for symplectic (explicit) bending,
+   the bending force;
+2. ``_step_params``: the step's scalars, the contact law's tag and parameters among them;
+3. ``_prepare_rod_contacts``: the rod-rod contact points that :meth:`RodSolver.collide` found
+   at the start-of-step positions (:class:`~rodwarp.sim.contacts.ContactPoints`: speculative,
+   sorted), framed and warm-started (coloured on a GPU);
+4. ``_prepare_wall_contacts``: the wall contacts of the walls in place, found, warm-started and
+   framed in one fused pass per rod;
+5. ``_factor_rods``: the rods' bending, twist and edge-length systems factored;
+6. ``_solve``: ``iterations`` Gauss-Seidel sweeps over rod-rod contacts, wall contacts and
+   exact per-rod solves of bending, twist and edge-length constraints; every block uses the
+   same mass metric, so the converged step is implicit Euler under the contact law and its
+   fixed point is the static equilibrium;
+7. ``_advance``: x' = x + dt v', overlaps projected out (laws that ask it), theta' = theta +
+   dt omega', directors transported with their edges;
+8. ``_check_step``: fastest speed and deepest overlap; a blow-up raises before the contacts
+   commit.
 
 As in Newton, contacts come from a collide step and are passed to the step::
 
@@ -444,7 +451,6 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
             untouched.
         """
         control, contacts = self._step_inputs(state_in, control, contacts, dt, check)
-        m = self.model
         touching = self._touching(contacts, control)
         theta = self.theta_for(dt, touching)
         if theta == 0.0 and touching and not self._warned_explicit:

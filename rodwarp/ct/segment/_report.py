@@ -24,7 +24,7 @@ from rodwarp._util import progress_bar, versions
 from rodwarp.errors import RodwarpError
 from rodwarp.ct._voxels import parse_voxel_size_text
 from rodwarp.rodset import UNITS, RodSet
-from rodwarp.rodset.rundir import SEGMENT_OUTPUTS
+from rodwarp.rodset.commands import SEGMENT_OUTPUTS
 from rodwarp.rodset.files import save_figure, write_json, write_text
 
 
