@@ -14,22 +14,18 @@ others docs/experiments.md.
 from __future__ import annotations
 
 import json
-import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from rodwarp.errors import RodwarpError
-
 from rodwarp.experiments._loop import Engine, LoopPosition, StepMemory, step_stages
-from rodwarp.rodset.commands import SIMULATE_OUTPUTS
+from rodwarp.experiments._params import ProtocolParams, _straight, rod_model_rule, rod_resolution
 from rodwarp.experiments._plan import check_plan, frames, plan
 from rodwarp.experiments._recorder import ENTANGLED
-
-from rodwarp.experiments._params import (RIGID_SAG, RODS_PER_ALPHA, ProtocolParams, _straight,  # noqa: E402,F401
-                                         option_table, rod_model_rule, rod_resolution)
+from rodwarp.rodset.commands import SIMULATE_OUTPUTS
 
 
 def _build(params: ProtocolParams, rods, device, rod_model: str, proto=None):
@@ -228,16 +224,12 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
     from rodwarp.experiments import _verdict as vd
     from rodwarp.experiments._checks import CheckedProtocol, check_step_count, output_bytes
     from rodwarp.experiments._packing import orientation_statistics
-    from rodwarp.experiments._recorder import Recorder, plot_metrics
-    from rodwarp.rodset import load, rundir
-    from rodwarp.rodset.files import write_json
-    from rodwarp.rodset.trajectory import plot_snapshots
-    from rodwarp.sim import State, centroid_height, rod_contacts
+    from rodwarp.experiments._recorder import Recorder
+    from rodwarp.experiments.protocols import protocol
+    from rodwarp.rodset import rundir
 
     checked = params if isinstance(params, CheckedProtocol) else params.validate()
     params = checked.params  # with --initial: the input's alpha and length
-    from rodwarp.experiments.protocols import protocol
-
     proto = protocol(params.protocol)
     thresholds = thresholds or vd.DEFAULT_THRESHOLDS
     outdir = Path(outdir)
@@ -254,9 +246,45 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
     _warp.load_kernels(device, _warp.SIMULATION_MODULES + (("fields",) if params.fields_every > 0 else ()),
                        progress=progress)
     t_wall = time.perf_counter()
+    rods, ck, donor_rec = _start_rods(params, checked, proto, outdir, device, resume, branch, donor)
+    orient = orientation_statistics(rods)
+    rule = _rod_model(params, rods)
+    model, solver, box = _build(params, rods, device, rule["rod_model"], proto)
+    sim_rods = model.rods  # the simulated rods (two vertices per rod for rigid rods)
+    stages = check_plan(tuple(stages) if stages is not None else plan(params))
+    protocol_dt = _default_dt(stages, model, solver)
+    check_step_count(params, params.dt or protocol_dt, "--dt" if params.dt else "the default step")
+
+    engine, control, loop = _start_loop(params, model, solver, stages, ck)
+    n_frames = frames(stages, params.save_every)
+    if branch is not None:
+        _take_entangling(donor, outdir, ck[1], n_frames, sim_rods)
+    rec = Recorder(outdir, model, solver, sim_rods, n_frames, checkpoint=ck,
+                   done=stages[:loop.start_stage], fields_every=params.fields_every, columns=proto.columns,
+                   kept_snapshot=next((s.snapshot for s in stages if s.keep), ""))
+
+    # the verdict's pile reference measures the input rods (a rigid rod's two-vertex chord may
+    # differ from its polyline's length in the last bits)
+    longest = float(np.max(rods.rod_lengths()))
+    state, control = step_stages(params, model, solver, stages, engine, control, loop, rec, longest, progress)
+
+    run_info = {"device": device, "wall_time_s": time.perf_counter() - t_wall, "resumed": bool(resume),
+                "initial_orientation": orient, "fields_wall_s": rec.fields_wall_s, "entangled_from": donor_rec}
+    summary = _write_outputs(params, proto, model, stages, state, engine.points, control, loop, rec, rule, box,
+                             thresholds, run_info)
+    run.complete()
+    return summary
+
+
+def _start_rods(params, checked, proto, outdir: Path, device, resume: bool, branch, donor):
+    """The run's rods and where it starts: ``(rods, checkpoint or None, donor record or None)``.
+    A resumed run reloads its own; a branched run copies the donor's initial rods and kept
+    checkpoint; else the input rods or the protocol's packing, saved as ``initial.npz``."""
+    from rodwarp.rodset import load
+    from rodwarp.rodset.files import write_json
+
     ckdir = outdir / "checkpoints"
-    ck = None
-    donor_rec = None
+    ck, donor_rec = None, None
     if resume:
         ck = _resume_point(params, ckdir)
         rods = load(outdir / "initial.npz")
@@ -277,22 +305,27 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
             old.unlink()
         if branch is None:
             rods.save(outdir / "initial.npz")
-    orient = orientation_statistics(rods)
+    return rods, ck, donor_rec
+
+
+def _rod_model(params, rods) -> dict:
+    """The rod model rule's choice for these rods (curved input rods are elastic), with the
+    resolution rule's reasons for a packing of elastic rods."""
     rule = rod_model_rule(params)
     if rule["rod_model"] == "rigid" and params.rod_model == "auto" and not _straight(rods):
         rule.update(rod_model="elastic", rule=rule["rule"] + " (the input has curved rods: elastic)")
     if rule["rod_model"] == "elastic" and not params.initial:
         # the vertices per rod the packing was made with, and why (the input's own with --initial)
         rule["resolution"] = rod_resolution(params)
-    model, solver, (box_lo, box_hi) = _build(params, rods, device, rule["rod_model"], proto)
-    sim_rods = model.rods  # the simulated rods (two vertices per rod for rigid rods)
-    stages = check_plan(tuple(stages) if stages is not None else plan(params))
-    protocol_dt = _default_dt(stages, model, solver)
-    check_step_count(params, params.dt or protocol_dt, "--dt" if params.dt else "the default step")
+    return rule
 
-    state = model.state()
-    other = State(model)
-    points = solver.contacts()
+
+def _start_loop(params, model, solver, stages, ck):
+    """The engine, the control of a stage under way (None otherwise) and the loop's position:
+    afresh, or restored from checkpoint ``ck``."""
+    from rodwarp.sim import State, centroid_height
+
+    state, other, points = model.state(), State(model), solver.contacts()
     control = None
     if ck is None:
         floor0 = model.control().floor_height(0.0)
@@ -309,42 +342,38 @@ def run_protocol(params, outdir, *, progress: bool = True, resume: bool = False,
         saved = {k[6:]: v for k, v in arrays.items() if k.startswith("state_")}
         state.load_numpy(saved)
         points.load_numpy(saved)
-    n_frames = frames(stages, params.save_every)
-    if branch is not None:
-        _take_entangling(donor, outdir, ck[1], n_frames, sim_rods)
-    rec = Recorder(outdir, model, solver, sim_rods, n_frames, checkpoint=ck,
-                   done=stages[:loop.start_stage], fields_every=params.fields_every, columns=proto.columns,
-                   kept_snapshot=next((s.snapshot for s in stages if s.keep), ""))
+    return Engine(state, other, points), control, loop
 
-    # the verdict's pile reference measures the input rods (a rigid rod's two-vertex chord may
-    # differ from its polyline's length in the last bits)
-    longest = float(np.max(rods.rod_lengths()))
-    state, control = step_stages(params, model, solver, stages, Engine(state, other, points), control, loop, rec,
-                                 longest, progress)
 
-    wall = time.perf_counter() - t_wall
+def _write_outputs(params, proto, model, stages, state, points, control, loop, rec, rule, box, thresholds,
+                   run_info: dict) -> dict:
+    """The finished run's outputs: final.npz, snapshots.png, metrics.csv, summary.json (with the
+    verdict on the test stage and the protocol's block) and metrics.png. Returns the summary."""
+    from rodwarp.experiments import _verdict as vd
+    from rodwarp.experiments._recorder import plot_metrics
+    from rodwarp.rodset.files import write_json
+    from rodwarp.rodset.trajectory import plot_snapshots
+    from rodwarp.sim import centroid_height, rod_contacts
+
+    outdir, sim_rods = rec.outdir, model.rods
     c = rod_contacts(model, state, points)
     final = sim_rods.with_points(state.positions(), velocities=state.velocities())
     final.contacts = c
     final.attrs.update({"time": state.time})
     final.save(outdir / "final.npz")
     rec.snapshot("end", state.positions())
-    plot_snapshots(outdir / "snapshots.png", rec.snapshots, sim_rods.offsets, box=(box_lo, box_hi))
+    plot_snapshots(outdir / "snapshots.png", rec.snapshots, sim_rods.offsets, box=box)
     floor = control.floor_height(state.time)
     test = next(s for s in stages if s.test)
-    summary = _summary(params, model, rec.rows, loop, vd.judge_rows(rec.rows, loop.pile_ref.time, thresholds,
-                                                                    stage=test.name),
-                       c, centroid_height(model, state, 0.0 if floor is None else floor), rule,
-                       {"device": device, "wall_time_s": wall, "resumed": bool(resume), "initial_orientation": orient,
-                        "fields_wall_s": rec.fields_wall_s,
-                        "entangled_from": donor_rec})
+    verdict = vd.judge_rows(rec.rows, loop.pile_ref.time, thresholds, stage=test.name)
+    summary = _summary(params, model, rec.rows, loop, verdict, c,
+                       centroid_height(model, state, 0.0 if floor is None else floor), rule, run_info)
     if (block := proto.summary(params, model, rec.rows, loop, stages, thresholds)) is not None:
         summary[block[0]] = block[1]
     rec.write_metrics()
     write_json(outdir / "summary.json", summary)
     plot_metrics(outdir / "metrics.png", rec.rows, summary)
     rec.finish()
-    run.complete()
     return summary
 
 

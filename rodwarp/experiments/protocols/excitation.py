@@ -26,7 +26,7 @@ import numpy as np
 from rodwarp.experiments._option import param
 from rodwarp.experiments._plan import Stage, Vibrate
 from rodwarp.experiments.protocols.base import Protocol
-from rodwarp.validation import MAX_MU, Range
+from rodwarp.validation import Range
 from rodwarp.experiments.protocols.lab import FLOOR, TUBE
 
 #: the name of the shaken container's side wall (the floor is :data:`FLOOR`)

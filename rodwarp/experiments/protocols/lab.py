@@ -226,7 +226,6 @@ def lab_summary(params, model, rows, loop, stages, thresholds) -> dict:
     the rods separated from it at the end, 1 - f. Height is no criterion while the plate throws
     the packing: at A = 25 mm, 5 Hz (a/g = 2.5) it leaves the plate every cycle.
     """
-    from rodwarp.experiments import _verdict as vd
     num = lambda r, k: None if r is None or r.get(k) in ("", None) else float(r[k])  # noqa: E731
     names = [s.name for s in stages]
     pour = _stage_rows(rows, POUR)

@@ -14,7 +14,7 @@ import numpy as np
 from rodwarp.experiments._option import param
 from rodwarp.experiments._plan import Stage, Vibrate
 from rodwarp.experiments.protocols.base import Protocol
-from rodwarp.validation import MAX_MU, Range
+from rodwarp.validation import Range
 
 #: the stages, by the names metrics.csv's ``stage`` column carries
 ENTANGLE = "entangle"
