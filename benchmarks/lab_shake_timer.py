@@ -27,7 +27,7 @@ def main(path: str, seconds: float, profile: bool = False) -> dict:
     from rodwarp import _warp
     from rodwarp.experiments import _protocol as P
     from rodwarp.experiments._params import ProtocolParams, rod_model_rule
-    from rodwarp.experiments._plan import plan
+    from rodwarp.experiments import plan
     from rodwarp.rodset import load
     from rodwarp.rodset.trajectory import read_checkpoint_file
     from rodwarp.sim import State

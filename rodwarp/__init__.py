@@ -16,7 +16,7 @@ draws the layers; docs/physics.md and docs/protocol.md describe the model and th
 from rodwarp.errors import RodwarpError, SimulationBlowUp
 from rodwarp.rodset import Contacts, RodSet, load
 
-__version__ = "0.1.0"
+from rodwarp._version import __version__
 
 __all__ = ["RodSet", "Contacts", "load", "ModelBuilder", "Model", "State", "ContactPoints", "Control", "Material",
            "STEEL", "RodSolver", "StepInfo", "RodwarpError", "SimulationBlowUp", "__version__"]

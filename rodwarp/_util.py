@@ -132,7 +132,7 @@ def versions(*modules: str) -> dict[str, str | None]:
     dict
         ``rodwarp``, ``python``, ``platform``, then one key per package.
     """
-    from rodwarp import __version__
+    from rodwarp._version import __version__
 
     out: dict[str, str | None] = {"rodwarp": __version__, "python": platform.python_version(),
                                   "platform": platform.platform()}

@@ -28,7 +28,7 @@ def default_dt(alpha: float) -> float:
     import numpy as np
 
     from rodwarp.experiments import ProtocolParams, random_packing, rod_model_rule
-    from rodwarp.experiments._plan import plan
+    from rodwarp.experiments import plan
     from rodwarp.experiments._protocol import _build, _default_dt
 
     p = ProtocolParams(alpha=alpha)

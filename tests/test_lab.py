@@ -12,7 +12,7 @@ import zarr
 
 from rodwarp.errors import RodwarpError
 from rodwarp.experiments import ProtocolParams, run_protocol
-from rodwarp.experiments._plan import plan
+from rodwarp.experiments import plan
 from rodwarp.experiments.protocols.lab import FLOOR, LIFT, PISTON, POUR, SHAKE, TUBE, PressTo, lab_plan
 
 # steel rods of the paper's experiments' scale: l = 5 cm, real gravity

@@ -20,7 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 LAYERS = {
-    "rodwarp.errors": 0, "rodwarp._util": 0, "rodwarp.arguments": 0, "rodwarp._warp": 0, "rodwarp.validation": 0, "rodwarp.kernels": 0,
+    "rodwarp.errors": 0, "rodwarp._version": 0, "rodwarp._util": 0, "rodwarp.arguments": 0, "rodwarp._warp": 0, "rodwarp.validation": 0, "rodwarp.kernels": 0,
     "rodwarp.rodset": 1,
     "rodwarp.sim": 2, "rodwarp.analysis": 2, "rodwarp.ct": 2, "rodwarp.testing": 2,
     "rodwarp.experiments": 3,

@@ -6,7 +6,8 @@ import pytest
 
 from rodwarp.errors import RodwarpError
 from rodwarp.experiments import ProtocolParams, run_protocol
-from rodwarp.experiments._plan import Stage, frames, plan
+from rodwarp.experiments import Stage, plan
+from rodwarp.experiments._plan import frames
 from rodwarp.experiments.protocols.paper import ENTANGLE, SIDE_WALLS, TEST
 
 TINY = dict(alpha=20, n_rods=12, entangle_duration=0.05, duration=0.05, save_every=0.01, fields_every=0.0,

@@ -35,8 +35,9 @@ from rodwarp._util import lazy_exports
 
 _WHERE = {
     # the protocol
-    "ProtocolParams": "_params", "RODS_PER_ALPHA": "_params", "RIGID_SAG": "_params",
-    "Stage": "_plan", "Vibrate": "_plan", "REST": "_plan", "plan": "_plan", "LoopPosition": "_loop",
+    "ProtocolParams": "_params", "RODS_PER_ALPHA": "_fields", "RIGID_SAG": "_fields",
+    "ExperimentParams": "_fields", "RunParams": "_fields",
+    "Stage": "_plan", "Vibrate": "_plan", "REST": "_plan", "plan": "protocols", "LoopPosition": "_loop",
     "PROTOCOLS": "protocols", "Protocol": "protocols", "protocol": "protocols", "register_protocol": "protocols",
     "check_branch_protocol": "_protocol", "SIDE_WALLS": "protocols.paper", "ENTANGLE": "protocols.paper",
     "TEST": "protocols.paper",

@@ -12,7 +12,8 @@ import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from rodwarp.experiments._plan import frames, plan
+from rodwarp.experiments._plan import frames
+from rodwarp.experiments.protocols import plan
 from rodwarp.validation import BASE_BYTES, check_ranges, device_name, fail, memory_fits, number
 
 #: bytes of memory per simulated vertex (model, two states, contact lists, solver scratch and
@@ -37,6 +38,20 @@ MAX_INPUT_OVERLAP = 0.1
 CHECKPOINT_FLOOR = 0.01
 #: options that mean nothing with --initial (the input decides them)
 NOT_WITH_INITIAL = ("n_rods", "vertices", "box", "seed")
+
+
+#: the strongest drive accepted, peak acceleration over gravity: the paper's entangling drive is
+#: a/g ~ 400 at its rescaled gravity (5 cm at 10 Hz, g 0.5), its tests 0.3 to 7.9; beyond 1000 a
+#: drive is a typo or a shock, and it tears any packing apart
+MAX_A_OVER_G = 1000.0
+#: the widest plate stroke of a poured packing, in rod lengths: the alpha* study's largest drive
+#: is l / 2; a plate swinging more than two rod lengths throws rods out of any container
+MAX_PLATE_AMPLITUDE_LENGTHS = 2.0
+#: the IMC stiffness accepted, in heaviest-rod weights per delta: the default is 1000 and DisMech's
+#: floor about 100; below 1 a rod's own weight pushes it through delta, above 1e6 the penalty is a
+#: rigid wall (a 20-weight contact overlaps 2e-5 delta), outside the range docs/physics.md checks
+#: its implicit solve in; the exact law is the rigid one
+IMC_STIFFNESS_WEIGHTS_RANGE = (1.0, 1e6)
 
 
 def stage_steps(duration: float, dt: float) -> int:
@@ -204,8 +219,6 @@ def _drive_options(stage) -> tuple[str, str]:
 
 def _check_drives(p) -> None:
     """Each drive's strength (a/g) and stroke against what the scene can take."""
-    from rodwarp.experiments._params import MAX_A_OVER_G, MAX_PLATE_AMPLITUDE_LENGTHS
-
     from rodwarp.experiments.protocols import protocol
 
     poured = protocol(p.protocol).poured
@@ -228,7 +241,6 @@ def _check_drives(p) -> None:
 
 def _check_imc_stiffness(p) -> None:
     """The IMC stiffness in the unit that makes sense of it: heaviest-rod weights per delta."""
-    from rodwarp.experiments._params import IMC_STIFFNESS_WEIGHTS_RANGE
     from rodwarp.sim.contact_law import IMC_DELTA_DIAMETERS
 
     d = p.diameter

@@ -4,8 +4,7 @@ A :class:`Stage` is a name and a duration, the walls taken out, the walls that m
 motion: :class:`Vibrate` (a sinusoidal drive, or rest at amplitude 0) or a protocol's own
 (the lab's piston pressing to a strain, :class:`rodwarp.experiments.protocols.lab.PressTo`).
 A motion sets the stage's :class:`~rodwarp.sim.Control` and may measure the run when its stage
-begins and ends (``begin``, ``end``). :func:`plan` asks the protocol plug-in for its stages
-(:mod:`rodwarp.experiments.protocols`); the checks, the stepping loop
+begins and ends (``begin``, ``end``). :func:`rodwarp.experiments.protocols.plan` asks the protocol plug-in for its stages; the checks, the stepping loop
 (:mod:`rodwarp.experiments._loop`), the recorder and the output iterate them and name none.
 """
 
@@ -109,14 +108,6 @@ class Stage:
 
             per_period = STEPS_PER_PERIOD
         return per_period * self.freq * self.duration
-
-
-def plan(params) -> tuple[Stage, ...]:
-    """The stages of ``params.protocol`` for ``params``
-    (:class:`~rodwarp.experiments.ProtocolParams`), from its plug-in."""
-    from rodwarp.experiments.protocols import protocol
-
-    return protocol(params.protocol).plan(params)
 
 
 def check_plan(stages) -> tuple[Stage, ...]:

@@ -23,7 +23,8 @@ import numpy as np
 from rodwarp.errors import RodwarpError
 from rodwarp.experiments._loop import Engine, LoopPosition, StepMemory, step_stages
 from rodwarp.experiments._params import ProtocolParams, _straight, rod_model_rule, rod_resolution
-from rodwarp.experiments._plan import check_plan, frames, plan
+from rodwarp.experiments._plan import check_plan, frames
+from rodwarp.experiments.protocols import plan
 from rodwarp.experiments._recorder import ENTANGLED
 from rodwarp.rodset.commands import SIMULATE_OUTPUTS
 

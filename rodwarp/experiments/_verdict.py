@@ -34,7 +34,6 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from rodwarp.errors import RodwarpError
-from rodwarp.experiments.protocols.paper import TEST
 
 
 @dataclass(frozen=True)
@@ -167,9 +166,12 @@ def judge(times, t0: float, height_kept, cluster_fraction, rods_left=None,
     return Verdict(stable, float(h[-1]), tau, float(f[-1]), left, thresholds)
 
 
-def judge_rows(rows, t0: float, thresholds: Thresholds = DEFAULT_THRESHOLDS, stage: str = TEST) -> Verdict:
+def judge_rows(rows, t0: float, thresholds: Thresholds = DEFAULT_THRESHOLDS, stage: str | None = None) -> Verdict:
     """:func:`judge` on metric rows (dicts with ``time``, ``stage``, ``height_kept``,
-    ``largest_cluster_fraction``, ``rods_left``) of the test stage (named ``stage``)."""
+    ``largest_cluster_fraction``, ``rods_left``) of the test stage (named ``stage``; None: the
+    stage of the first judged row, the first with a ``height_kept``)."""
+    if stage is None:
+        stage = next((r["stage"] for r in rows if r.get("height_kept") not in (None, "")), None)
     test = [r for r in rows if r["stage"] == stage and float(r["time"]) > t0]
     if not test:
         raise RodwarpError("no samples of the stability test to judge; run a test longer than --save-every")
@@ -181,15 +183,16 @@ def judge_rows(rows, t0: float, thresholds: Thresholds = DEFAULT_THRESHOLDS, sta
 def judge_metrics_csv(path, t0: float | None = None, thresholds: Thresholds = DEFAULT_THRESHOLDS) -> Verdict:
     """Judge a finished run again from its ``metrics.csv`` (e.g. with other thresholds).
 
-    ``t0`` (the test's start, s) defaults to the time of the first ``stability`` row's
-    predecessor: the last sample before the test, or the first test sample itself.
+    ``t0`` (the test's start, s) defaults to the time of the first test row's predecessor
+    (the test's rows are those with a ``height_kept``): the last sample before the test, or
+    the first test sample itself.
     """
     with open(path, newline="") as fh:
         rows = list(csv.DictReader(fh))
     if not rows or "height_kept" not in rows[0]:
         raise RodwarpError(f"{path} has no height_kept column: it was written by an older rodwarp; rerun the run")
     if t0 is None:
-        idx = next((i for i, r in enumerate(rows) if r["stage"] == TEST), None)
+        idx = next((i for i, r in enumerate(rows) if r["height_kept"] != ""), None)
         if idx is None:
             raise RodwarpError(f"{path} has no stability-test rows")
         t0 = float(rows[idx - 1]["time"]) if idx > 0 else float(rows[idx]["time"])

@@ -528,7 +528,7 @@ def claim(path, kind: str, parameters: dict, outputs, *, resume: bool = False, o
     }
     if run_id and not manifest["started"]:
         manifest["started"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-    from rodwarp import __version__
+    from rodwarp._version import __version__
 
     manifest["rodwarp"] = __version__
     run = RunDir(path, manifest)

@@ -38,13 +38,20 @@ def register_protocol(proto: Protocol) -> Protocol:
     if proto.Params is not None:
         raise RodwarpError(f"protocol {proto.name!r} has parameters of its own ({proto.Params.__name__}): add its "
                            "module to rodwarp.experiments.protocols.PROTOCOLS instead")
-    from rodwarp.experiments._params import ProtocolParams
+    from rodwarp.experiments._fields import ExperimentParams, RunParams
 
-    known = {f.name for f in fields(ProtocolParams)}
+    known = {f.name for group in (ExperimentParams, RunParams, *(p.Params for p in PROTOCOLS.values() if p.Params))
+             for f in fields(group)}
     if unknown := sorted(set(proto.fields) - known):
         raise RodwarpError(f"protocol {proto.name!r} claims fields ProtocolParams lacks: {', '.join(unknown)}")
     PROTOCOLS[proto.name] = proto
     return proto
+
+
+def plan(params) -> tuple:
+    """The stages of ``params.protocol`` for ``params``
+    (:class:`~rodwarp.experiments.ProtocolParams`), from its plug-in."""
+    return protocol(params.protocol).plan(params)
 
 
 def protocol(name: str) -> Protocol:
@@ -55,4 +62,4 @@ def protocol(name: str) -> Protocol:
         raise RodwarpError(f"--protocol must be one of {', '.join(PROTOCOLS)}, got '{name}'") from None
 
 
-__all__ = ["PROTOCOLS", "Protocol", "protocol", "register_protocol", "PAPER", "LAB", "EXCITATION"]
+__all__ = ["PROTOCOLS", "Protocol", "plan", "protocol", "register_protocol", "PAPER", "LAB", "EXCITATION"]

@@ -58,7 +58,7 @@ class PaperProtocol(Protocol):
     branch = True
 
     def rods(self, params) -> int:
-        from rodwarp.experiments._params import RODS_PER_ALPHA
+        from rodwarp.experiments._fields import RODS_PER_ALPHA
 
         return int(round(RODS_PER_ALPHA * params.alpha))
 
