@@ -302,7 +302,8 @@ def curved_factor(model: RodModel, dt: wp.float64, factors: RodFactors):
             # A[i+1, i] = A[i, i+1]^T
             T = wp.transpose(coupled_block(model, factors, inv_dt2, i, i + 1))
             if i - 1 >= a:
-                T = T - factors.curved_lower2[i - 1] * factors.curved_pivot[i - 1] * wp.transpose(factors.curved_lower1[i - 1])
+                T = T - factors.curved_lower2[i - 1] * factors.curved_pivot[i - 1] * wp.transpose(
+                    factors.curved_lower1[i - 1])
             factors.curved_lower1[i] = T * Dinv
         if i + 2 < b:
             factors.curved_lower2[i] = wp.transpose(coupled_block(model, factors, inv_dt2, i, i + 2)) * Dinv
@@ -319,7 +320,8 @@ def project_straight_bending(r: int, a: int, b: int, model: RodModel, state: Rod
         Cb = (state.x[i - 1] + v[i - 1] * dt) * c[0] + (state.x[i] + v[i] * dt) * c[1] + \
             (state.x[i + 1] + v[i + 1] * dt) * c[2]
         factors.bend_rhs[i] = -(Cb - factors.bend_target[i]) - factors.bend_lambda[i] * c[3]
-    pentadiagonal_substitute(a + 1, b - 1, factors.bend_inv_pivot, factors.bend_lower1, factors.bend_lower2, factors.bend_rhs, factors.bend_dlambda)
+    pentadiagonal_substitute(a + 1, b - 1, factors.bend_inv_pivot, factors.bend_lower1, factors.bend_lower2,
+                             factors.bend_rhs, factors.bend_dlambda)
     for i in range(a + 1, b - 1):
         c = factors.bend_stencil[i]
         dlb = factors.bend_dlambda[i]
@@ -366,7 +368,8 @@ def back_substitute(dinv: wp.array(dtype=wp.float64), l: wp.array(dtype=wp.float
 def project_straight_twist(a: int, b: int, model: RodModel, state: RodState, spin: wp.array(dtype=wp.float64),
                            factors: RodFactors, dt: wp.float64, inv_dt: wp.float64, inv_dt2: wp.float64):
     for i in range(a + 1, b - 1):
-        rj = -twist_residual(model, state, spin, factors, dt, i) - model.twist_compliance[i] * inv_dt2 * factors.twist_lambda[i]
+        rj = -twist_residual(model, state, spin, factors, dt, i) - (
+            model.twist_compliance[i] * inv_dt2 * factors.twist_lambda[i])
         factors.twist_rhs[i] = eliminated(rj, factors.twist_lower, factors.twist_rhs, i, a + 1)
     back_substitute(factors.twist_inv_pivot, factors.twist_lower, factors.twist_rhs, a + 1, b - 1)
     for i in range(a + 1, b - 1):
