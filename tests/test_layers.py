@@ -1,4 +1,6 @@
-"""The package's layers import downwards only (README, "Layout").
+"""The package's import drawing (README, "Layout"; docs/extending.md): layers import downwards
+only, no module imports another package's private module, and no modules import each other
+in a circle.
 
     bottom  rodwarp.errors, rodwarp._util, rodwarp.arguments, rodwarp._warp, rodwarp.validation, rodwarp.kernels
     io      rodwarp.rodset (rod sets, formats, files, trajectories, run folders)
@@ -111,6 +113,66 @@ def private_imports() -> list[str]:
     return bad
 
 
+def import_cycles() -> list[list[str]]:
+    """Every circle of modules that import each other (directly or around a loop), counting
+    imports inside functions too: the strongly connected components of the import graph with
+    more than one module. ``from pkg import name`` counts as importing ``pkg`` (its face) unless
+    ``pkg.name`` is a module."""
+    import sys
+
+    mods = dict(_modules())
+
+    def resolve(target: str):
+        parts = target.split(".")
+        for k in range(len(parts), 0, -1):
+            if ".".join(parts[:k]) in mods:
+                return ".".join(parts[:k])
+        return None
+
+    graph = {m: set() for m in mods}
+    for module, path in mods.items():
+        package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        for _, target in _imports(path, package):
+            for cand in (target, target.rpartition(".")[0]):
+                r = resolve(cand) if cand.startswith("rodwarp") else None
+                if r is not None:
+                    if r != module:
+                        graph[module].add(r)
+                    break
+    index, low, stack, on, out = {}, {}, [], set(), []
+    sys.setrecursionlimit(max(10_000, sys.getrecursionlimit()))
+
+    def visit(v):  # Tarjan's strongly connected components
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_circles():
+    assert import_cycles() == []
+
+
 def test_no_module_imports_from_a_layer_above_it_or_a_peer():
     assert upward_imports() == []
 
@@ -122,3 +184,4 @@ def test_no_module_imports_another_packages_private_module():
 if __name__ == "__main__":  # pragma: no cover - `python tests/test_layers.py` lists the offenders
     print("\n".join(upward_imports()) or "no upward imports")
     print("\n".join(private_imports()) or "no private cross-package imports")
+    print("\n".join(" <-> ".join(c) for c in import_cycles()) or "no import circles")

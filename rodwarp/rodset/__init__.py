@@ -19,10 +19,11 @@ the ParaView series, checkpoints) and :mod:`rodwarp.rodset.rundir` (output folde
 one run: the ``rodwarp-run.json`` manifest).  Nothing here imports warp.
 """
 
-from rodwarp.rodset._formats import load, save_csv
+from rodwarp.rodset._formats import save_csv
 from rodwarp.rodset._geometry import detect_contacts, segment_closest_params, segment_distance
 from rodwarp.rodset._graph import contacts_per_rod, largest_cluster, largest_cluster_fraction
-from rodwarp.rodset._rodset import FORMAT_NAME, FORMAT_VERSION, MAX_COORDINATE, SUPPORTED_SUFFIXES, Contacts, RodSet
+from rodwarp.rodset._rodset import (FORMAT_NAME, FORMAT_VERSION, MAX_COORDINATE, SUPPORTED_SUFFIXES, Contacts, RodSet,
+                                    load)
 from rodwarp.rodset._units import UNITS, check_units
 
 __all__ = ["RodSet", "Contacts", "load", "UNITS", "FORMAT_NAME", "FORMAT_VERSION", "SUPPORTED_SUFFIXES",

@@ -20,11 +20,14 @@ import numpy as np
 from rodwarp._util import json_safe
 from rodwarp._util import one_line_error as _fail
 from rodwarp.errors import RodwarpError
-from rodwarp.rodset._rodset import FORMAT_NAME, FORMAT_VERSION, MAX_COORDINATE, SUPPORTED_SUFFIXES, Contacts, RodSet
-from rodwarp.rodset._units import check_units, _positive
+from rodwarp.rodset._units import MAX_COORDINATE, _positive, check_units
 from rodwarp.rodset.files import atomic_path
 
-__all__ = ["save", "save_csv", "load"]
+__all__ = ["save", "save_csv", "read", "FORMAT_NAME", "FORMAT_VERSION", "SUPPORTED_SUFFIXES"]
+
+FORMAT_NAME = "rodwarp.rodset"
+FORMAT_VERSION = 1
+SUPPORTED_SUFFIXES = (".npz", ".zarr", ".csv")
 
 _CONTACT_KEYS = ("contact_rod_i", "contact_rod_j", "contact_point", "contact_gap")
 _OPTIONAL_KEYS = ("rest_points", "velocities", "box")
@@ -34,12 +37,12 @@ _OPTIONAL_KEYS = ("rest_points", "velocities", "box")
 # writing
 # ----------------------------------------------------------------------------------------------
 
-def _meta(rods: RodSet) -> dict:
+def _meta(rods) -> dict:
     return json_safe({"format": FORMAT_NAME, "format_version": FORMAT_VERSION, "units": rods.units,
                       "n_rods": rods.n_rods, "n_vertices": rods.n_vertices, "attrs": rods.attrs}, finite=False)
 
 
-def _arrays(rods: RodSet) -> dict[str, np.ndarray]:
+def _arrays(rods) -> dict[str, np.ndarray]:
     arrays = {"points": rods.points, "offsets": rods.offsets, "radii": rods.radii}
     for name in _OPTIONAL_KEYS:
         if getattr(rods, name) is not None:
@@ -50,7 +53,7 @@ def _arrays(rods: RodSet) -> dict[str, np.ndarray]:
     return arrays
 
 
-def save(rods: RodSet, path: str | os.PathLike) -> Path:
+def save(rods, path: str | os.PathLike) -> Path:
     """Validate ``rods`` and write them atomically in the format of the suffix (see
     :meth:`RodSet.save`); returns the path."""
     rods.validate()
@@ -79,7 +82,7 @@ def save(rods: RodSet, path: str | os.PathLike) -> Path:
     return path
 
 
-def save_csv(rods: RodSet, path: str | os.PathLike) -> Path:
+def save_csv(rods, path: str | os.PathLike) -> Path:
     """Write ``rod,x,y,z,radius`` (one row per vertex) atomically, in ``rods.units`` (which the
     CSV does not record); returns the path. Values are the shortest decimals that read back to
     the same floats (Python's repr): exact, and readable (0.1, not 0.10000000000000001). The
@@ -101,30 +104,10 @@ def save_csv(rods: RodSet, path: str | os.PathLike) -> Path:
 # loading
 # ----------------------------------------------------------------------------------------------
 
-def load(path: str | os.PathLike, *, radius: float | None = None, diameter: float | None = None,
-         units: str | None = None) -> RodSet:
-    """Read a rod set from ``.npz``, ``.zarr`` or ``.csv``.
-
-    Parameters
-    ----------
-    path : path-like
-        File (``.npz``, ``.csv``) or zarr group directory (``.zarr`` name or containing ``zarr.json``/``.zgroup``).
-    radius, diameter : float, optional
-        Rod radius or diameter in the file's units, for CSV files without a ``radius`` column
-        (give one, not both). Ignored when the file carries radii.
-    units : str, optional
-        CSV: the unit the coordinates are in (default ``"m"``). npz/zarr: convert the stored
-        set to this unit (metric units only; use :meth:`RodSet.to_units` for voxels).
-
-    Returns
-    -------
-    RodSet
-
-    Raises
-    ------
-    RodwarpError
-        Missing file, unknown type, a file not written by rodwarp, or invalid content.
-    """
+def read(path: str | os.PathLike, cls, *, radius: float | None = None, diameter: float | None = None,
+         units: str | None = None):
+    """Read a rod set as a ``cls`` (:class:`~rodwarp.rodset.RodSet`); the parameters,
+    returns and errors are :func:`rodwarp.rodset.load`'s."""
     path = Path(path)
     if not path.exists():
         raise _fail(f"no such file: {path}; check the path")
@@ -136,20 +119,20 @@ def load(path: str | os.PathLike, *, radius: float | None = None, diameter: floa
     is_zarr_dir = path.is_dir() and (suffix == ".zarr" or (path / "zarr.json").exists()
                                      or (path / ".zgroup").exists())
     if is_zarr_dir:
-        rods = _load_zarr(path)
+        rods = _load_zarr(path, cls)
     elif path.is_dir():
         raise _fail(f"{path} is a directory but not a zarr group; pass a {', '.join(SUPPORTED_SUFFIXES)} path")
     elif suffix == ".zarr":  # a zarr store is a folder; a plain file with the name is something else
         raise _fail(f"{path} is a plain file, not a zarr store (a .zarr rod set is a folder); pass the rod set's "
                     f".zarr folder, or an .npz or .csv file")
     elif suffix == ".npz":
-        rods = _load_npz(path)
+        rods = _load_npz(path, cls)
     elif suffix == ".csv":
         if diameter is not None:
             radius = _length(diameter, "diameter") / 2.0
         elif radius is not None:
             radius = _length(radius, "radius")
-        return _load_csv(path, radius, units or "m")
+        return _load_csv(path, radius, units or "m", cls)
     else:
         raise _fail(f"unsupported file type {path.suffix or '(none)'!r} for {path}; "
                     f"use one of {', '.join(SUPPORTED_SUFFIXES)}")
@@ -185,7 +168,7 @@ def _parse_meta(meta, path: Path) -> dict:
     return meta
 
 
-def _assemble(arrays: dict, meta: dict, path: Path) -> RodSet:
+def _assemble(arrays: dict, meta: dict, path: Path, cls):
     for key in ("points", "offsets", "radii"):
         if key not in arrays:
             raise _fail(f"{path} lacks the {key!r} array; the file is damaged or incomplete")
@@ -196,16 +179,16 @@ def _assemble(arrays: dict, meta: dict, path: Path) -> RodSet:
     contacts = None
     try:
         if present:
-            contacts = Contacts(*(arrays[k] for k in _CONTACT_KEYS))
+            contacts = cls.contacts_type(*(arrays[k] for k in _CONTACT_KEYS))
         attrs = meta.get("attrs") or {}
-        return RodSet(arrays["points"], arrays["offsets"], arrays["radii"], units=meta.get("units", "m"),
+        return cls(arrays["points"], arrays["offsets"], arrays["radii"], units=meta.get("units", "m"),
                       rest_points=arrays.get("rest_points"), velocities=arrays.get("velocities"),
                       contacts=contacts, box=arrays.get("box"), attrs=attrs)
     except RodwarpError as e:
         raise _fail(f"{path}: {e}") from None
 
 
-def _load_npz(path: Path) -> RodSet:
+def _load_npz(path: Path, cls):
     import zipfile
 
     # an npz is a zip archive; anything else would reach np.load's .npy/pickle fallbacks, whose
@@ -227,10 +210,10 @@ def _load_npz(path: Path) -> RodSet:
             raise _fail(f"{path} is not a rod-set .npz (it holds Python object arrays, which rodwarp does not "
                         f"write or load)") from None
         raise _fail(f"cannot read {path} as npz ({type(e).__name__}: {e}); the file is damaged or not npz") from None
-    return _assemble(arrays, meta, path)
+    return _assemble(arrays, meta, path, cls)
 
 
-def _load_zarr(path: Path) -> RodSet:
+def _load_zarr(path: Path, cls):
     import zarr
 
     try:
@@ -244,7 +227,7 @@ def _load_zarr(path: Path) -> RodSet:
         raise _fail(f"{path} has no rodwarp metadata in its group attributes, so it was not written by rodwarp; "
                     f"build a RodSet from its arrays and save it")
     meta = _parse_meta(meta_raw, path)
-    return _assemble(arrays, meta, path)
+    return _assemble(arrays, meta, path, cls)
 
 
 # -- CSV -------------------------------------------------------------------------------------
@@ -253,7 +236,7 @@ class _NeedSlowPath(Exception):
     """The fast CSV reader saw a problem; re-read line by line to report it precisely."""
 
 
-def _load_csv(path: Path, radius: float | None, units: str) -> RodSet:
+def _load_csv(path: Path, radius: float | None, units: str, cls):
     name = str(path)
     with open(path, "rb") as fh:
         head = fh.read(1 << 16)
@@ -287,12 +270,12 @@ def _load_csv(path: Path, radius: float | None, units: str) -> RodSet:
 
     try:
         data = _csv_fast(path, usecols)
-        return _csv_build(data, None, want, radius, units, name)
+        return _csv_build(data, None, want, radius, units, name, cls)
     except _NeedSlowPath:
         pass
     data, lines = _csv_slow(path, usecols, want, name)
     try:
-        return _csv_build(data, lines, want, radius, units, name)
+        return _csv_build(data, lines, want, radius, units, name, cls)
     except _NeedSlowPath:  # pragma: no cover - slow path always has line numbers
         raise _fail(f"{name}: malformed CSV; check it has one numeric row per vertex") from None
 
@@ -339,7 +322,7 @@ def _csv_slow(path: Path, usecols: list[int], names: list[str], fname: str) -> t
 
 
 def _csv_build(data: np.ndarray, lines: np.ndarray | None, names: list[str], radius: float | None, units: str,
-               fname: str) -> RodSet:
+               fname: str, cls):
     """Group CSV rows into rods. With ``lines`` None any problem raises _NeedSlowPath."""
 
     def fail(row: int, msg: str) -> RodwarpError:
@@ -390,6 +373,6 @@ def _csv_build(data: np.ndarray, lines: np.ndarray | None, names: list[str], rad
     if not np.array_equal(block_ids, np.arange(block_ids.size)):
         attrs["source_rod_ids"] = block_ids.tolist()
     try:
-        return RodSet(np.ascontiguousarray(data[:, 1:4]), offsets, r_rod, units=units, attrs=attrs)
+        return cls(np.ascontiguousarray(data[:, 1:4]), offsets, r_rod, units=units, attrs=attrs)
     except RodwarpError as e:
         raise _fail(f"{fname}: {e}") from None

@@ -26,21 +26,14 @@ import numpy as np
 from rodwarp._util import json_safe
 from rodwarp.errors import RodwarpTypeError
 from rodwarp._util import one_line_error as _fail
-from rodwarp.rodset._units import UNITS, check_units, _scale, _unit_scale
+from rodwarp.rodset import _formats
+from rodwarp.rodset._formats import FORMAT_NAME, FORMAT_VERSION, SUPPORTED_SUFFIXES
+from rodwarp.rodset._units import MAX_COORDINATE, UNITS, _scale, _unit_scale, check_units
 
-__all__ = ["UNITS", "FORMAT_NAME", "FORMAT_VERSION", "SUPPORTED_SUFFIXES", "MAX_COORDINATE", "Contacts", "RodSet"]
+__all__ = ["UNITS", "FORMAT_NAME", "FORMAT_VERSION", "SUPPORTED_SUFFIXES", "MAX_COORDINATE", "Contacts", "RodSet",
+           "load"]
 
 
-FORMAT_NAME = "rodwarp.rodset"
-FORMAT_VERSION = 1
-SUPPORTED_SUFFIXES = (".npz", ".zarr", ".csv")
-#: largest magnitude of a coordinate, radius, gap or box corner, in the set's own unit (and of a
-#: velocity, in that unit per second).  1e12 of any unit (1000 km in um, 7 AU in m) is beyond
-#: any packing or scan, while squares and cubes of such values (distances, box volumes) stay far
-#: from float64 overflow (1e308): a larger value is a stray or corrupt number, not a length.
-#: Sets far smaller than this but spread over many rod lengths are refused with their own
-#: message (:func:`rodwarp.rodset.sanity.far_rod`, the engine's and the grid's limits).
-MAX_COORDINATE = 1e12
 
 
 # ----------------------------------------------------------------------------------------------
@@ -194,6 +187,9 @@ class RodSet:
     Construction converts dtypes and calls :meth:`validate`; assigning attributes afterwards
     is allowed, and :meth:`save` validates again before writing.
     """
+
+    #: the type of :attr:`contacts` (what a file's contact arrays are read into)
+    contacts_type = Contacts
 
     points: np.ndarray
     offsets: np.ndarray
@@ -564,7 +560,7 @@ class RodSet:
                       rest_points=_scale(self.rest_points, k, div), velocities=_scale(self.velocities, k, div),
                       contacts=c, box=_scale(self.box, k, div), attrs=_copy.deepcopy(self.attrs))
 
-    # -- I/O (the formats live in rodwarp.rodset._formats) -------------------------------------
+    # -- I/O (the formats live in rodwarp.rodset._formats, which knows no class of its own) -----
 
     def save(self, path: str | os.PathLike) -> Path:
         """Validate and write the set atomically; the format follows the suffix.
@@ -581,9 +577,7 @@ class RodSet:
         Path
             The written path.
         """
-        from rodwarp.rodset._formats import save
-
-        return save(self, path)
+        return _formats.save(self, path)
 
     def to_csv(self, path: str | os.PathLike) -> Path:
         """Write ``rod,x,y,z,radius`` (one row per vertex, rods 0..N-1 in order) atomically.
@@ -599,14 +593,37 @@ class RodSet:
         Path
             The written path.
         """
-        from rodwarp.rodset._formats import save_csv
-
-        return save_csv(self, path)
+        return _formats.save_csv(self, path)
 
     @classmethod
     def load(cls, path: str | os.PathLike, *, radius: float | None = None, diameter: float | None = None,
              units: str | None = None) -> "RodSet":
-        """Read a rod set; same as :func:`rodwarp.rodset.load`."""
-        from rodwarp.rodset._formats import load
+        """Read a rod set from ``.npz``, ``.zarr`` or ``.csv``; same as :func:`rodwarp.rodset.load`."""
+        return _formats.read(path, cls, radius=radius, diameter=diameter, units=units)
 
-        return load(path, radius=radius, diameter=diameter, units=units)
+
+def load(path: str | os.PathLike, *, radius: float | None = None, diameter: float | None = None,
+         units: str | None = None) -> RodSet:
+    """Read a rod set from ``.npz``, ``.zarr`` or ``.csv``.
+
+    Parameters
+    ----------
+    path : path-like
+        File (``.npz``, ``.csv``) or zarr group directory (``.zarr`` name or containing ``zarr.json``/``.zgroup``).
+    radius, diameter : float, optional
+        Rod radius or diameter in the file's units, for CSV files without a ``radius`` column
+        (give one, not both). Ignored when the file carries radii.
+    units : str, optional
+        CSV: the unit the coordinates are in (default ``"m"``). npz/zarr: convert the stored
+        set to this unit (metric units only; use :meth:`RodSet.to_units` for voxels).
+
+    Returns
+    -------
+    RodSet
+
+    Raises
+    ------
+    RodwarpError
+        Missing file, unknown type, a file not written by rodwarp, or invalid content.
+    """
+    return RodSet.load(path, radius=radius, diameter=diameter, units=units)

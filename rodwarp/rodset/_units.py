@@ -16,6 +16,14 @@ UNITS: dict[str, float | None] = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "voxel": Non
 _EXPONENT = {"m": 0, "mm": -3, "um": -6}
 
 
+#: largest magnitude of a coordinate, radius, gap or box corner, in the set's own unit (and of a
+#: velocity, in that unit per second).  1e12 of any unit (1000 km in um, 7 AU in m) is beyond
+#: any packing or scan, while squares and cubes of such values (distances, box volumes) stay far
+#: from float64 overflow (1e308): a larger value is a stray or corrupt number, not a length.
+#: Sets far smaller than this but spread over many rod lengths are refused with their own
+#: message (:func:`rodwarp.rodset.sanity.far_rod`, the engine's and the grid's limits).
+MAX_COORDINATE = 1e12
+
 def _positive(v, name: str, what: str = "a positive number") -> float:
     """``v`` as a finite float > 0, else a one-line error naming ``name``."""
     try:
