@@ -9,10 +9,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from rodwarp.kernels import exact
-from rodwarp.sim.contact_law import ContactLaw, register_contact_law
+from rodwarp.sim._law import ContactLaw
 
 
-@register_contact_law
 @dataclass(frozen=True)
 class ExactLaw(ContactLaw):
     """Signorini and the Coulomb cone (the default law): no penetration, true sticking; the

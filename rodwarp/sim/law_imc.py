@@ -15,7 +15,7 @@ from rodwarp.arguments import real
 from rodwarp.errors import RodwarpError
 from rodwarp.kernels import imc
 from rodwarp.sim._limits import MAX_LENGTH_M, MAX_SPEED
-from rodwarp.sim.contact_law import ContactLaw, register_contact_law
+from rodwarp.sim._law import ContactLaw
 
 #: IMC's K1 = 15 / delta and K2 = 15 / nu (DisMech's contact_force.cpp and floor_contact_force.cpp)
 IMC_SHARPNESS = 15.0
@@ -35,7 +35,6 @@ IMC_STIFFNESS_WEIGHTS = 1000.0
 IMC_MAX_STIFFNESS = 1e15
 
 
-@register_contact_law
 @dataclass(frozen=True)
 class ImcLaw(ContactLaw):
     """DisMech's IMC law.

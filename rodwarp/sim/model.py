@@ -37,7 +37,7 @@ from rodwarp.rodset import RodSet
 from rodwarp.arguments import instance, real
 from rodwarp.sim._limits import (DENSITY_RANGE, MAX_LENGTH_M, YOUNG_RANGE, check_model_options, check_rods, friction,
                                  pinned_indices)
-from rodwarp.sim.contact_law import ContactLaw
+from rodwarp.sim.contact_law import ContactLaw  # the registry, with its built-in laws
 from rodwarp.sim.walls import Plane
 
 if TYPE_CHECKING:
