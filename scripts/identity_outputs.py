@@ -12,7 +12,9 @@ output that carries a result: each CSV, every numeric array in every ``.npz`` by
 
 ``--code DIR`` runs another checkout's code (its ``rodwarp`` and ``kernels`` put first on
 ``PYTHONPATH``) with this environment, so the two can run side by side. ``--time-main K``
-times the main job K times after the hashes (median wall seconds in the JSON).
+times the main job K times after the hashes (median wall seconds in the JSON); with
+``--time-against DIR`` each timing alternates with DIR's main job, and the JSON holds the
+median of the per-pair ratios (``ratio_this_over_other``).
 """
 
 from __future__ import annotations
@@ -132,6 +134,8 @@ def main() -> int:
     ap.add_argument("--code", type=Path, default=ROOT, help="the checkout whose code runs (default: this one)")
     ap.add_argument("--only", default="", help="comma-separated jobs (default: all)")
     ap.add_argument("--time-main", type=int, default=0, help="time the main job this many more times")
+    ap.add_argument("--time-against", type=Path, help="with --time-main: alternate each timing with this "
+                                                      "checkout's main job (a same-run ratio)")
     a = ap.parse_args()
     only = set(filter(None, a.only.split(",")))
     result = {"code": str(a.code), "jobs": {}, "wall_s": {}}
@@ -151,12 +155,23 @@ def main() -> int:
             result["wall_s"][name] = _run([x.replace("{in}", str(Path(tmp) / src)) for x in args], out, env)
             result["jobs"][name] = _digest_folder(out)
             print(f"{name}: {len(result['jobs'][name])} digests", flush=True)
-        times = []
+        times, other = [], []
+        env_other = (dict(os.environ, PYTHONPATH=_overlay(a.time_against.resolve(), Path(tmp) / "other"))
+                     if a.time_against else None)
         for k in range(a.time_main):
+            if env_other is not None:  # the other code first, then this, in turn
+                other.append(_run(JOBS["main"], Path(tmp) / f"main_o{k}", env_other))
             times.append(_run(JOBS["main"], Path(tmp) / f"main_t{k}", env))
+            print(f"main job {k + 1}: {times[-1]:.1f} s" + (f" (other {other[-1]:.1f} s)" if other else ""),
+                  flush=True)
         if times:
             result["main_times_s"] = times
             result["main_median_s"] = statistics.median(times)
+        if other:
+            result["other_code"] = str(a.time_against)
+            result["other_times_s"] = other
+            result["other_median_s"] = statistics.median(other)
+            result["ratio_this_over_other"] = statistics.median(t / o for t, o in zip(times, other))
     a.out.write_text(json.dumps(result, indent=1, sort_keys=True))
     if a.compare:
         before = json.loads(a.compare.read_text())["jobs"]
