@@ -247,13 +247,13 @@ def _step_stage(params, solver, stage, si: int, engine: Engine, control, loop: L
     j = j0 + 1
     while j <= n_samples:
         target = t_s0 + dur if j == n_samples else t_s0 + j * params.save_every
-        info, dt, landing = _one_step(params, solver, engine, control, loop, target)
+        info, refused, dt, landing = _one_step(params, solver, engine, control, loop, target)
         loop.steps += 1
-        record.add(dt, info.refused)
+        record.add(dt, refused)
         loop.stepper = StepMemory(dt, info.max_speed, info.max_overlap)
         state = engine.state
         if landing:
-            rec.sample(stage.name, state, engine.points, info.step, control, loop, test=stage.test)
+            rec.sample(stage.name, state, engine.points, info, control, loop, test=stage.test)
             j += 1
             rate = (loop.steps - steps0) / max(time.perf_counter() - t0, 1e-9)
             update(stage.name, state.time - t_s0, dur, note=f"{rate:.0f} steps/s")
@@ -264,25 +264,9 @@ def _step_stage(params, solver, stage, si: int, engine: Engine, control, loop: L
     return engine.state, t_mark
 
 
-@dataclass
-class _Taken:
-    """A step taken: the solver's StepInfo, the tries refused before it, and its outcome."""
-
-    step: object
-    refused: int
-
-    @property
-    def max_speed(self) -> float:
-        return self.step.max_speed
-
-    @property
-    def max_overlap(self):
-        return self.step.max_overlap
-
-
 def _one_step(params, solver, engine: Engine, control, loop: LoopPosition, target: float):
-    """One step towards the sample time ``target`` (s): ``(taken, dt, landing)``, the state
-    advanced in ``engine`` (the two states swapped)."""
+    """One step towards the sample time ``target`` (s): ``(StepInfo, tries refused before it,
+    dt, landing)``, the state advanced in ``engine`` (the two states swapped)."""
     state, other, points = engine.state, engine.other, engine.points
     dt = params.dt or solver.adaptive_dt(control, loop.stepper.vmax, loop.stepper.dt, safety=params.step_safety,
                                          overlap=loop.stepper.overlap)
@@ -302,4 +286,4 @@ def _one_step(params, solver, engine: Engine, control, loop: LoopPosition, targe
     engine.state, engine.other = other, state
     if landing:
         other.time = target
-    return _Taken(info, refused), dt, landing
+    return info, refused, dt, landing
