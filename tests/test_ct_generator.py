@@ -103,3 +103,44 @@ def test_it_shares_no_code_with_rodwarp_ct():
     names = [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
     names += [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
     assert not [m for m in names if m.startswith("rodwarp")]
+
+
+def test_the_segment_distance_agrees_with_the_edge_search():
+    rng = np.random.default_rng(3)
+    P0, P1, Q0, Q1 = (rng.uniform(-5, 5, (20, 3)) for _ in range(4))
+    P1[:3] = P0[:3] + [1.0, 0.0, 0.0]  # parallel pairs too
+    Q1[:3] = Q0[:3] + [2.0, 0.0, 0.0]
+    D, _, _ = g._closest_segments(P0, P1, Q0, Q1)
+    for i in range(20):
+        for j in range(20):
+            assert D[i, j] == pytest.approx(g._segment_distance(P0[i], P1[i], Q0[j], Q1[j]), abs=1e-9)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+@pytest.mark.parametrize("r", [1.5, 2.0, 3.0])
+def test_touching_wires_touch_at_zero_gap_and_the_rest_stay_clear(seed, r):
+    s = g.wire_tangle(radius=r, seed=seed, touching=True)
+    assert s.n_rods == 8 and s.meta["touching"]
+    pairs = set(s.contacts)
+    assert len(pairs) == len(s.contacts) >= 4  # most wires touch one they cross
+    assert all(i < j for i, j in pairs)
+    for i in range(s.n_rods):
+        for j in range(i + 1, s.n_rods):
+            d = g.polyline_distance(s.polylines[i], s.polylines[j])
+            if (i, j) in pairs:
+                assert d == pytest.approx(2 * r, abs=1e-6)  # touching: gap 0
+            else:
+                assert d >= 2 * r + 1.0  # clear by a voxel at least
+    hi = np.array(s.shape[::-1]) - 1
+    for p in s.polylines:
+        assert np.all(p >= r) and np.all(p <= hi - r)
+    assert len(s.p0) == sum(len(p) - 1 for p in s.polylines)
+    assert np.all(s.radius == r)
+
+
+def test_the_touching_option_leaves_the_apart_scenes_as_they_were():
+    a = g.wire_tangle(radius=2.0, seed=4)
+    b = g.wire_tangle(radius=2.0, seed=4, touching=False)
+    assert not a.contacts and all(np.array_equal(x, y) for x, y in zip(a.polylines, b.polylines))
+    c = g.wire_tangle(radius=2.0, seed=4, touching=True)
+    assert c.contacts and c.meta["n_contacts"] == len(c.contacts)

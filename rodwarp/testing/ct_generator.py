@@ -6,8 +6,10 @@ Nothing here comes from :mod:`rodwarp.ct`; every step takes another path:
 - **Placement.** Scenes of the paper's regime, in voxel units: thin rods, mostly within 25
   degrees of horizontal, lying in bundles of 2-5 parallel rods that touch with zero gap, with
   crossing rods laid on them (:func:`touching_bundles`). Also wire tangles, smooth closed-form
-  curves as chains of short capsules (:func:`wire_tangle`). Each scene states its true contacts
-  analytically, from the way it was built.
+  curves as chains of short capsules (:func:`wire_tangle`), kept apart or (``touching=True``)
+  moved rigidly onto the wires they cross until they touch at zero gap. Each scene states its
+  true contacts from the way it was built: touching pairs at gap 0, every other pair at least a
+  voxel apart.
 - **Partial volume.** Each voxel's filled fraction is the exact volume of the unit cube on the
   inner side of the plane tangent to the nearest surface (:func:`cube_fraction`, a closed form),
   with that plane moved by the surface's mean bend over the voxel. This is exact for a flat
@@ -34,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["GeneratedScene", "cube_fraction", "capsule_distance", "render", "touching_bundles", "wire_tangle",
-           "psf_kernel", "capsule_volume"]
+           "psf_kernel", "capsule_volume", "polyline_distance"]
 
 
 @dataclass
@@ -361,47 +363,165 @@ def touching_bundles(shape=(96, 128, 128), radius: float = 2.0, n_bundles: int =
                            "n_crossing": crossed, "length": length, "max_tilt_deg": max_tilt_deg, "seed": seed})
 
 
+def _closest_segments(P0, P1, Q0, Q1):
+    """Closest points of every segment pair ``P0[i]P1[i]`` / ``Q0[j]Q1[j]`` (all of positive
+    length): the distances (n, m) and, for the closest pair overall, the two points. Per pair
+    the line parameter ``s`` on P is clamped to [0, 1], ``t`` on Q follows by projection and is
+    clamped, and ``s`` is projected again when ``t`` was clamped (the clamped-lines construction
+    of the segment-segment distance)."""
+    d1 = (P1 - P0)[:, None, :]
+    d2 = (Q1 - Q0)[None, :, :]
+    w = P0[:, None, :] - Q0[None, :, :]
+    a = np.sum(d1 * d1, axis=-1)
+    e = np.sum(d2 * d2, axis=-1)
+    b = np.sum(d1 * d2, axis=-1)
+    c = np.sum(d1 * w, axis=-1)
+    f = np.sum(d2 * w, axis=-1)
+    den = a * e - b * b
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = np.where(den > 1e-12 * a * e, np.clip((b * f - c * e) / den, 0.0, 1.0), 0.0)
+        t = (b * s + f) / e
+        lo, hi = t < 0.0, t > 1.0
+        t = np.clip(t, 0.0, 1.0)
+        s = np.where(lo, np.clip(-c / a, 0.0, 1.0), np.where(hi, np.clip((b - c) / a, 0.0, 1.0), s))
+    cp = P0[:, None, :] + s[..., None] * d1
+    cq = Q0[None, :, :] + t[..., None] * d2
+    D = np.linalg.norm(cp - cq, axis=-1)
+    k = np.unravel_index(int(np.argmin(D)), D.shape)
+    return D, cp[k], cq[k]
+
+
+def polyline_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Smallest distance between two polylines (n, 3) and (m, 3): between their segments."""
+    D, _, _ = _closest_segments(a[:-1], a[1:], b[:-1], b[1:])
+    return float(D.min())
+
+
+def _wire_curve(rng, hi, margin, length, segments):
+    """A closed-form smooth curve: a chord within 35 degrees of horizontal, plus three random
+    sinusoids per axis (half as strong in z), as ``segments + 1`` points."""
+    u = _direction(rng, 35.0)
+    s = np.linspace(-0.5, 0.5, segments + 1)
+    c = rng.uniform(margin + 0.3 * length * np.abs(u), hi - margin - 0.3 * length * np.abs(u))
+    pts = c + np.outer(s * 0.6 * length, u)
+    for axis in range(3):
+        for _ in range(3):
+            amp = rng.uniform(2.0, 8.0) * (0.5 if axis == 2 else 1.0)
+            pts[:, axis] += amp * np.sin(2 * math.pi * rng.uniform(0.3, 1.5) * s + rng.uniform(0, 2 * math.pi))
+    return pts
+
+
+def _self_clear(pts, radius) -> bool:
+    """No self-contact: points further apart along the wire than ``4 r + 2`` stay ``2 r + 1``
+    apart in space."""
+    D = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1)
+    arc = np.cumsum(np.r_[0.0, np.linalg.norm(np.diff(pts, axis=0), axis=1)])
+    far = np.abs(arc[:, None] - arc[None, :]) > 4 * radius + 2
+    return not np.any(D[far] < 2 * radius + 1.0)
+
+
+def _touch_by_translation(pts, targets, lines, gap_to, iters: int = 30, tol: float = 1e-9):
+    """Translate the polyline ``pts`` rigidly so that its distance to each polyline
+    ``lines[k]`` (k in ``targets``) is exactly ``gap_to``: Newton steps on the translation,
+    each the least-norm solution of ``n_k . dt = gap_to - d_k`` (``n_k`` the unit vector
+    between the closest points, along which ``d_k`` grows). None when it does not converge."""
+    shift = np.zeros(3)
+    for _ in range(iters):
+        rows, rhs = [], []
+        for k in targets:
+            q = lines[k]
+            D, cp, cq = _closest_segments(pts[:-1] + shift, pts[1:] + shift, q[:-1], q[1:])
+            d = float(D.min())
+            if d < 1e-9:
+                return None
+            rows.append((cp - cq) / d)
+            rhs.append(gap_to - d)
+        if max(abs(v) for v in rhs) < tol:
+            return pts + shift
+        A = np.array(rows)
+        if len(rows) > 1 and np.linalg.svd(A, compute_uv=False)[-1] < 0.2:
+            return None  # the contact normals are nearly parallel: the two contacts fight
+        shift = shift + np.linalg.lstsq(A, np.array(rhs), rcond=None)[0]
+        if np.linalg.norm(shift) > 40.0:
+            return None
+    return None
+
+
 def wire_tangle(shape=(96, 128, 128), radius: float = 2.0, n_wires: int = 8, segments: int = 40,
-                length: float = 160.0, seed: int = 0, max_tries: int = 400) -> GeneratedScene:
+                length: float = 160.0, seed: int = 0, max_tries: int = 400, touching: bool = False,
+                touch_probability: float = 0.85, second_touch: float = 0.5) -> GeneratedScene:
     """Curved wires: each a closed-form smooth curve (a sum of three random sinusoids per axis
-    about a random chord), cut into ``segments`` capsules. Wires are kept at least one voxel
-    apart from each other (no contacts); a wire's own turns are not allowed to touch either."""
+    about a random chord), cut into ``segments`` capsules. A wire's own turns never touch.
+
+    With ``touching=False`` wires are kept at least one voxel apart from each other (no
+    contacts). With ``touching=True`` they touch where they cross, as in a real tangle: each new
+    wire, with probability ``touch_probability``, is drawn as above and then moved rigidly
+    (Newton steps on its translation, :func:`_touch_by_translation`) until the distance between
+    its centreline and a random wire already placed is exactly ``2 radius`` (gap 0 to 1e-9
+    voxels), the two crossing at more than 17 degrees; with probability ``second_touch`` it is
+    moved to touch the nearest other wire as well (two conditions on the translation). Every
+    other pair stays at least a voxel apart, so the true contacts (``scene.contacts``) are
+    exactly the pairs made to touch. Wires that cannot be placed that way are drawn again.
+    """
     rng = np.random.default_rng(seed)
     nz, ny, nx = shape
     hi = np.array([nx - 1, ny - 1, nz - 1], float)
     margin = radius + 2.0
     lines: list[np.ndarray] = []
+    contacts: list[tuple[int, int]] = []
     tries = 0
     while len(lines) < n_wires and tries < max_tries:
         tries += 1
-        u = _direction(rng, 35.0)
-        s = np.linspace(-0.5, 0.5, segments + 1)
-        c = rng.uniform(margin + 0.3 * length * np.abs(u), hi - margin - 0.3 * length * np.abs(u))
-        pts = c + np.outer(s * 0.6 * length, u)
-        for axis in range(3):
-            for _ in range(3):
-                amp = rng.uniform(2.0, 8.0) * (0.5 if axis == 2 else 1.0)
-                pts[:, axis] += amp * np.sin(2 * math.pi * rng.uniform(0.3, 1.5) * s + rng.uniform(0, 2 * math.pi))
+        pts = _wire_curve(rng, hi, margin, length, segments)
+        targets: list[int] = []
+        if touching and lines and rng.random() < touch_probability:
+            # cross a random wire: put a middle point of the new wire 2 r above a middle
+            # point of the old one, along the normal to both tangents, then make it exact
+            k = int(rng.integers(0, len(lines)))
+            q = lines[k]
+            iq = int(rng.integers(len(q) // 6, len(q) - len(q) // 6))
+            ip = int(rng.integers(len(pts) // 6, len(pts) - len(pts) // 6))
+            tq = q[min(iq + 1, len(q) - 1)] - q[max(iq - 1, 0)]
+            tp = pts[min(ip + 1, len(pts) - 1)] - pts[max(ip - 1, 0)]
+            nrm = np.cross(tq, tp)
+            sn = np.linalg.norm(nrm) / (np.linalg.norm(tq) * np.linalg.norm(tp))
+            if sn < 0.3:
+                continue
+            nrm = nrm / np.linalg.norm(nrm) * (1.0 if rng.random() < 0.5 else -1.0)
+            pts = pts + (q[iq] + 2 * radius * nrm - pts[ip])
+            moved = _touch_by_translation(pts, [k], lines, 2 * radius)
+            if moved is None:
+                continue
+            pts, targets = moved, [k]
+            if len(lines) > 1 and rng.random() < second_touch:
+                gaps = [polyline_distance(pts, o) if j != k else np.inf for j, o in enumerate(lines)]
+                j = int(np.argmin(gaps))
+                if gaps[j] < 2 * radius + 12.0:
+                    moved = _touch_by_translation(pts, [k, j], lines, 2 * radius)
+                    if moved is not None:
+                        pts, targets = moved, [k, j]
         if np.any(pts.min(axis=0) < margin) or np.any(pts.max(axis=0) > hi - margin):
             continue
         ok = True
-        for other in lines:
-            D = np.linalg.norm(pts[:, None, :] - other[None, :, :], axis=-1)
-            if D.min() < 2 * radius + 1.0 + 0.5 * np.linalg.norm(pts[1] - pts[0]):
-                ok = False
+        for j, other in enumerate(lines):
+            d = polyline_distance(pts, other)
+            if j in targets:
+                ok = abs(d - 2 * radius) < 1e-6
+            elif touching:
+                ok = d >= 2 * radius + 1.0
+            else:  # the original check (vertices, with half a segment's slack): seeds keep their scenes
+                D = np.linalg.norm(pts[:, None, :] - other[None, :, :], axis=-1)
+                ok = D.min() >= 2 * radius + 1.0 + 0.5 * np.linalg.norm(pts[1] - pts[0])
+            if not ok:
                 break
-        if not ok:
+        if not ok or not _self_clear(pts, radius):
             continue
-        # no self-contact: points further apart along the wire than 3 radii stay apart in space
-        D = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1)
-        arc = np.cumsum(np.r_[0.0, np.linalg.norm(np.diff(pts, axis=0), axis=1)])
-        far = np.abs(arc[:, None] - arc[None, :]) > 4 * radius + 2
-        if np.any(D[far] < 2 * radius + 1.0):
-            continue
+        contacts.extend((k, len(lines)) for k in targets)
         lines.append(pts)
     p0 = np.concatenate([ln[:-1] for ln in lines]) if lines else np.zeros((0, 3))
     p1 = np.concatenate([ln[1:] for ln in lines]) if lines else np.zeros((0, 3))
     rod = np.concatenate([np.full(len(ln) - 1, k) for k, ln in enumerate(lines)]) if lines else np.zeros(0, int)
-    return GeneratedScene(tuple(shape), p0, p1, np.full(len(p0), float(radius)), rod, [], lines,
+    return GeneratedScene(tuple(shape), p0, p1, np.full(len(p0), float(radius)), rod, sorted(contacts), lines,
                           {"generator": "wire_tangle", "radius": radius, "n_wires": len(lines),
-                           "segments": segments, "length": length, "seed": seed})
+                           "segments": segments, "length": length, "seed": seed, "touching": bool(touching),
+                           "n_contacts": len(contacts)})
