@@ -342,8 +342,14 @@ def real_scan_qa(results_dir=None) -> dict:
             key = "radius far from the median" if key.startswith("radius") else key
             key = "foreground continues past an end" if key.startswith("the foreground continues") else key
             key = "untraced foreground around it" if "untraced foreground" in key else key
+            key = "wider than thick (fused or flattened)" if key.startswith("cross-section") else key
             reasons[key] = reasons.get(key, 0) + 1
-    return {"file": REAL_SCAN, "command": f"rodwarp segment {REAL_SCAN} --voxel-size 1 --units voxel --shape curved",
+    radii = np.array([f["radius"] for f in summ["filaments"]])
+    return {"file": REAL_SCAN,
+            "foreground_explained": q.get("foreground_explained"),
+            "traces_off_foreground": int(sum(any(w.startswith("axis off the foreground") for w in f["doubts"])
+                                             for f in summ["filaments"])),
+            "radius_quartiles_voxels": [float(v) for v in np.percentile(radii, [25, 50, 75])] if len(radii) else None,
             "time_s": dt, "n_filaments": summ["n_rods"], "n_contacts": summ["n_contacts"],
             "diameter_voxels": summ["diameter_voxels"], "mean_length_voxels": summ["mean_rod_length"],
             "confidence_quartiles": [float(v) for v in np.percentile(conf, [25, 50, 75])] if len(conf) else None,
@@ -397,7 +403,9 @@ def summary(rec: dict) -> list[dict]:
         u = r["unexplained"]
         rows.append({"benchmark": f"real micro-CT of PCL fibres ({r['file']}, 128^3): QA (segment_real_*.png)",
                      "rodwarp": f"{r['n_filaments']} filaments, {r['doubtful']} doubtful (confidence < 0.7), "
-                                f"unexplained foreground {100 * u['fraction']:.1f}% in {u['regions']} regions",
+                                f"unexplained foreground {100 * u['fraction']:.1f}% in {u['regions']} regions"
+                                + (f", explained {100 * r['foreground_explained']:.1f}%"
+                                   if r.get("foreground_explained") is not None else ""),
                      "peer": "no truth: the QA shows where the trace is unsure", "ratio": None})
     if "timing_512" in rec:
         t = rec["timing_512"]

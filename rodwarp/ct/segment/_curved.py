@@ -18,9 +18,18 @@ Pipeline (:func:`trace_filaments`):
    of smooth bridges the image supports (:func:`rodwarp.ct.segment._bridging.pair_ends`); chains of
    paired branches are filaments, refined once more as wholes; faint chains (noise) and
    duplicates (one skeleton drawn for two touching filaments) are dropped.
-4. **radius** -- per filament, from the intensity mass per unit length (voxels assigned to
+4. **on the foreground** -- filaments are trimmed where their ends run off the binarised
+   foreground and cut where their axis leaves it for more than :data:`OFF_RUN` radii (a bridge
+   across a gap); what is left mostly off it goes (:func:`_split_off_foreground`).
+5. **second pass** -- the foreground farther than ``r0 + 1.5`` from every filament (thick
+   fibres, fused masses, pieces cut short at knots: what a tracer built for radius ``r0``
+   leaves out) is split into regions; each large region's longest skeleton path becomes a
+   filament (:func:`_residual_filaments`), a few rounds.  Their radii come from their own
+   mass, as below; the confidence stage flags those wider than thick
+   (:mod:`rodwarp.ct.segment._doubt`).
+6. **radius** -- per filament, from the intensity mass per unit length (voxels assigned to
    their nearest filament), which blur does not change: ``mass = C pi r^2 (L + 4 r / 3)``.
-5. **contacts** -- pairs of *distinct* filaments whose surfaces come within the contact
+7. **contacts** -- pairs of *distinct* filaments whose surfaces come within the contact
    tolerance (pieces of one filament are one filament, so never in contact with each other).
 """
 
@@ -180,6 +189,147 @@ def _refine_centrelines(polys, sampler, r0, n_iter=3, own_weight=None):
     return polys
 
 
+#: a filament is cut where its axis runs off the binarised foreground for more than this many
+#: radii (and at least 3 voxels): every trace then lies on the foreground
+OFF_RUN = 1.5
+#: second pass: foreground farther than this many voxels from every trace's surface is residual
+RESIDUAL_MARGIN = 1.5
+#: second pass: a residual region is traced when it holds at least this many cross-sections'
+#: worth of voxels (pi r0^2 per voxel of length, this many radii long)
+RESIDUAL_MIN_RADII = 4.0
+#: second pass: at most this many rounds (each traces one path per residual region)
+RESIDUAL_ROUNDS = 3
+
+
+def _on_mask(mask: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Nearest-voxel mask values at polyline vertices (x, y, z); False outside the volume."""
+    zyx = np.rint(p[:, ::-1]).astype(np.int64)
+    ok = np.all((zyx >= 0) & (zyx < np.asarray(mask.shape)), axis=1)
+    out = np.zeros(len(p), bool)
+    out[ok] = mask[zyx[ok, 0], zyx[ok, 1], zyx[ok, 2]]
+    return out
+
+
+def _split_off_foreground(polys, mask, r0: float, min_len: float):
+    """Cut every filament where its axis leaves the foreground for more than ``OFF_RUN`` radii;
+    the off-foreground runs are dropped, and pieces shorter than ``min_len`` with them.
+
+    Returns (pieces, cuts)."""
+    run_max = max(3.0, OFF_RUN * r0)
+    out, cuts = [], 0
+    for p in polys:
+        q = _resample(p, 1.0) if len(p) >= 2 else p
+        on = _on_mask(mask, q)
+        if on.all() or len(q) < 3:
+            out.append(p)
+            continue
+        # runs of off-foreground vertices
+        pad = np.concatenate([[True], on, [True]])
+        d = np.diff(pad.astype(np.int8))
+        starts, ends = np.flatnonzero(d == -1), np.flatnonzero(d == 1)
+        bad = np.zeros(len(q), bool)
+        for a, b in zip(starts, ends):
+            if b - a > run_max or a == 0 or b == len(q):
+                bad[a:b] = True
+        if not bad.any():
+            out.append(p)
+            continue
+        cuts += 1
+        pad = np.concatenate([[True], bad, [True]])
+        d = np.diff(pad.astype(np.int8))
+        for a, b in zip(np.flatnonzero(d == -1), np.flatnonzero(d == 1)):
+            piece = q[a:b]
+            if len(piece) >= 2 and float(np.linalg.norm(np.diff(piece, axis=0), axis=1).sum()) >= min_len:
+                out.append(piece)
+    # what is left mostly off the foreground (short gaps adding up) goes too
+    kept = []
+    for p in out:
+        if _on_mask(mask, _resample(p, 1.0) if len(p) >= 2 else p).mean() >= 0.9:
+            kept.append(p)
+        else:
+            cuts += 1
+    return kept, cuts
+
+
+def _longest_path(pts: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """The longest geodesic path through a (branched) skeleton: its voxels in order (m, 3)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    n = len(pts)
+    if n < 2 or len(pairs) == 0:
+        return pts[:1]
+    w = np.linalg.norm(pts[pairs[:, 0]] - pts[pairs[:, 1]], axis=1)
+    g = coo_matrix((w, (pairs[:, 0], pairs[:, 1])), shape=(n, n)).tocsr()
+    d0 = dijkstra(g, directed=False, indices=0)
+    d0[~np.isfinite(d0)] = -1
+    a = int(np.argmax(d0))
+    d, pred = dijkstra(g, directed=False, indices=a, return_predecessors=True)
+    d[~np.isfinite(d)] = -1
+    b = int(np.argmax(d))
+    path = [b]
+    while path[-1] != a and pred[path[-1]] >= 0:
+        path.append(int(pred[path[-1]]))
+    return pts[np.array(path[::-1])]
+
+
+def _residual_filaments(polys, mask, r0: float, min_len: float):
+    """The second pass: centrelines of the foreground no first-pass filament explains.
+
+    The foreground farther than ``r0 + RESIDUAL_MARGIN`` from every filament's axis is split into
+    connected regions; each region large enough (:data:`RESIDUAL_MIN_RADII`) is skeletonised,
+    and its longest geodesic skeleton path, smoothed, becomes a filament when it is at least ``min_len``
+    long and lies on the foreground.  These are the thick fibres and fused masses the first pass
+    (built for fibres of radius ``r0``) leaves out; their radii come from their own intensity mass
+    and the confidence stage judges them like any other trace (a fused mass is wider than thick).
+    """
+    from skimage.morphology import skeletonize
+
+    from rodwarp.ct.segment._seeds import _components
+
+    lab = np.zeros(mask.shape, np.int32)
+    for k, p in enumerate(polys):
+        q = _resample(p, 0.5)
+        zyx = np.rint(q[:, ::-1]).astype(np.int64)
+        ok = np.all((zyx >= 0) & (zyx < np.asarray(mask.shape)), axis=1)
+        zyx = zyx[ok]
+        lab[zyx[:, 0], zyx[:, 1], zyx[:, 2]] = 1
+    dist = ndimage.distance_transform_edt(lab == 0)
+    res = mask & (dist > r0 + RESIDUAL_MARGIN)
+    if not res.any():
+        return []
+    # regions: opened a little, so that a thin fringe along a traced fibre is no region
+    res = ndimage.binary_opening(res, structure=ndimage.generate_binary_structure(3, 1))
+    cc, n = ndimage.label(res, structure=np.ones((3, 3, 3), bool))
+    if n == 0:
+        return []
+    sizes = np.bincount(cc.ravel(), minlength=n + 1)
+    min_vox = max(27, int(math.pi * r0 * r0 * RESIDUAL_MIN_RADII * r0))
+    out = []
+    objs = ndimage.find_objects(cc)
+    for k in range(1, n + 1):
+        if sizes[k] < min_vox or objs[k - 1] is None:
+            continue
+        sl = objs[k - 1]
+        sub = np.pad(cc[sl] == k, 1)
+        sk = np.argwhere(skeletonize(sub)) - 1 + np.array([s.start for s in sl])
+        if len(sk) < 3:
+            continue
+        pairs = _components(sk)[0]
+        path = _longest_path(sk[:, ::-1].astype(np.float64), pairs)
+        if len(path) < 3:
+            continue
+        path = _resample(path, 1.0)
+        if len(path) >= 5:
+            path = _resample(_smooth(path, max(1.0, 0.5 * r0)), 1.0)
+        if float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) < min_len:
+            continue
+        if _on_mask(mask, path).mean() < 0.9:
+            continue
+        out.append(path)
+    return out
+
+
 def _radii(polys, raw_norm: np.ndarray, r0: float, margin: float):
     """Per-filament radius from the intensity mass per unit length (voxels nearest to it)."""
     shape = raw_norm.shape
@@ -231,6 +381,14 @@ class FilamentResult:
         Branch ends joined by smooth bridges through the junction gaps (:mod:`rodwarp.ct.segment._bridging`).
     duplicates : int
         Pieces dropped as lying along a longer filament (one skeleton for two touching ones).
+    off_foreground_cuts : int
+        Filaments trimmed or cut where their axis left the binarised foreground (at an end, or
+        for more than :data:`OFF_RUN` radii: a bridge across a gap, a trace through noise), or
+        dropped as mostly off it.
+    residual : int
+        Filaments traced in the second pass, from foreground the first pass left more than
+        :data:`RESIDUAL_MARGIN` voxels from every trace (thick fibres, fused masses, pieces cut
+        short at knots); the last ``residual`` polylines.
     mask : ndarray of bool
         The binarised volume (reused by the confidence stage).
     """
@@ -245,6 +403,8 @@ class FilamentResult:
     bridges: int = 0
     duplicates: int = 0
     mask: object = field(default=None, repr=False, compare=False)
+    off_foreground_cuts: int = 0
+    residual: int = 0
 
     @property
     def filaments(self) -> int:
@@ -311,9 +471,18 @@ def trace_filaments(raw: np.ndarray, st, P, progress=None) -> FilamentResult:
         else:
             faint += 1
     polys, duplicates = drop_duplicates(keep, r0)
+    min_len = max(P.min_length * r0, 3.0)
+    polys, cut = _split_off_foreground(polys, mask, r0, min_len)
+    extra = []
+    for _ in range(RESIDUAL_ROUNDS):  # a branched mass gives one path a round
+        more = _residual_filaments(polys + extra, mask, r0, min_len) if polys else []
+        extra += more
+        if not more:
+            break
+    polys = polys + extra
     radii = _radii(polys, raw_norm, r0, P.window_margin) if polys else np.zeros(0)
     if progress is not None:
         progress("detect", 3, 3)
     return FilamentResult(polylines=polys, radii=radii, skeleton_voxels=n_sk, skeleton_junctions=int(len(junc)),
                           branches=n_branches, bend_fraction=bend, faint=faint, bridges=bridges,
-                          duplicates=duplicates, mask=mask)
+                          duplicates=duplicates, mask=mask, off_foreground_cuts=cut, residual=len(extra))

@@ -20,9 +20,14 @@ filaments), in one pass over the prepared volume, a block of slices at a time:
   - **open ends**: an end past which the unexplained foreground continues (the filament goes on:
     broken, or cut short at a crossing);
 
-  and a radius far from the median (a thick trace is often two fused fibres).  The confidence
-  is ``support x (1 - crowding) x 0.75^open_ends`` (x 0.7 for the radius), from 0 to 1; a rod
-  below :data:`DOUBT_CONFIDENCE` is *doubtful*, with its reasons in words.
+  and a radius far from the median (a thick trace is often two fused fibres), and, for
+  curved traces with the binarised volume at hand, a cross-section wider than thick: the
+  trace's radius (from its intensity mass) over the inscribed radius of its cross-section (half
+  the shortest foreground chord through the axis in the normal plane, median along the axis),
+  relative to the median trace's, above :data:`WIDE_RATIO` (fused fibres traced as one, or a
+  flattened fibre).  The confidence is ``support x (1 - crowding) x 0.75^open_ends``
+  (x 0.7 for the radius, x 0.6 when wider than thick), from 0 to 1; a rod below
+  :data:`DOUBT_CONFIDENCE` is *doubtful*, with its reasons in words.
 
 The cost is one Gaussian smoothing and one rasterisation of the traces over the volume (a few
 per cent of a segmentation).
@@ -50,6 +55,10 @@ END_MARGIN = 2.5
 RADIUS_RANGE = (0.6, 1.6)
 #: blocks of this many slices
 BLOCK = 64
+#: a curved trace whose radius (from its intensity mass) over its cross-section's inscribed
+#: radius is this many times the median trace's is wider than thick: fused fibres traced as
+#: one, or a flattened fibre
+WIDE_RATIO = 1.35
 
 
 @dataclass(frozen=True)
@@ -75,6 +84,11 @@ class Doubt:
         most 20): ``centre`` (x, y, z, working voxels) and ``voxels``.
     n_regions : int
         Number of such regions.
+    wide : ndarray (n,) or None
+        Curved traces in a volume held whole: the trace's radius over its cross-section's
+        inscribed radius (median along the axis); above :data:`WIDE_RATIO` times the median
+        trace's, the trace is wider than thick (fused fibres traced as one, a flattened fibre)
+        and its confidence is multiplied by 0.6.  Zeros otherwise.
     mip_z, mip_y : ndarray (2, ...) of uint16
         Projections along z (y, x) and along y (z, x): voxels of foreground ([0]) and of
         unexplained foreground ([1]) along each ray (for ``qa_confidence.png``).
@@ -91,6 +105,7 @@ class Doubt:
     n_regions: int = 0
     mip_z: np.ndarray | None = None
     mip_y: np.ndarray | None = None
+    wide: np.ndarray | None = None
 
     @property
     def unexplained_fraction(self) -> float:
@@ -135,6 +150,40 @@ def _axis_samples(rods, step: float = 1.0):
 def _ring(r: float, n: int = 12) -> np.ndarray:
     a = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
     return np.stack([np.cos(a), np.sin(a)], 1) * r
+
+
+def _inscribed_radii(mask: np.ndarray, pts: np.ndarray, t: np.ndarray, r_max: float,
+                     n_dir: int = 8, step: float = 0.5) -> np.ndarray:
+    """Half the shortest foreground chord through each axis sample (x, y, z) in its normal plane
+    (``n_dir`` directions, chords walked ``step`` voxels at a time up to ``r_max`` each way): the
+    radius of the largest disc the cross-section holds there."""
+    ref = np.where(np.abs(t[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    e1 = _unit_rows(np.cross(t, ref))
+    e2 = np.cross(t, e1)
+    a = np.linspace(0.0, math.pi, n_dir, endpoint=False)
+    steps = np.arange(step, r_max + step, step)
+    shape = np.asarray(mask.shape)
+    out = np.empty(len(pts))
+    for c0 in range(0, len(pts), 4096):
+        p, u1, u2 = pts[c0:c0 + 4096], e1[c0:c0 + 4096], e2[c0:c0 + 4096]
+        d = np.cos(a)[None, :, None] * u1[:, None, :] + np.sin(a)[None, :, None] * u2[:, None, :]  # (m, n_dir, 3)
+        chord = np.zeros((len(p), n_dir))
+        for sign in (1.0, -1.0):
+            run = np.ones((len(p), n_dir), bool)
+            w = np.zeros((len(p), n_dir))
+            for s_ in steps:
+                q = p[:, None, :] + sign * s_ * d
+                idx = np.rint(q[..., ::-1]).astype(np.int64)
+                ok = np.all((idx >= 0) & (idx < shape), axis=-1)
+                on = np.zeros(ok.shape, bool)
+                on[ok] = mask[idx[ok][:, 0], idx[ok][:, 1], idx[ok][:, 2]]
+                run &= on
+                w += run * step
+                if not run.any():
+                    break
+            chord += w
+        out[c0:c0 + 4096] = 0.5 * (chord.min(1) + step)  # the last on-voxel reaches half a step on
+    return out
 
 
 def assess(reader, st, rods, P, block: int = BLOCK, mask=None) -> Doubt:
@@ -267,6 +316,15 @@ def assess(reader, st, rods, P, block: int = BLOCK, mask=None) -> Doubt:
     open_ends = look_end.out.reshape(-1, 2).sum(1).astype(int)
     r_med = float(np.median(radii)) if n else 0.0
     conf = support * (1.0 - crowding) * 0.75 ** open_ends
+    # curved traces (polylines) in a volume held whole: is the cross-section as thick as wide?
+    wide = np.zeros(n)
+    if n and mask is not None and int(np.max(np.diff(rods.offsets))) > 2:
+        r_in = _inscribed_radii(mask, pts, t, 2.0 * float(np.max(radii)) + 3.0)
+        r_in_med = ndimage.median(r_in, owner, np.arange(n)) if n else np.zeros(0)
+        wide = radii / np.maximum(np.asarray(r_in_med, float), 0.5)
+    # relative to the median trace's: the mass radius of a thin blurred fibre exceeds its
+    # binarised inscribed radius by a share that depends on blur and threshold, not on fusion
+    wide_med = float(np.median(wide)) if n else 0.0
     doubts = []
     for k in range(n):
         why = []
@@ -281,7 +339,11 @@ def assess(reader, st, rods, P, block: int = BLOCK, mask=None) -> Doubt:
         if r_med > 0 and not (RADIUS_RANGE[0] <= radii[k] / r_med <= RADIUS_RANGE[1]):
             conf[k] *= 0.7
             why.append(f"radius {radii[k] / r_med:.1f} x the median")
+        if wide_med > 0 and wide[k] > WIDE_RATIO * wide_med:
+            conf[k] *= 0.6
+            why.append(f"cross-section {wide[k] / wide_med:.1f} x as wide for its thickness as the "
+                       f"median trace's (fused fibres traced as one, or a flattened fibre)")
         doubts.append(why if conf[k] < DOUBT_CONFIDENCE else [])
     return Doubt(confidence=np.clip(conf, 0.0, 1.0), support=support, crowding=crowding, open_ends=open_ends,
-                 doubts=doubts, foreground_voxels=fg, unexplained_voxels=un, regions=regions,
+                 doubts=doubts, wide=wide, foreground_voxels=fg, unexplained_voxels=un, regions=regions,
                  n_regions=n_regions, mip_z=mip_z, mip_y=mip_y)
