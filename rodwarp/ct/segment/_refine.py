@@ -33,7 +33,7 @@ from rodwarp.rodset import segment_distance
 
 
 class _Rod:
-    __slots__ = ("p0", "p1", "r", "plateau", "resid", "mass", "mass_r", "ok", "why", "prev", "own_r")
+    __slots__ = ("p0", "p1", "r", "plateau", "resid", "mass", "mass_r", "ok", "why", "prev", "own_r", "split_off")
 
     def __init__(self, p0, p1, r):
         self.p0 = np.asarray(p0, float)
@@ -46,6 +46,7 @@ class _Rod:
         self.ok = True
         self.why = ""
         self.own_r = False
+        self.split_off = False  # split off a traced axis that held touching rods, not refined yet
 
     @property
     def length(self):
@@ -465,6 +466,9 @@ class RefineStats:
         Rods dropped during refinement, by reason (``"no interior"``, ``"collapsed"``,
         ``"short"``, ..., and ``"duplicate"`` for pieces merged into another rod), in the
         order the reasons first occurred; reasons that never occurred are absent.
+    touching_split : int
+        Traced axes that held two or more touching rods (their mass and cross-section said so),
+        each replaced by its rods (:func:`_split_touching_rods`).
     """
 
     radius_profile_fit: float
@@ -475,6 +479,156 @@ class RefineStats:
     blur_sigma: float
     end_offset: float
     rejected: dict
+    touching_split: int = 0
+
+
+def _set_radii(rods, ref, st, P, r_given) -> float:
+    """The global radius, the mixed-radii switch and each rod's radius from the rods' masses;
+    returns the robust cv of the rods' own radii (0 with fewer than 3 rods).
+
+    The radius from the mass per unit length is unbiased by touching neighbours (the
+    nearest-surface partition trades equal leaks); the profile shape is not.  Mixed radii are
+    detected from the ridge, or from the spread of the rods' own radii.
+    """
+    masses = [rod.mass for rod in rods if rod.ok and np.isfinite(rod.mass)]
+    if r_given is None and masses:
+        ref.r = math.sqrt(float(np.median(masses)) / (math.pi * ref.C))
+    ref.min_len = P.min_length * ref.r
+    own = np.array([math.sqrt(rod.mass / (math.pi * ref.C)) for rod in rods
+                    if rod.ok and np.isfinite(rod.mass) and rod.mass > 0])
+    cv = 1.4826 * float(np.median(np.abs(own - np.median(own)))) / float(np.median(own)) if own.size >= 3 else 0.0
+    if P.per_rod_radius is None:
+        ref.mixed = r_given is None and (st.mixed or cv > MIXED_RADIUS_CV)
+    else:
+        ref.mixed = bool(P.per_rod_radius) and r_given is None
+    for rod in rods:
+        rod.r = ref.r
+        if ref.mixed and np.isfinite(rod.mass) and rod.mass > 0:
+            rod.r = float(np.clip(math.sqrt(rod.mass / (math.pi * ref.C)), 0.5, 3.0 * ref.r))
+            rod.own_r = True
+    return cv
+
+
+def _single_mass(masses) -> float:
+    """A single rod's intensity mass per unit length: the lightest well-populated cluster.
+
+    Each rod's cluster is the rods within 15% of its mass; of the clusters holding at least half
+    as many rods as the largest (and at least 3), the lightest one's median.  Touching rods
+    traced as one (about twice the mass) and pieces cut by the volume's faces (lighter, few)
+    then do not move it; a pile of mixed radii gets its thinnest common rod.
+    """
+    m = np.sort(np.asarray(masses, float))
+    lo = np.searchsorted(m, m / 1.15, side="left")
+    hi = np.searchsorted(m, m * 1.15, side="right")
+    count = hi - lo
+    need = max(0.5 * count.max(), min(3, count.max()))
+    i = int(np.flatnonzero(count >= need)[0])
+    return float(np.median(m[lo[i]:hi[i]]))
+
+
+def _touching_groups(rods, fat, radius, max_members):
+    """Groups of parallel rods (within 5 degrees) whose surfaces touch (within a voxel), each
+    holding a candidate of ``fat``: lists of rod indices, the heaviest group first."""
+    ok = [k for k, rod in enumerate(rods) if rod.ok]
+    U = {k: _unit(rods[k].p1 - rods[k].p0) for k in ok}
+    parent = {k: k for k in ok}
+
+    def find(x):
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    nb = _neighbours([rods[k] for k in ok], 1.0)
+    for i, js in enumerate(nb):
+        a = ok[i]
+        for j in js:
+            b = ok[j]
+            if a < b and abs(float(U[a] @ U[b])) > math.cos(math.radians(5.0)):
+                d = float(segment_distance(rods[a].p0[None], rods[a].p1[None], rods[b].p0[None], rods[b].p1[None])[0])
+                if d < radius[a] + radius[b] + 1.0:
+                    parent[find(a)] = find(b)
+    groups: dict[int, list] = {}
+    for k in ok:
+        groups.setdefault(find(k), []).append(k)
+    fat_set = set(fat)
+    out = [sorted(g, key=lambda k: (-rods[k].length, k)) for g in groups.values()
+           if fat_set.intersection(g) and len(g) <= max_members]
+    out.sort(key=lambda g: (-max(rods[k].mass for k in g if k in fat_set), g[0]))
+    return out
+
+
+def _split_touching_rods(rods, ref, reader, st, r_given):
+    """Traced axes that hold more touching rods than they are, replaced by those rods.
+
+    Candidates hold at least :data:`~rodwarp.ct.segment._bundles.FAT_MASS_RATIO` times a single
+    rod's mass per unit length.  Each candidate and the parallel rods touching it form a group,
+    examined heaviest first (:func:`~rodwarp.ct.segment._bundles.split_touching`) with the rods
+    around it modelled and taken off its cross-section: the rods split before it, groups kept
+    whole at their own radii, the others at the single rods' radius (their own when thinner; a
+    candidate not yet examined is left in the section).  A disc nearer another rod than any of
+    the group's axes is that rod's, not a new one.  Rods split off are marked ``split_off``
+    until refined.  Returns the rods and the number of groups split.
+    """
+    from rodwarp.ct.segment._bundles import FAT_MASS_RATIO, MAX_RODS, split_touching
+
+    masses = [rod.mass for rod in rods if rod.ok and np.isfinite(rod.mass) and rod.mass > 0]
+    if r_given is None and len(masses) < 2:
+        return rods, 0
+    m1 = math.pi * ref.C * r_given * r_given if r_given is not None else _single_mass(masses)
+    if not m1 > 0:
+        return rods, 0
+    r1 = math.sqrt(m1 / (math.pi * ref.C))
+    fat = [k for k, rod in enumerate(rods) if rod.ok and np.isfinite(rod.mass)
+           and rod.mass >= FAT_MASS_RATIO * m1 and rod.length >= 4.0 * r1]
+    if not fat:
+        return rods, 0
+
+    def own(rod):
+        return math.sqrt(rod.mass / (math.pi * ref.C)) if np.isfinite(rod.mass) and rod.mass > 0 else r1
+
+    radius = {k: own(rod) for k, rod in enumerate(rods)}
+    groups = _touching_groups(rods, fat, radius, MAX_RODS - 1)
+    waiting = {id(rods[k]) for g in groups for k in g}
+    scale, bg = ref.scale, st.bg
+
+    def sample(xyz):
+        return (reader.trilinear(xyz) - bg) * scale
+
+    def model_radius(rod):
+        return own(rod) if own(rod) < r1 or rod.mass >= FAT_MASS_RATIO * m1 else r1
+
+    out = list(rods)
+    n_split = 0
+    reach = 4.0 * r1 + 3.0 * ref.sigma + 2.0
+    for g in groups:
+        mem = [rods[k] for k in g]
+        waiting.difference_update(id(o) for o in mem)
+        others = [o for o in out if o.ok and all(o is not q for q in mem)]
+        near = [o for o in others if id(o) not in waiting and
+                min(float(segment_distance(o.p0[None], o.p1[None], q.p0[None], q.p1[None])[0]) for q in mem) < reach]
+        axes = split_touching(sample, [(q.p0, q.p1) for q in mem], r1, ref.sigma, ref.C,
+                              [(o.p0, o.p1, model_radius(o)) for o in near])
+        if axes is None:
+            continue
+        mine = []
+        for a, b in axes:
+            m = 0.5 * (a + b)[None]
+            d_own = min(float(_point_segment_distance(m, q.p0, q.p1)[0]) for q in mem)
+            if all(float(_point_segment_distance(m, o.p0, o.p1)[0]) > d_own for o in near):
+                mine.append((a, b))
+        if len(mine) < len(mem):  # (fewer discs than traced axes: the tracing stands)
+            continue
+        kids = []
+        for a, b in mine:
+            kid = _Rod(a, b, r1)
+            kid.mass, kid.mass_r, kid.split_off = m1, r1, True
+            kid.prev = (kid.p0.copy(), kid.p1.copy())
+            kids.append(kid)
+        gone = {id(q) for q in mem}
+        out = [o for o in out if id(o) not in gone] + kids
+        n_split += len(mine) > len(mem)
+    return out, n_split
 
 
 def _refine(reader, st, P, lines, progress):
@@ -497,6 +651,8 @@ def _refine(reader, st, P, lines, progress):
     it = 0
     rejected: dict[str, int] = {}  # reason -> rods, in the order the reasons first occur
     r_profile = cv = None
+    split_rods = 0
+    fresh: set = set()  # rods split off a fat one: refined in the next round whatever they moved
     for it in range(n_it):
         if progress is not None:
             progress("refine", it, n_it)
@@ -514,32 +670,24 @@ def _refine(reader, st, P, lines, progress):
             if ref.surface is None:  # (a mask has nothing to fit: contrast 1, a one-voxel edge)
                 ref.contrast_fit(collect, r_given)
                 r_profile = ref.r
-            # the radius from the mass per unit length is unbiased by touching neighbours
-            # (the nearest-surface partition trades equal leaks); the profile shape is not
-            masses = [rod.mass for rod in rods if rod.ok and np.isfinite(rod.mass)]
-            if r_given is None and masses:
-                ref.r = math.sqrt(float(np.median(masses)) / (math.pi * ref.C))
-            ref.min_len = P.min_length * ref.r
-            # mixed radii: detected from the ridge, or from the spread of the rods' own radii
-            own = np.array([math.sqrt(rod.mass / (math.pi * ref.C)) for rod in rods
-                            if rod.ok and np.isfinite(rod.mass) and rod.mass > 0])
-            cv = 1.4826 * float(np.median(np.abs(own - np.median(own)))) / float(np.median(own)) if own.size >= 3 \
-                else 0.0
-            if P.per_rod_radius is None:
-                ref.mixed = r_given is None and (st.mixed or cv > MIXED_RADIUS_CV)
-            else:
-                ref.mixed = bool(P.per_rod_radius) and r_given is None
-            for rod in rods:
-                rod.r = ref.r
-                if ref.mixed and np.isfinite(rod.mass) and rod.mass > 0:
-                    rod.r = float(np.clip(math.sqrt(rod.mass / (math.pi * ref.C)), 0.5, 3.0 * ref.r))
-                    rod.own_r = True
+            cv = _set_radii(rods, ref, st, P, r_given)
             ref.set_end_model(ref.r, ref.sigma, cap)
             if abs(ref.r / st.r0 - 1.0) > REDO_RADIUS_CHANGE:
                 # the axes moved with a wrong radius (bundles inflate the coarse one: touching
                 # rods then share one window and pull together): undo, and move them next round
                 for rod in rods:
                     rod.p0, rod.p1 = rod.prev[0].copy(), rod.prev[1].copy()
+        if it == fit_it + 1 and ref.surface is None:
+            # (once duplicates are merged: two traces of one rod share its mass and look thin)
+            rods, n_split = _split_touching_rods(rods, ref, reader, st, r_given)
+            if n_split:
+                split_rods += n_split
+                fresh.update(id(rod) for rod in rods if rod.split_off)
+                for rod in rods:
+                    rod.split_off = False
+                active = set(range(len(rods)))
+                cv = _set_radii(rods, ref, st, P, r_given)
+                ref.set_end_model(ref.r, ref.sigma, cap)
         nbl = _neighbours(rods, 2.0 * P.window_margin + 1.0)
         for k in sorted(active):
             if rods[k].ok:
@@ -564,7 +712,8 @@ def _refine(reader, st, P, lines, progress):
             rejected["duplicate"] = rejected.get("duplicate", 0) + nm
         # next round: rods that moved, new (merged) rods, and the neighbours of either
         hot = [k for k, rod in enumerate(rods)
-               if id(rod) not in old_ids or moved.get(id(rod), 0.0) > P.refine_tol]
+               if id(rod) not in old_ids or id(rod) in fresh or moved.get(id(rod), 0.0) > P.refine_tol]
+        fresh.clear()
         if it + 1 < n_it and hot:
             nbl = _neighbours(rods, 2.0 * P.window_margin + 1.0)
             active = set(hot)
@@ -577,5 +726,6 @@ def _refine(reader, st, P, lines, progress):
     if progress is not None:
         progress("refine", n_it, n_it)
     stats = RefineStats(radius_profile_fit=r_profile, radius_cv=cv, rounds=it + 1, rod_refinements=n_refined,
-                        contrast_fit=ref.C, blur_sigma=ref.sigma, end_offset=ref.delta, rejected=rejected)
+                        contrast_fit=ref.C, blur_sigma=ref.sigma, end_offset=ref.delta, rejected=rejected,
+                         touching_split=split_rods)
     return rods, ref, stats

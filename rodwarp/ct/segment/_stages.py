@@ -481,7 +481,7 @@ class RefineStage(Stage):
         if r is not None:
             q.update(radius_profile_fit=r.radius_profile_fit, radius_cv=r.radius_cv, refine_rounds=r.rounds,
                      rod_refinements=r.rod_refinements, contrast_fit=r.contrast_fit, blur_sigma=r.blur_sigma,
-                     end_offset=r.end_offset)
+                     end_offset=r.end_offset, touching_split=r.touching_split)
         q.update(per_rod_radius=ctx.per_rod_radius, rods_rejected=ctx.rejected, fit_residual=ctx.fit_residual,
                  radius_spread=ctx.radius_spread)
         return q

@@ -39,12 +39,16 @@ class TraceStats:
         Traces recognised as bundles of touching rods, and the rods traced in them.
     residual_seeds : int
         Seeds taken from foreground that no traced rod explained (the second round).
+    seeds_turned : int
+        Seeds traced along the image's own direction (:meth:`_BlockTrace.axis_direction`)
+        because that trace is much longer than the skeleton piece's: a piece running across the
+        rods of a raft.
     branch_voxels, bent_voxels, bent_branches : int
         Long skeleton branches judged for bending: their voxels, the voxels of those that bend
         smoothly, and how many do (``shape="auto"``).
     events : tuple of str
         Names of the optional counters (``split``, ``bundles_split``, ``bundle_rods``,
-        ``residual_seeds``) that became non-zero, in the order they first did; a counter
+        ``residual_seeds``, ``seeds_turned``) that became non-zero, in the order they first did; a counter
         never incremented is not listed.  ``SegmentResult.quality`` lists exactly these, in
         this order.
     """
@@ -59,6 +63,7 @@ class TraceStats:
     branch_voxels: int = 0
     bent_voxels: int = 0
     bent_branches: int = 0
+    seeds_turned: int = 0
     events: tuple[str, ...] = ()
 
     def _bump(self, name: str, n: int) -> None:
@@ -104,6 +109,15 @@ class TraceResult(NamedTuple):
 #: a trace filling less than 0.4 of the fitting disc is a thin rod when the image on its axis
 #: (median over slices, the probe disc) is at least this share of the plateau
 THIN_AXIS_LEVEL = 0.6
+
+
+#: a seed is turned to the image's own direction when the structure tensor's weakest
+#: eigenvalue is below this share of its middle one (a rod: 0.0-0.1; a crossing or a blob: more)
+AXIS_TENSOR_RATIO = 0.2
+#: ... and the seed's direction is more than this (degrees) away from it
+SEED_TURN_DEG = 20.0
+#: ... and the trace along the image's direction is this many times longer than the seed's own
+SEED_TURN_GAIN = 1.5
 
 
 class _Tracer:
@@ -403,6 +417,32 @@ class _BlockTrace:
             self.stats._bump("split", 1)
         return bool(got)
 
+    def axis_direction(self, c):
+        """The rods' direction at ``c`` (global xyz) from the image's gradient structure tensor,
+        or None where the image there is not one-directional.
+
+        Around a rod, and inside a raft of parallel touching rods, every gradient is normal to
+        the rods, so the tensor's weakest direction is theirs; the skeleton of a raft wider than
+        it is thick runs across it (a medial surface thinned to lines) and cannot tell.
+        """
+        r0 = self.r0
+        h = int(math.ceil(2.0 * r0 + 2.0))
+        q = np.round(np.asarray(c, float)[::-1] - np.asarray(self.origin_zyx, float)).astype(int)
+        lo = np.maximum(q - h, 0)
+        hi = np.minimum(q + h + 1, self.g.shape)
+        if np.any(hi - lo < 5):
+            return None
+        sub = self.g[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+        gz, gy, gx = np.gradient(sub)
+        zz, yy, xx = np.meshgrid(*(np.arange(a, b) - qq for a, b, qq in zip(lo, hi, q)), indexing="ij")
+        w = np.exp(-(zz * zz + yy * yy + xx * xx) / (2.0 * (1.5 * r0) ** 2))
+        G = np.stack([gx, gy, gz], -1).reshape(-1, 3)  # (x, y, z)
+        T = (G * w.reshape(-1, 1)).T @ G
+        ev, vec = np.linalg.eigh(T)
+        if not ev[0] < AXIS_TENSOR_RATIO * ev[1]:
+            return None
+        return _canonical(vec[:, 0])
+
     def run(self, seed_list) -> None:
         """Trace each seed ``(c, u, t0, t1, weight)`` (global xyz) not yet covered by a line."""
         r0 = self.r0
@@ -410,6 +450,15 @@ class _BlockTrace:
             if _lines_cover(self.lines, c, 0.75 * r0):
                 continue
             res = self.tr.trace(c, u, t0, t1, self.max_len)
+            # a seed across the rods (the skeleton of a raft of touching rods) traced along them
+            # too: the longer trace by far wins (across a raft it ends at the raft's edge; a rod
+            # lying across the raft keeps its own, as long as along the raft)
+            v = self.axis_direction(c)
+            if v is not None and abs(float(v @ u)) < math.cos(math.radians(SEED_TURN_DEG)):
+                alt = self.tr.trace(c, v, -2.0 * r0, 2.0 * r0, self.max_len)
+                if alt is not None and (res is None or alt[3] - alt[2] > SEED_TURN_GAIN * (res[3] - res[2])):
+                    res = alt
+                    self.stats._bump("seeds_turned", 1)
             if res is None:
                 continue
             c2, u2, a, b, fill = res
