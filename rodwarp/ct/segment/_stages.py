@@ -75,6 +75,12 @@ __all__ = ["Stage", "SegmentContext", "DEFAULT_STAGES", "insert_stage", "AUTO_BE
 #: arcs and wires: above 0.5)
 AUTO_BEND_FRACTION = 0.3
 
+#: ... unless the straight traces' median length is at least this many coarse radii: the
+#: skeleton of closest-packed bundles of straight rods bends too (bend fraction 0.3-0.54 on
+#: rodwarp's bundles of radius 2-3, straight traces 34-36 radii long), wires' straight pieces
+#: run 7-14 radii (issue 50)
+AUTO_STRAIGHT_RADII = 20.0
+
 #: smallest volume edge (voxels) segmentation accepts: the thinnest rod it resolves is about
 #: 2 voxels across (radius 1), its blurred edges take ~2 voxels on each side and the background
 #: around it another voxel or two; a smaller volume cannot hold a rod and would only be told
@@ -339,9 +345,12 @@ class DetectStage(Stage):
         trace = ctx.trace = TraceStats.total(block_stats)
         ctx.lines, ctx.candidates = lines, len(lines)
         ctx.mask = mask if len(chunks) == 1 else None
-        # (below a contrast-to-noise of 1.5 the skeleton of the noise itself bends: stay straight)
+        # (below a contrast-to-noise of 1.5 the skeleton of the noise itself bends: stay straight;
+        # so it does where the straight traces run long: bundles of touching rods bend the skeleton)
+        run_long = bool(lines) and float(np.median([np.linalg.norm(b - a) for a, b in lines])) >= \
+            AUTO_STRAIGHT_RADII * st.r0
         if P.shape == "auto" and trace.bend_fraction > AUTO_BEND_FRACTION and trace.bent_branches >= 3 \
-                and ctx.cnr >= 1.5:
+                and ctx.cnr >= 1.5 and not run_long:
             ctx.path = "curved"
             return
         if not lines:
