@@ -280,7 +280,7 @@ def fit_discs(img: np.ndarray, g1: np.ndarray, sigma: float = 1.0, C: float = 1.
 #: a refined rod whose intensity mass per unit length is at least this many times a single
 #: rod's is examined as touching rods traced as one (two rods side by side: 1.7-2.0 measured
 #: through a window that truncates them; single rods: 0.9-1.15)
-FAT_MASS_RATIO = 1.4
+FAT_MASS_RATIO = 1.25
 #: k discs of the single rods' radius replace one fatter disc when their residual is below
 #: this share of the one disc's
 SPLIT_SSE_RATIO = 0.7
