@@ -558,6 +558,41 @@ def _touching_groups(rods, fat, radius, max_members):
     return out
 
 
+#: rods of the lightest mass cluster examined for being bundles themselves, and the share of
+#: them that must be for the cluster to count as bundles
+CLUSTER_PROBES, CLUSTER_BUNDLED_SHARE = 6, 2.0 / 3.0
+
+
+def _cluster_holds(rods, m1, ref, sample) -> int:
+    """How many touching rods each rod of the lightest mass cluster holds: 1, or k = 2 or 3 when
+    most of its longest rods' cross-sections are k touching discs of radius ``r1 / sqrt(k)``
+    rather than one disc (a scan of thin rods all bundled: every trace is a bundle, and the
+    lightest is no single rod; rodwarp's closest-packed bundles of radius 1.5 traced 8 of 28)."""
+    from rodwarp.ct.segment._bundles import split_touching
+
+    r1 = math.sqrt(m1 / (math.pi * ref.C))
+    probe = sorted((rod for rod in rods if rod.ok and np.isfinite(rod.mass) and abs(rod.mass / m1 - 1.0) < 0.15
+                    and rod.length >= 8.0 * r1), key=lambda rod: -rod.length)[:CLUSTER_PROBES]
+    if len(probe) < 3:
+        return 1
+    best, best_n = 1, 0
+    for k in (2, 3):
+        rk = r1 / math.sqrt(k)
+        n = 0
+        need = math.ceil(CLUSTER_BUNDLED_SHARE * len(probe))
+        for i, rod in enumerate(probe):
+            if n + len(probe) - i < need:  # (the rest cannot make the share)
+                break
+            near = [(o.p0, o.p1, math.sqrt(max(o.mass, 0.0) / (math.pi * ref.C)) if np.isfinite(o.mass) else r1)
+                    for o in rods if o is not rod and o.ok
+                    and float(segment_distance(o.p0[None], o.p1[None], rod.p0[None], rod.p1[None])[0]) < 4.0 * r1]
+            axes = split_touching(sample, [(rod.p0, rod.p1)], rk, ref.sigma, ref.C, near)
+            n += axes is not None and len(axes) >= 2
+        if n >= need and n > best_n:
+            best, best_n = k, n
+    return best
+
+
 def _split_touching_rods(rods, ref, reader, st, r_given):
     """Traced axes that hold more touching rods than they are, replaced by those rods.
 
@@ -578,6 +613,13 @@ def _split_touching_rods(rods, ref, reader, st, r_given):
     m1 = math.pi * ref.C * r_given * r_given if r_given is not None else _single_mass(masses)
     if not m1 > 0:
         return rods, 0
+    scale, bg = ref.scale, st.bg
+
+    def sample(xyz):
+        return (reader.trilinear(xyz) - bg) * scale
+
+    if r_given is None:
+        m1 = m1 / _cluster_holds(rods, m1, ref, sample)
     r1 = math.sqrt(m1 / (math.pi * ref.C))
     fat = [k for k, rod in enumerate(rods) if rod.ok and np.isfinite(rod.mass)
            and rod.mass >= FAT_MASS_RATIO * m1 and rod.length >= 4.0 * r1]
@@ -590,10 +632,6 @@ def _split_touching_rods(rods, ref, reader, st, r_given):
     radius = {k: own(rod) for k, rod in enumerate(rods)}
     groups = _touching_groups(rods, fat, radius, MAX_RODS - 1)
     waiting = {id(rods[k]) for g in groups for k in g}
-    scale, bg = ref.scale, st.bg
-
-    def sample(xyz):
-        return (reader.trilinear(xyz) - bg) * scale
 
     def model_radius(rod):
         return own(rod) if own(rod) < r1 or rod.mass >= FAT_MASS_RATIO * m1 else r1

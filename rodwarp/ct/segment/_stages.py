@@ -75,11 +75,13 @@ __all__ = ["Stage", "SegmentContext", "DEFAULT_STAGES", "insert_stage", "AUTO_BE
 #: arcs and wires: above 0.5)
 AUTO_BEND_FRACTION = 0.3
 
-#: ... unless the straight traces' median length is at least this many coarse radii: the
-#: skeleton of closest-packed bundles of straight rods bends too (bend fraction 0.3-0.54 on
-#: rodwarp's bundles of radius 2-3, straight traces 34-36 radii long), wires' straight pieces
-#: run 7-14 radii (issue 50)
+#: ... unless the straight traces' median length is at least this many coarse radii and the
+#: bend fraction below AUTO_BUNDLE_BEND: the skeleton of closest-packed bundles of straight rods
+#: bends too (bend fraction up to 0.54 on 30 of rodwarp's bundle scenes of radius 1.5-3, their
+#: straight traces 33-36 radii long), wires' straight pieces run 6-14 radii, and arcs' 22-26
+#: radii with bend fractions of 0.77-0.95 (issue 50)
 AUTO_STRAIGHT_RADII = 20.0
+AUTO_BUNDLE_BEND = 0.65
 
 #: smallest volume edge (voxels) segmentation accepts: the thinnest rod it resolves is about
 #: 2 voxels across (radius 1), its blurred edges take ~2 voxels on each side and the background
@@ -347,8 +349,8 @@ class DetectStage(Stage):
         ctx.mask = mask if len(chunks) == 1 else None
         # (below a contrast-to-noise of 1.5 the skeleton of the noise itself bends: stay straight;
         # so it does where the straight traces run long: bundles of touching rods bend the skeleton)
-        run_long = bool(lines) and float(np.median([np.linalg.norm(b - a) for a, b in lines])) >= \
-            AUTO_STRAIGHT_RADII * st.r0
+        run_long = bool(lines) and trace.bend_fraction < AUTO_BUNDLE_BEND and \
+            float(np.median([np.linalg.norm(b - a) for a, b in lines])) >= AUTO_STRAIGHT_RADII * st.r0
         if P.shape == "auto" and trace.bend_fraction > AUTO_BEND_FRACTION and trace.bent_branches >= 3 \
                 and ctx.cnr >= 1.5 and not run_long:
             ctx.path = "curved"
