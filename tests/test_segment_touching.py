@@ -96,3 +96,13 @@ def test_touching_bundles_of_the_independent_generator(radius, seed):
     assert m.f1 >= 0.95, m.f1
     assert score_contacts(res.contacts, truth, m).recall >= 0.9
     assert res.quality["shape"] == "straight"
+
+
+def test_profile_tables_do_not_depend_on_which_caller_made_them():
+    # a table is shared by every radius that rounds to its key: the first caller's radius must
+    # not shape it (it did: a benchmark's rows depended on the scenes segmented before them)
+    bd._PROFILES.clear()
+    first = bd._profile(1.504, 1.0)
+    bd._PROFILES.clear()
+    again = bd._profile(1.496, 1.0)
+    assert np.array_equal(first[0], again[0]) and np.array_equal(first[1], again[1])

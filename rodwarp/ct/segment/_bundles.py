@@ -80,7 +80,8 @@ def _profile(r: float, sigma: float):
     if key not in _PROFILES:
         from rodwarp.ct.segment._profile import _blur_model
 
-        rho = np.linspace(0.0, r + 5.0 * sigma + 1.0, 160)
+        # (from the key alone: a table must not depend on which caller made it first)
+        rho = np.linspace(0.0, key[0] + 5.0 * key[1] + 1.0, 160)
         _PROFILES[key] = (rho, _blur_model(-np.inf, rho, key[0], key[1], n_r=24, n_th=32))
     return _PROFILES[key]
 

@@ -96,7 +96,7 @@ def _axis_level(r, sigma, rho_e):
     rod of radius r shows under blur sigma; about 1 for thick rods, well below for thin ones)."""
     key = (round(float(r), 2), round(float(sigma), 2), round(float(rho_e), 2))
     if key not in _LEVELS:
-        rr = (np.arange(12) + 0.5) / 12 * rho_e
-        w = rr * _end_weight(rr, rho_e)
-        _LEVELS[key] = float((_blur_model(-np.inf, rr, r, sigma, n_r=24, n_th=32) * w).sum() / w.sum())
+        rr = (np.arange(12) + 0.5) / 12 * key[2]  # (from the key alone, as the table is shared)
+        w = rr * _end_weight(rr, key[2])
+        _LEVELS[key] = float((_blur_model(-np.inf, rr, key[0], key[1], n_r=24, n_th=32) * w).sum() / w.sum())
     return _LEVELS[key]
