@@ -177,7 +177,11 @@ def main() -> int:
     ap.add_argument("--radii", default=",".join(f"{r:g}" for r in RADII))
     ap.add_argument("--code", default=None, help="score this code tree's rodwarp (e.g. a git worktree) "
                                                  "instead of this checkout's")
+    ap.add_argument("--chart", action="store_true", help="only draw segment_independent.png from the before "
+                                                       "and after results already written")
     a = ap.parse_args()
+    if a.chart:
+        return chart()
     code = Path(a.code).resolve() if a.code else ROOT
     if a.code:
         if not (code / "rodwarp" / "__init__.py").is_file():
@@ -256,6 +260,39 @@ def main() -> int:
                      f"{s['true_contacts_median']:g} | {s['n_curved_path']} |")
     (OUT / f"segment_independent_{a.label}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+    return 0
+
+
+def chart(out=OUT) -> int:
+    """``segment_independent.png``: rod F1 and contact recall, median (bar) and worst seed (dot),
+    before and after, for each regime, generator and radius."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = {lab: json.loads((out / f"segment_independent_{lab}.json").read_text()) for lab in ("before", "after")}
+    summ = {lab: {(s["regime"], s["generator"], s["radius"]): s for s in r["summary"]} for lab, r in runs.items()}
+    keys = [k for k in summ["after"] if k in summ["before"]]
+    fig, axes = plt.subplots(2, 1, figsize=(12, 6.5), sharex=True)
+    x = np.arange(len(keys))
+    for ax, (field, name) in zip(axes, (("rod_f1", "rod F1"), ("contact_recall", "contact recall"))):
+        for dx, lab, col in ((-0.2, "before", "0.6"), (0.2, "after", "tab:blue")):
+            med = [summ[lab][k][f"{field}_median"] for k in keys]
+            worst = [summ[lab][k][f"{field}_worst"] for k in keys]
+            ax.bar(x + dx, [np.nan if v is None else v for v in med], 0.38, color=col, label=f"{lab}: median")
+            ax.plot(x + dx, [np.nan if v is None else v for v in worst], "v", color="k" if lab == "after" else "0.3",
+                    ms=5, label=f"{lab}: worst seed")
+        ax.axhline(0.95 if field == "rod_f1" else 0.9, color="tab:red", lw=0.8, ls="--", label="target (median)")
+        ax.set_ylim(0, 1.05)
+        ax.set_ylabel(name)
+    axes[0].legend(ncol=5, fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False)
+    axes[1].set_xticks(x, [f"{k[0]}\n{k[1]}\nr {k[2]:g}" for k in keys], fontsize=8)
+    fig.suptitle(f"segmentation on two phantom generators, 10 drawn seeds: before {runs['before']['commit']}, "
+                 f"after {runs['after']['commit']}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out / "segment_independent.png", dpi=110)
+    print(out / "segment_independent.png")
     return 0
 
 
