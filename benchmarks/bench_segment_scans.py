@@ -323,6 +323,7 @@ def real_scan_qa(results_dir=None) -> dict:
 
     from rodwarp.ct import SegmentParams
     from rodwarp.ct import run_segment
+    from rodwarp.ct.segment import doubt_kind
 
     src = common.ROOT / REAL_SCAN
     dest = Path(results_dir) if results_dir is not None else common.ROOT / "benchmarks" / "results"
@@ -338,11 +339,7 @@ def real_scan_qa(results_dir=None) -> dict:
     reasons: dict = {}
     for f in summ["filaments"]:
         for why in f["doubts"]:
-            key = why.split(" (")[0].split(" for ")[0]
-            key = "radius far from the median" if key.startswith("radius") else key
-            key = "foreground continues past an end" if key.startswith("the foreground continues") else key
-            key = "untraced foreground around it" if "untraced foreground" in key else key
-            key = "wider than thick (fused or flattened)" if key.startswith("cross-section") else key
+            key = doubt_kind(why)
             reasons[key] = reasons.get(key, 0) + 1
     radii = np.array([f["radius"] for f in summ["filaments"]])
     return {"file": REAL_SCAN,

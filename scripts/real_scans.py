@@ -147,6 +147,8 @@ def _on(mask, pts):
 def measure(name: str, path: Path, side: dict, vol, fg, ref_r) -> dict:
     if "error" in side:
         return {"error": side["error"]}
+    from rodwarp.ct.segment import doubt_kind
+
     z = side["arrays"]
     polys, radii = _polys(z), np.asarray(z["radii"], float)
     n = len(polys)
@@ -167,11 +169,7 @@ def measure(name: str, path: Path, side: dict, vol, fg, ref_r) -> dict:
     reasons: dict = {}
     for why in side["doubts"]:
         for w in why:
-            key = w.split(" (")[0].split(" for ")[0]
-            key = "radius far from the median" if key.startswith("radius") else key
-            key = "foreground continues past an end" if key.startswith("the foreground continues") else key
-            key = "untraced foreground around it" if "untraced foreground" in key else key
-            key = "wider than thick (fused or flattened)" if key.startswith("cross-section") else key
+            key = doubt_kind(w)
             reasons[key] = reasons.get(key, 0) + 1
     out["doubt_reasons"] = reasons
     wide = np.asarray(z["wide"], float)
@@ -215,7 +213,7 @@ def figures(name, vol, fg, rec, outdir: Path):
     after = rec["after"]
     files = []
     if "error" not in after:
-        polys, radii, conf = after["_polys"], after["_radii"], after["_conf"]
+        polys, conf = after["_polys"], after["_conf"]
         cov = after["_ex"] <= 1.5
         fig, axes = plt.subplots(1, 3, figsize=(15, 5.4))
         mids = [s // 2 for s in vol.shape]
@@ -410,7 +408,7 @@ def report(out) -> str:
                 L.append(f"- {side}: doubt reasons {s['doubt_reasons']}; unexplained {s['unexplained']}; "
                          f"radii p10/median/p90 {s['radii']['p10']:.2f}/{s['radii']['median']:.2f}/"
                          f"{s['radii']['p90']:.2f}; flags {s['flags']}")
-        L += [f"- figures: " + ", ".join(f"`{f}`" for f in r["figures"]), ""]
+        L += ["- figures: " + ", ".join(f"`{f}`" for f in r["figures"]), ""]
         for f in r["figures"]:
             L.append(f"![{Path(f).stem}]({Path(f).name})")
         L.append("")

@@ -44,7 +44,6 @@ import argparse
 import hashlib
 import importlib.util
 import json
-import math
 import platform
 import statistics
 import subprocess

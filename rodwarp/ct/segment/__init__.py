@@ -41,7 +41,7 @@ _WHERE = {
     "prepare_volume": "_prepare", "Prepared": "_prepare",
     "cross_section": "_bundles", "looks_bundled": "_bundles", "fit_discs": "_bundles",
     "trace_filaments": "_curved", "FilamentResult": "_curved",
-    "Doubt": "_doubt", "DOUBT_CONFIDENCE": "_doubt",
+    "Doubt": "_doubt", "DOUBT_CONFIDENCE": "_doubt", "doubt_kind": "_doubt",
     "RodMatch": "_score", "match_rods": "_score", "ContactScore": "_score", "score_contacts": "_score",
     "PolylineMatch": "_score", "match_polylines": "_score", "resample_polyline": "_score",
     "run_segment": "_report", "write_outputs": "_report", "to_physical": "_report", "write_rods_csv": "_report",

@@ -126,6 +126,23 @@ class Doubt:
                 "doubt_confidence": DOUBT_CONFIDENCE}
 
 
+#: the kind of each doubt sentence :func:`assess` writes, by how the sentence begins
+DOUBT_KINDS = (("axis off the foreground", "axis off the foreground"),
+               ("the foreground continues", "foreground continues past an end"),
+               ("radius", "radius far from the median"),
+               ("cross-section", "wider than thick (fused or flattened)"))
+
+
+def doubt_kind(sentence: str) -> str:
+    """The kind of one doubt sentence (a trace's ``doubts`` entry), for counting them by reason."""
+    if "untraced foreground" in sentence:
+        return "untraced foreground around it"
+    for start, kind in DOUBT_KINDS:
+        if sentence.startswith(start):
+            return kind
+    return sentence.split(" (")[0].split(" for ")[0]
+
+
 def _unit_rows(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
 

@@ -48,7 +48,6 @@ Points are ``(x, y, z)`` in working voxels with the centre of voxel ``(0, 0, 0)`
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
