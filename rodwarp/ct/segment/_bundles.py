@@ -218,7 +218,6 @@ def fit_discs(img: np.ndarray, g1: np.ndarray, sigma: float = 1.0, C: float = 1.
         Disc centres in the grid's coordinates, the common radius (voxels), residual sum.
     """
     from scipy.optimize import least_squares
-    from scipy.signal import fftconvolve
 
     h = float(g1[1] - g1[0])
     A, B = np.meshgrid(g1, g1, indexing="ij")
@@ -235,21 +234,8 @@ def fit_discs(img: np.ndarray, g1: np.ndarray, sigma: float = 1.0, C: float = 1.
         r = math.sqrt(mass / (k * math.pi * C))
         if r < 0.75:
             break
-        rho_t, val = _profile(r, sigma)
-        # greedy start: the best match of a disc template in what the discs so far leave
-        tmpl = np.interp(np.hypot(A, B), rho_t, val, right=0.0)
-        res = img.astype(np.float64).copy()
-        cen = []
-        for _ in range(k):
-            resp = fftconvolve(res, tmpl[::-1, ::-1], mode="same")
-            for c0 in cen:  # no second disc on top of a first
-                resp[np.hypot(A - c0[0], B - c0[1]) < 1.6 * r] = -np.inf
-            i, j = np.unravel_index(int(np.argmax(resp)), resp.shape)
-            if not np.isfinite(resp[i, j]):
-                break
-            cen.append((g1[i], g1[j]))
-            res -= C * np.interp(np.hypot(A - g1[i], B - g1[j]), rho_t, val, right=0.0)
-        if len(cen) < k:
+        cen = _greedy_centres(img, A, B, k, r, sigma, C)
+        if cen is None:
             break
 
         def fun(p):
