@@ -107,7 +107,9 @@ def check_protocol(p, explicit=None) -> CheckedProtocol:
 
     # the protocol's own defaults for what was not given (an API caller: what differs from
     # ProtocolParams' defaults)
+    duration_given = ("duration" in explicit) if explicit is not None else _changed(p, ["duration"])
     p = protocol(p.protocol).resolve(p, None if explicit is None else explicit)
+    p = resolve_cycles(p, duration_given)
     explicit = frozenset(explicit or ())
     stages = _check_options(p, explicit)
     rods = None
@@ -119,6 +121,23 @@ def check_protocol(p, explicit=None) -> CheckedProtocol:
     else:
         n_vertices = _check_packing(p)
     return CheckedProtocol(p, rods, n_vertices, frames(stages, p.save_every))
+
+
+def resolve_cycles(p, duration_given: bool):
+    """``p`` with the stability test's duration set from ``cycles`` (cycles / freq, s), refused
+    (one line) when ``--duration`` was given too and disagrees, or the test has no frequency."""
+    if p.cycles is None:
+        return p
+    for name in ("cycles", "freq"):  # their own ranges first: the duration is derived from them
+        type(p).__dataclass_fields__[name].metadata["range"].check(f"--{name}", getattr(p, name))
+    if not p.freq > 0:
+        fail(f"--cycles {p.cycles:g} counts drive periods, but --freq is {p.freq:g} Hz; give --freq > 0 or set "
+             "the test's length with --duration")
+    duration = p.cycles / p.freq
+    if duration_given and not math.isclose(p.duration, duration, rel_tol=1e-9):
+        fail(f"--cycles {p.cycles:g} and --duration {p.duration:g} both set the stability test's length "
+             f"({p.cycles:g} cycles at {p.freq:g} Hz is {duration:.6g} s); give one of them")
+    return replace(p, duration=duration)
 
 
 def _check_options(p, explicit: frozenset):
@@ -183,9 +202,12 @@ def _check_options(p, explicit: frozenset):
     # consistency of durations, intervals and the step
     stages = plan(p)
     test = next(s for s in stages if s.test)
-    if p.save_every > test.duration:
+    if test.interval(p.save_every) > test.duration:
         fail(f"--save-every {p.save_every:g} s is longer than the {test.title} ({test.option} {test.duration:g} s): "
              f"the verdict needs samples inside the test; lower --save-every")
+    if p.samples_per_cycle and not test.freq > 0:
+        fail(f"--samples-per-cycle {p.samples_per_cycle} samples the {test.title} per drive period, but its drive "
+             "has no frequency; drop it (the test samples every --save-every)")
     if p.dt is not None:
         for s in stages:
             if p.dt > s.duration or stage_steps(s.duration, p.dt) < 1:

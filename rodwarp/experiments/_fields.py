@@ -50,6 +50,9 @@ class ExperimentParams:
           range=Range(ge=1e-3, le=1000, unit="m/s^2", hint="the paper rescales g to 0.5; 1000 is 100 Earth g"))
     duration: float = _param(5.0, "Stability-test duration (s).", "dur",
           range=Range(ge=0, le=1e5, unit="s", hint="the run's step count is checked as well"))
+    cycles: float | None = _param(None, "Stability-test length in drive cycles: sets --duration to cycles / --freq "
+                                        "(tests of equal cycles compare drives of different frequency).", "cyc",
+          range=Range(gt=0, le=1e6, hint="a number of drive periods; the duration follows from --freq"))
     static_load: float = _param(0.0, "Extra downward body load F~ in units of a rod's weight rho g d^2 l.", "F",
           range=Range(ge=0, le=1e4, hint="in units of a rod's weight rho g d^2 l (the paper's F~ is 0 to 12)"))
     n_rods: int | None = _param(None, f"Number of rods (default round({RODS_PER_ALPHA:g} alpha); lab: the rods "
@@ -109,6 +112,10 @@ class RunParams:
           range=Range(gt=0, le=1e5, unit="s"))
     checkpoint_every: float = _param(1.0, "Checkpoint interval (s of simulated time).", "ckpt",
           range=Range(gt=0, le=1e5, unit="s"))
+    samples_per_cycle: int | None = _param(None, "Samples per drive cycle during the stability test (replaces "
+                                                 "--save-every there); 4 or more give the landed measures: h and f "
+                                                 "at the lowest centroid of each cycle (docs/verdict.md).", "spc",
+          range=Range(ge=1, le=1000, whole=True, hint="samples per drive period of the test; 8 resolves the landing"))
     fields_every: float = _param(0.5, "Interval (s of simulated time, a multiple of --save-every) of the "
                                       "entanglement fields during the run: cv_e(t), mean e and phi in "
                                       "metrics.csv; 0 turns them off.", "fev",

@@ -237,7 +237,8 @@ def _step_stage(params, solver, stage, si: int, engine: Engine, control, loop: L
     wall-clock mark of the stage's last checkpoint."""
     t_s0 = loop.stage_t0[stage.name]
     dur = stage.duration
-    n_samples = max(1, int(math.ceil(dur / params.save_every - 1e-9)))
+    every = stage.interval(params.save_every)
+    n_samples = max(1, int(math.ceil(dur / every - 1e-9)))
     update(stage.name, engine.state.time - t_s0, dur)
     if si == 0 and j0 == 0 and not loop.mid_stage:
         rec.sample(stage.name, engine.state, engine.points, None, control, loop, test=stage.test)
@@ -246,7 +247,7 @@ def _step_stage(params, solver, stage, si: int, engine: Engine, control, loop: L
     record = loop.dts[stage.name]
     j = j0 + 1
     while j <= n_samples:
-        target = t_s0 + dur if j == n_samples else t_s0 + j * params.save_every
+        target = t_s0 + dur if j == n_samples else t_s0 + j * every
         info, refused, dt, landing = _one_step(params, solver, engine, control, loop, target)
         loop.steps += 1
         record.add(dt, refused)

@@ -65,6 +65,9 @@ class Stage:
         The packing at the stage's end is drawn in snapshots.png under this title ("" none).
     title, option : str
         How the checks name the stage and the option that sets its duration.
+    sample_every : float or None
+        Its sample interval (s); None: the run's ``save_every``. The test stage samples a fixed
+        number of times per drive cycle with ``--samples-per-cycle``.
     """
 
     name: str
@@ -77,6 +80,11 @@ class Stage:
     snapshot: str = ""
     title: str = ""
     option: str = ""
+    sample_every: float | None = None
+
+    def interval(self, save_every: float) -> float:
+        """Its sample interval (s): its own ``sample_every``, else the run's ``save_every``."""
+        return self.sample_every or save_every
 
     @property
     def amplitude(self) -> float:
@@ -124,4 +132,15 @@ def check_plan(stages) -> tuple[Stage, ...]:
 
 def frames(stages, save_every: float) -> int:
     """Trajectory frames of a run: the start and every sample of every stage."""
-    return 1 + sum(int(math.ceil(s.duration / save_every)) + 1 for s in stages)
+    return 1 + sum(int(math.ceil(s.duration / s.interval(save_every))) + 1 for s in stages)
+
+
+def sampled_per_cycle(stages, samples_per_cycle: int | None) -> tuple[Stage, ...]:
+    """The plan with its test stage sampled ``samples_per_cycle`` times per drive period (its
+    ``sample_every`` = 1 / (samples_per_cycle f)); unchanged when None or the test has no drive."""
+    import dataclasses
+
+    if not samples_per_cycle:
+        return tuple(stages)
+    return tuple(dataclasses.replace(s, sample_every=1.0 / (samples_per_cycle * s.freq)) if s.test and s.freq > 0
+                 else s for s in stages)

@@ -77,7 +77,7 @@ def _resume_point(params: ProtocolParams, ckdir: Path):
 
 #: the stability test's own parameters: a run may take its entangled packing from a run that
 #: differs from it in these alone (and in the device)
-TEST_FIELDS = ("freq", "amplitude", "duration")
+TEST_FIELDS = ("freq", "amplitude", "duration", "cycles", "samples_per_cycle")
 
 
 def _comparable(parameters: dict) -> dict:
@@ -369,6 +369,9 @@ def _write_outputs(params, proto, model, stages, state, points, control, loop, r
     verdict = vd.judge_rows(rec.rows, loop.pile_ref.time, thresholds, stage=test.name)
     summary = _summary(params, model, rec.rows, loop, verdict, c,
                        centroid_height(model, state, 0.0 if floor is None else floor), rule, run_info)
+    per_cycle = 1.0 / (test.freq * test.interval(params.save_every)) if test.freq > 0 else 0.0
+    summary["landed"] = vd.landed_rows(rec.rows, loop.pile_ref.time, test.freq, per_cycle, thresholds,
+                                       stage=test.name)
     if (block := proto.summary(params, model, rec.rows, loop, stages, thresholds)) is not None:
         summary[block[0]] = block[1]
     rec.write_metrics()

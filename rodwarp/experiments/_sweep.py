@@ -114,7 +114,9 @@ GRID_KEYS = ("alpha", "freq", "gravity", "static_load", "seed")
 FIXED_KEYS = ("amplitude", "entangle_duration", "duration")
 #: result columns, after the parameter columns
 RESULT_KEYS = ("a_over_g", "F_tilde", "n_rods", "largest_cluster_fraction", "height_kept", "persistence",
-               "rods_left", "contacts_per_rod", "cv_e", "mean_e", "std_e", "stable", "max_penetration_over_d",
+               "rods_left", "contacts_per_rod", "cv_e", "mean_e", "std_e", "stable", "test_duration_s",
+               "cycles_tested", "height_kept_landed", "cluster_landed", "persistence_landed", "stable_landed",
+               "max_penetration_over_d",
                "device", "wall_s", "entangled_from", "worker", "status")
 
 
@@ -373,6 +375,7 @@ def run_point(point: dict, outdir: str, entangled_from: str | None = None, donor
             "rods_left": summary["rods_left"],
             "contacts_per_rod": summary["contacts_per_rod"], "stable": bool(summary["stable"]),
             "max_penetration_over_d": summary.get("max_penetration_over_d"), "device": dev,
+            **_landed_columns(summary),
             "cv_e": a.get("cv_e"), "mean_e": a.get("mean_e"), "std_e": a.get("std_e"),
             "status": "ok",
         })
@@ -384,6 +387,19 @@ def run_point(point: dict, outdir: str, entangled_from: str | None = None, donor
             row["status"] += " | " + traceback.format_exc().replace("\n", " ")
     row["wall_s"] = time.perf_counter() - t0
     return row
+
+
+def _landed_columns(summary: dict) -> dict:
+    """results.csv's test length and landed measures (docs/verdict.md, "The landed phase") from a
+    run's summary: empty where the test was not sampled finely enough to find the landing."""
+    dur = float(summary["parameters"]["duration"])
+    landed = summary.get("landed") or {}
+    stable = landed.get("stable")
+    return {"test_duration_s": dur, "cycles_tested": dur * float(summary["freq"]),
+            "height_kept_landed": landed.get("height_kept"),
+            "cluster_landed": landed.get("largest_cluster_fraction"),
+            "persistence_landed": landed.get("persistence"),
+            "stable_landed": None if stable is None else bool(stable)}
 
 
 def check_points(pts: list[dict], *, local: bool) -> float:

@@ -199,6 +199,118 @@ def judge_metrics_csv(path, t0: float | None = None, thresholds: Thresholds = DE
     return judge_rows(rows, t0, thresholds)
 
 
+# ----------------------------------------------------------------------------- the landed phase
+
+#: samples per drive period below which a cycle's lowest sample may miss the landed packing
+LANDED_SAMPLES = 4
+#: the landed measures average the last this many whole cycles of the test
+LANDED_LAST = 5
+
+LANDED_RULE = ("per whole drive cycle N of the test (samples with N - 1 < (t - t0) f <= N), the sample with the "
+               "lowest centroid: the packing landed, not in flight; h and f there, averaged over the last "
+               "{last} cycles; persistence = the share of cycles whose landed sample has h >= {height_kept:g} and "
+               "f >= {cluster:g}; stable = both means above those thresholds and persistence >= {persistence:g}")
+
+
+def samples_per_cycle(params) -> float:
+    """Samples the stability test takes per drive period: ``samples_per_cycle`` when set, else
+    1 / (freq save_every); 0 for a test without a drive."""
+    if not params.freq > 0:
+        return 0.0
+    k = getattr(params, "samples_per_cycle", None)
+    return float(k) if k else 1.0 / (params.freq * params.save_every)
+
+
+def landed_samples(t, y, freq: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per whole drive cycle N = 1, 2, ... (samples with N - 1 < t f <= N), the index of the
+    sample with the lowest height ``y``: the packing landed. ``t`` is the time since the drive
+    began (s). Returns (cycles, indices); cycles without a sample are left out."""
+    t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
+    k = np.ceil(t * freq - 1e-9).astype(int)
+    cyc = np.unique(k[k >= 1])
+    idx = np.array([np.flatnonzero(k == c)[np.argmin(y[k == c])] for c in cyc], dtype=int)
+    return cyc, idx
+
+
+def landed(times, t0: float, freq: float, height_kept, cluster_fraction, per_cycle: float,
+           thresholds: Thresholds = DEFAULT_THRESHOLDS, last: int = LANDED_LAST) -> dict:
+    """The phase-aware measures of a vibration test: h and f where the packing has landed.
+
+    A sample at one fixed time may catch a thrown pile in the air (h of 2 to 5 at the end of a
+    test whose floor moves by half a rod length). Here each whole drive cycle contributes its
+    sample of lowest centroid height, the landed packing; the measures are the means of h and
+    f at those samples over the last ``last`` cycles, the persistence over every cycle, and the
+    verdict's rule applied to them.
+
+    Parameters
+    ----------
+    times : (K,) float
+        Sample times of the test (s), after its start ``t0`` (s).
+    freq : float
+        The test's drive frequency (Hz).
+    height_kept, cluster_fraction : (K,) float
+        h(t) and f(t) at the samples.
+    per_cycle : float
+        Samples per drive period; below :data:`LANDED_SAMPLES` the landing is not resolved and
+        the measures are None (``why`` says so).
+    thresholds : Thresholds
+        The verdict's thresholds.
+    last : int
+        Cycles averaged (fewer when the test has fewer whole cycles; ``cycles_averaged`` says).
+
+    Returns
+    -------
+    dict
+        ``height_kept``, ``largest_cluster_fraction``, ``persistence``, ``stable`` (None when not
+        resolved), ``cycles`` (whole cycles sampled), ``cycles_averaged``, ``samples_per_cycle``,
+        ``per_cycle`` (cycle, h, f of every landed sample), ``rule`` and ``why`` (None or why the
+        measures are missing).
+    """
+    out = {"height_kept": None, "largest_cluster_fraction": None, "persistence": None, "stable": None,
+           "cycles": 0, "cycles_averaged": 0, "samples_per_cycle": float(per_cycle),
+           "per_cycle": {"cycle": [], "height_kept": [], "largest_cluster_fraction": []},
+           "rule": LANDED_RULE.format(last=last, **thresholds.to_dict()), "why": None}
+    if not freq > 0:
+        out["why"] = "the test has no drive: there is no cycle to find the landing in"
+        return out
+    if per_cycle < LANDED_SAMPLES - 1e-9:
+        out["why"] = (f"{per_cycle:.3g} samples per drive cycle; the landed phase needs at least {LANDED_SAMPLES} "
+                      f"(--samples-per-cycle 8)")
+        return out
+    t = np.asarray(times, dtype=float) - t0
+    h = np.asarray(height_kept, dtype=float)
+    f = np.asarray(cluster_fraction, dtype=float)
+    # a cycle is whole when the test reached its end (the last sample may close it a hair early)
+    whole = t * freq <= np.floor(t[-1] * freq + 1e-6) + 1e-9 if t.size else t > 0
+    cyc, idx = landed_samples(t[whole], h[whole], freq)
+    if cyc.size == 0:
+        out["why"] = "the test is shorter than one drive cycle"
+        return out
+    hl, fl = h[whole][idx], f[whole][idx]
+    n = min(last, cyc.size)
+    ent = entangled(hl, fl, thresholds)
+    tau = float(np.mean(ent))
+    h_mean, f_mean = float(np.mean(hl[-n:])), float(np.mean(fl[-n:]))
+    out.update({"height_kept": h_mean, "largest_cluster_fraction": f_mean, "persistence": tau,
+                "stable": bool(h_mean >= thresholds.height_kept and f_mean >= thresholds.cluster
+                               and tau >= thresholds.persistence),
+                "cycles": int(cyc.size), "cycles_averaged": int(n),
+                "per_cycle": {"cycle": cyc.tolist(), "height_kept": hl.tolist(),
+                              "largest_cluster_fraction": fl.tolist()}})
+    return out
+
+
+def landed_rows(rows, t0: float, freq: float, per_cycle: float, thresholds: Thresholds = DEFAULT_THRESHOLDS,
+                stage: str | None = None) -> dict:
+    """:func:`landed` on metric rows (dicts as in metrics.csv) of the test stage ``stage``
+    (None: the stage of the first row with a ``height_kept``)."""
+    if stage is None:
+        stage = next((r["stage"] for r in rows if r.get("height_kept") not in (None, "")), None)
+    test = [r for r in rows if r["stage"] == stage and float(r["time"]) > t0]
+    col = lambda k: [float(r[k]) for r in test]  # noqa: E731
+    return landed(col("time"), t0, freq, col("height_kept"), col("largest_cluster_fraction"), per_cycle, thresholds)
+
+
 # ----------------------------------------------------------------------------- pile geometry
 
 

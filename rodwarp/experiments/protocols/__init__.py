@@ -50,8 +50,11 @@ def register_protocol(proto: Protocol) -> Protocol:
 
 def plan(params) -> tuple:
     """The stages of ``params.protocol`` for ``params``
-    (:class:`~rodwarp.experiments.ProtocolParams`), from its plug-in."""
-    return protocol(params.protocol).plan(params)
+    (:class:`~rodwarp.experiments.ProtocolParams`), from its plug-in; the test stage sampled
+    ``samples_per_cycle`` times per drive period when that is set."""
+    from rodwarp.experiments._plan import sampled_per_cycle
+
+    return sampled_per_cycle(protocol(params.protocol).plan(params), getattr(params, "samples_per_cycle", None))
 
 
 def protocol(name: str) -> Protocol:

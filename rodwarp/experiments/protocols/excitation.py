@@ -25,6 +25,7 @@ import numpy as np
 
 from rodwarp.experiments._option import param
 from rodwarp.experiments._plan import Stage, Vibrate
+from rodwarp.experiments._verdict import samples_per_cycle
 from rodwarp.experiments.protocols.base import Protocol
 from rodwarp.validation import Range
 from rodwarp.experiments.protocols.lab import FLOOR, TUBE
@@ -272,10 +273,10 @@ def check_excitation(p) -> None:
         fail(f"{n} rods of {p.length * 1e3:g} mm x {p.diameter * 1e3:.3g} mm fill the {p.tube_diameter * 1e3:g} mm tube "
              f"to about {h * 1e3:.0f} mm at phi alpha = 5.4, above the container's {p.container_height * 1e3:g} mm; "
              f"lower --n-rods or widen --tube-diameter")
-    if p.a_over_g > 1 and 1.0 / (p.freq * p.save_every) < 4 - 1e-9 and p.duration > 0:
-        fail(f"--save-every {p.save_every:g} s gives {1.0 / (p.freq * p.save_every):.3g} samples per cycle at "
+    if p.a_over_g > 1 and samples_per_cycle(p) < 4 - 1e-9 and p.duration > 0:
+        fail(f"--save-every {p.save_every:g} s gives {samples_per_cycle(p):.3g} samples per cycle at "
              f"{p.freq:g} Hz; the landed height of each cycle (Fig. 1E, tau) needs at least 4: use --save-every "
-             f"{1.0 / (4 * p.freq):g} or less")
+             f"{1.0 / (4 * p.freq):g} or less, or --samples-per-cycle 8")
 
 
 @dataclass(frozen=True)

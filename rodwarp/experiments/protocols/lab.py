@@ -13,6 +13,7 @@ import numpy as np
 
 from rodwarp.experiments._option import param
 from rodwarp.experiments._plan import Stage, Vibrate
+from rodwarp.experiments._verdict import LANDED_SAMPLES, landed_samples, samples_per_cycle  # noqa: F401 (re-exported)
 from rodwarp.experiments.protocols.base import Protocol
 from rodwarp.validation import MAX_MU, Range
 
@@ -180,29 +181,13 @@ def landed_heights(t: np.ndarray, y: np.ndarray, freq: float) -> tuple[np.ndarra
     return cyc, np.asarray(y, dtype=float)[idx]
 
 
-def landed_samples(t, y, freq: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per whole drive cycle N = 1, 2, ... (samples with N - 1 < t f <= N), the index of the
-    sample with the lowest height ``y``: the packing landed (:func:`landed_heights`). ``t`` is
-    the time since the shaking began (s). Returns (cycles, indices); cycles without a sample
-    are left out."""
-    t, y = np.asarray(t, dtype=float), np.asarray(y, dtype=float)
-    k = np.ceil(t * freq - 1e-9).astype(int)
-    cyc = np.unique(k[k >= 1])
-    idx = np.array([np.flatnonzero(k == c)[np.argmin(y[k == c])] for c in cyc], dtype=int)
-    return cyc, idx
-
-
-#: samples per drive period below which a cycle's lowest sample may miss the landed packing
-LANDED_SAMPLES = 4
-
-
 def landed_sampling_warning(params) -> str | None:
     """Why Fig. 1E's landed heights of a shaken lab run cannot be trusted, or None: the plate
     throws the packing (a/g > 1) and ``save_every`` gives fewer than LANDED_SAMPLES samples per
     cycle, so the lowest sample of a cycle may be in flight."""
     if params.duration <= 0 or params.freq <= 0 or params.a_over_g <= 1.0:
         return None
-    per = 1.0 / (params.freq * params.save_every)
+    per = samples_per_cycle(params)
     if per >= LANDED_SAMPLES - 1e-9:
         return None
     return (f"--save-every {params.save_every:g} s gives {per:.3g} samples per cycle at {params.freq:g} Hz; at "
@@ -273,7 +258,7 @@ def shake_result(params, rows, t0: float, thresholds) -> dict:
             "cycles": ((t - t0) * params.freq).tolist(),
             "centroid_height_ratio": y.tolist(),
             "landed": {"cycle": k_cyc.tolist(), "centroid_height_ratio": y_landed.tolist(),
-                       "samples_per_cycle": float(1.0 / (params.freq * params.save_every)),
+                       "samples_per_cycle": samples_per_cycle(params),
                        "warning": landed_sampling_warning(params),
                        "rule": "per cycle N (samples with N-1 < (t - t0) f <= N), the lowest "
                                "centroid height above the plate over y_c(0): the packing landed, "
