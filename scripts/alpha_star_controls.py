@@ -95,14 +95,18 @@ BLOCKS = (
           why="alpha 200 (elastic at this scale too) where alpha 100 fails"),
     Block("paper-laws", "contact law", "paper", "exact locked", (15, 25, 50), (0, 1, 2), ("l/1000 a/g 1",),
           why="the exact law with the spin locked, at the baseline drive"),
-    Block("paper-imc", "contact law", "paper", "IMC nu 1e-3", (15, 25, 50), (0, 1, 2), ("l/1000 a/g 1",),
-          why="IMC at the baseline drive, 50 cycles"),
     Block("paper-N540", "number of rods", "paper", "exact", (15, 25), (0, 1, 2), ("l/1000 a/g 1",),
           extra=(("n_rods", 540),), why="N = 540 at every alpha, the box widened to keep the packing's height"),
+    Block("lab-drives-5", "drive", "lab", "exact", (25, 50), (3, 4), ALL_DRIVES,
+          why="five seeds at the alphas of the small drives' bracket"),
+    Block("paper-imc", "contact law", "paper", "IMC nu 1e-3", (15, 25, 50), (0, 1, 2), ("l/1000 a/g 1",),
+          why="IMC at the baseline drive, 50 cycles"),
     Block("paper-large", "drive", "paper", "exact", (100,), (0, 1, 2), ("l/1000 a/g 1", "l/20 a/g 2.5"),
           why="alpha 100 under the large drive at the paper's scale (elastic rods), against the lab scale's"),
-    Block("lab-drives-5", "drive", "lab", "exact", (25, 50, 100), (3, 4), ALL_DRIVES,
-          why="five seeds at every alpha of the map"),
+    Block("lab-drives-100-5", "drive", "lab", "exact", (100,), (3, 4), ALL_DRIVES,
+          why="five seeds at alpha 100"),
+    Block("lab-200-5", "drive", "lab", "exact", (200,), (3, 4), ("l/20 a/g 2.5", "l/2 a/g 2.5"),
+          why="five seeds at alpha 200 under the large drives"),
     Block("paper-baseline-5", "baseline", "paper", "exact", (25, 50), (3, 4),
           ("l/1000 a/g 1", "l/1000 a/g 2.5", "l/20 a/g 2.5"), why="five seeds at the baseline's bracket"),
     Block("lab-imc-200", "contact law", "lab", "IMC nu 1e-3", (200,), (0, 1, 2), LARGE,
@@ -112,8 +116,9 @@ BLOCKS = (
 )
 BLOCK_NAMES = {b.name: b for b in BLOCKS}
 #: blocks whose rows join another block's brackets (more seeds or alphas of the same level)
-LEVEL_OF = {"lab-drives-5": "lab-drives", "lab-200": "lab-drives", "paper-baseline-5": "paper-baseline",
-            "paper-large": "paper-baseline", "lab-imc-200": "lab-imc"}
+LEVEL_OF = {"lab-drives-5": "lab-drives", "lab-drives-100-5": "lab-drives", "lab-200": "lab-drives",
+            "lab-200-5": "lab-drives", "paper-baseline-5": "paper-baseline", "paper-large": "paper-baseline",
+            "lab-imc-200": "lab-imc"}
 
 
 def drive_freq(a_over_l: float, ag: float, length: float, gravity: float) -> float:
