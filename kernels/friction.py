@@ -51,6 +51,19 @@ def approach_target(gap: wp.float64, params: StepParams):
 
 
 @wp.func
+def restitution_target(target: wp.float64, gap: wp.float64, vn: wp.float64, params: StepParams):
+    """Newton restitution (``params.restitution`` e > 0): a contact approaching faster than
+    ``params.bounce_speed`` at the start of the step (normal relative velocity ``vn`` < -v_min,
+    before any contact impulse of the step) that touches or closes within it
+    (gap + vn dt <= 0) must leave at least at -e vn; otherwise ``target`` (the
+    :func:`approach_target`) stands. Callers call it only when e > 0, so e = 0 is the law as
+    it was, bit for bit."""
+    if vn < -params.bounce_speed and gap + vn * params.dt <= F0:
+        return wp.max(target, -params.restitution * vn)
+    return target
+
+
+@wp.func
 def local_frame(W: wp.mat33d, n: wp.vec3d, target: wp.float64):
     """The parts of a contact's local problem fixed within a step: mobility, tangent basis,
     the mobility's entries in it, whether normal and tangent couple, the normal target."""
@@ -290,13 +303,21 @@ def relaxed(P_new: wp.vec3d, P: wp.vec3d, n: wp.vec3d, mu: wp.float64, relax: wp
 
 @wp.kernel
 def prepare_rod_contacts(model: RodModel, x: wp.array(dtype=wp.vec3d), contacts: RodContacts,
-                         tangent: wp.array(dtype=wp.vec3d), params: StepParams, frames: wp.array(dtype=ContactFrame)):
-    """Per contact, once per step: its two sides, mobility, tangent basis and normal target."""
+                         tangent: wp.array(dtype=wp.vec3d), params: StepParams, frames: wp.array(dtype=ContactFrame),
+                         v0: wp.array(dtype=wp.vec3d), spin0: wp.array(dtype=wp.float64)):
+    """Per contact, once per step: its two sides, mobility, tangent basis and normal target.
+    ``v0``, ``spin0``: the velocities before this step's contact impulses, rigid rods as bodies
+    (:func:`rigid_to_body`), read only with restitution (:func:`restitution_target`)."""
     k = wp.tid()
     if k >= contacts.count:
         return
     a, b, W = rod_contact_sides(k, model, x, contacts, tangent)
-    f = local_frame(W, contacts.normal[k], approach_target(contacts.gap[k], params))
+    n = contacts.normal[k]
+    target = approach_target(contacts.gap[k], params)
+    if params.restitution > F0:
+        vn = wp.dot(side_velocity(a, v0, spin0) - side_velocity(b, v0, spin0), n)
+        target = restitution_target(target, contacts.gap[k], vn, params)
+    f = local_frame(W, n, target)
     f.gap = contacts.gap[k]
     f.a = a
     f.b = b

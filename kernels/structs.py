@@ -215,3 +215,5 @@ class StepParams:
     length_tolerance: wp.float64  # ... and with no edge length off by more than this (m)
     law: int  # contact law: its tag (kernels/contact_laws.py; host rodwarp/sim/contact_law.py)
     law_params: LawParams  # the law's parameters, as its host module packs them (device_params)
+    restitution: wp.float64  # Newton coefficient of restitution e of the exact law (0: perfectly inelastic, off)
+    bounce_speed: wp.float64  # approach speed (m/s) a contact must exceed to bounce (resting contacts do not)

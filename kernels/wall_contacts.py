@@ -9,8 +9,8 @@ drive. One thread per rod that touches a wall, so a rod's wall contacts never ra
 import warp as wp
 
 from rodwarp.kernels.constants import F0, F1, FAR
-from rodwarp.kernels.friction import (approach_target, contact_side, local_frame, relaxed, side_apply,
-                                      side_apply_atomic, side_velocity, solve_contact)
+from rodwarp.kernels.friction import (approach_target, contact_side, local_frame, relaxed, restitution_target,
+                                      side_apply, side_apply_atomic, side_velocity, solve_contact)
 from rodwarp.kernels.structs import ContactFrame, RodModel, StepParams, WallContacts, Walls
 from rodwarp.kernels.walls import wall_surface, wall_velocity
 
@@ -36,13 +36,19 @@ def vertex_edge(model: RodModel, i: int):
 
 @wp.func
 def wall_frame(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d), walls: Walls,
-               params: StepParams, contacts: WallContacts, k: int):
-    """The local frame of wall contact k (vertex x wall), side ``a`` the rod's."""
+               params: StepParams, contacts: WallContacts, k: int, v0: wp.array(dtype=wp.vec3d),
+               spin0: wp.array(dtype=wp.float64)):
+    """The local frame of wall contact k (vertex x wall), side ``a`` the rod's; ``v0``,
+    ``spin0`` as in ``prepare_rod_contacts`` (restitution only)."""
     i = k // walls.n
     e, se = vertex_edge(model, i)
     n = contacts.normal[k]
     c, W = contact_side(model, x, tangent, e, se, n * (-model.radius[model.vertex_rod[i]]))
-    f = local_frame(W, n, approach_target(contacts.gap[k], params))
+    target = approach_target(contacts.gap[k], params)
+    if params.restitution > F0:
+        vn = wp.dot(side_velocity(c, v0, spin0) - wall_velocity(walls, k % walls.n), n)
+        target = restitution_target(target, contacts.gap[k], vn, params)
+    f = local_frame(W, n, target)
     f.gap = contacts.gap[k]
     f.a = c
     return f
@@ -50,26 +56,29 @@ def wall_frame(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(d
 
 @wp.func
 def write_wall_frames(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d), walls: Walls,
-                      params: StepParams, contacts: WallContacts, r: int, base: int):
+                      params: StepParams, contacts: WallContacts, r: int, base: int, v0: wp.array(dtype=wp.vec3d),
+                      spin0: wp.array(dtype=wp.float64)):
     """The frames and keys of rod r's wall contacts in reach, written from slot ``base`` on."""
     j = base
     for k in range(model.rod_start[r] * walls.n, model.rod_start[r + 1] * walls.n):
         if contacts.gap[k] < FAR:
             contacts.key[j] = k
-            contacts.frames[j] = wall_frame(model, x, tangent, walls, params, contacts, k)
+            contacts.frames[j] = wall_frame(model, x, tangent, walls, params, contacts, k, v0, spin0)
             j += 1
 
 
 @wp.kernel
 def prepare_wall_contacts(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d), walls: Walls,
                           params: StepParams, contacts: WallContacts, v: wp.array(dtype=wp.vec3d),
-                          spin: wp.array(dtype=wp.float64)):
+                          spin: wp.array(dtype=wp.float64), v0: wp.array(dtype=wp.vec3d),
+                          spin0: wp.array(dtype=wp.float64)):
     """One thread per rod: gaps of its vertex spheres to every wall at the start of the step,
     warm-started impulses (applied); a rod with any contact within reach joins ``active``
     with a span of frames (written when they fit; the host grows the list otherwise).
 
     A capsule touches a plane first at a segment endpoint, so vertex spheres suffice.
-    Contacts out of reach get gap = +inf and zero impulse.
+    Contacts out of reach get gap = +inf and zero impulse. ``v0``, ``spin0``: the velocities
+    before this step's contact impulses, rigid rods as bodies (restitution only).
     """
     r = wp.tid()
     a = model.rod_start[r]
@@ -104,15 +113,16 @@ def prepare_wall_contacts(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent:
     contacts.span[q] = wp.vec2i(base, count)
     if base + count > contacts.frames.shape[0]:
         return
-    write_wall_frames(model, x, tangent, walls, params, contacts, r, base)
+    write_wall_frames(model, x, tangent, walls, params, contacts, r, base, v0, spin0)
 
 
 @wp.kernel
 def fill_wall_frames(model: RodModel, x: wp.array(dtype=wp.vec3d), tangent: wp.array(dtype=wp.vec3d), walls: Walls,
-                     params: StepParams, contacts: WallContacts):
+                     params: StepParams, contacts: WallContacts, v0: wp.array(dtype=wp.vec3d),
+                     spin0: wp.array(dtype=wp.float64)):
     """One thread per active rod: its span of frames (after the host grew the list)."""
     q = wp.tid()
-    write_wall_frames(model, x, tangent, walls, params, contacts, contacts.active[q], contacts.span[q][0])
+    write_wall_frames(model, x, tangent, walls, params, contacts, contacts.active[q], contacts.span[q][0], v0, spin0)
 
 
 @wp.func

@@ -61,7 +61,7 @@ same numbers bit for bit (``tests/test_restitution.py``).
 
 Usage::
 
-    python scripts/restitution.py [--quick] [--out FOLDER]
+    python scripts/restitution.py [--quick] [--only-restitution-option] [--out FOLDER]
 
 Writes ``restitution.csv`` (one row per case: medians over the phases), ``restitution.md``
 (tables, machine, versions, command) and ``restitution.png`` (e against the impact speed, one
@@ -181,19 +181,24 @@ class Law:
         IMC's k_c in rod weights per delta (None: rodwarp's default, 1000).
     iterations : int
         Most Gauss-Seidel sweeps per step (the protocol's 10 unless stated).
+    restitution : float
+        The exact law's coefficient of restitution option e (0: off, the law's default;
+        ``rodwarp simulate --restitution``).
     """
 
     name: str
     dt: float | None
     stiffness_weights: float | None = None
     iterations: int = ITERATIONS
+    restitution: float = 0.0
 
     @property
     def label(self) -> str:
         step = "rodwarp's step" if self.dt is None else f"dt {self.dt:g} s"
         k = "" if self.stiffness_weights is None else f", k_c {self.stiffness_weights:g} mg/delta"
         it = "" if self.iterations == ITERATIONS else f", {self.iterations} sweeps"
-        return f"{self.name}, {step}{k}{it}"
+        e = f", e = {self.restitution:g}" if self.restitution else ""
+        return f"{self.name}{e}, {step}{k}{it}"
 
 
 LAWS = (
@@ -205,7 +210,15 @@ LAWS = (
     Law("imc", DISMECH_DT),
     Law("exact", DISMECH_DT),
     Law("imc", DISMECH_DT, 100.0),
+    # the exact law's restitution option (rigid rods only: RESTITUTION_MODELS)
+    Law("exact", None, restitution=0.5),
+    Law("exact", None, restitution=0.9),
 )
+#: the rod models the restitution option's rows are measured for (a rigid rod's rebound is the
+#: contact's alone; an elastic rod's also rings in bending)
+RESTITUTION_MODELS = ("rigid",)
+#: the restitution option's laws
+RESTITUTION_LAWS = tuple(law for law in LAWS if law.restitution)
 QUICK_LAWS = (Law("exact", None), Law("imc", None), Law("imc", DISMECH_DT))
 
 
@@ -237,6 +250,7 @@ def build(case: Case, first_dt: float | None = None):
     """
     from rodwarp import RodSet
     from rodwarp.sim import STEEL, ImcLaw, ModelBuilder
+    from rodwarp.sim.law_exact import ExactLaw
 
     rods, law, v = case.rods, case.law, case.speed
     sc = rods.scale
@@ -264,6 +278,8 @@ def build(case: Case, first_dt: float | None = None):
         weight = STEEL.density * math.pi * r * r * l * sc.gravity
         k = None if law.stiffness_weights is None else law.stiffness_weights * weight / delta
         contact_law = ImcLaw(delta=delta, stiffness=k)
+    elif law.restitution:
+        contact_law = ExactLaw(restitution=law.restitution)
     else:
         contact_law = "exact"
     b = ModelBuilder(rs, STEEL, gravity=(0.0, 0.0, -sc.gravity), mu=MU, rod_contacts=case.kind == "cross",
@@ -398,15 +414,18 @@ def measure(case: Case, trace: list | None = None, window: float | None = None) 
             "wall_s": time.perf_counter() - t_wall, "failure": failure}
 
 
-def cases(quick: bool = False) -> list[list[Case]]:
-    """The measurement plan: one list of cases (its phases) per row of the results."""
+def cases(quick: bool = False, only_restitution: bool = False) -> list[list[Case]]:
+    """The measurement plan: one list of cases (its phases) per row of the results
+    (``only_restitution``: the restitution option's rows alone)."""
     rods = RODS[1:2] if quick else RODS
-    laws = QUICK_LAWS if quick else LAWS
+    laws = RESTITUTION_LAWS if only_restitution else QUICK_LAWS if quick else LAWS
     speeds = QUICK_SPEEDS if quick else SPEEDS
     plan = []
     for rc in rods:
         for kind in KINDS:
             for law in laws:
+                if law.restitution and rc.model not in RESTITUTION_MODELS:
+                    continue
                 phases = (0.0,) if (quick or (law.dt is not None and law.dt <= 2e-5)) else PHASES
                 for v in speeds:
                     plan.append([Case(kind, rc, law, v, p) for p in phases])
@@ -432,6 +451,7 @@ def summarise(group: list[Case], results: list[dict]) -> dict:
     d = sc.length / rc.alpha
     return {"impact": c.kind, "law": law.name, "dt_s": "adaptive" if law.dt is None else law.dt,
             "iterations": law.iterations, "stiffness_weights_per_delta": law.stiffness_weights or 1000.0,
+            "restitution": law.restitution,
             "scale": sc.name, "length_m": sc.length, "diameter_m": d, "alpha": rc.alpha, "gravity_m_s2": sc.gravity,
             "model": rc.model, "vertices": rc.vertices if rc.model == "elastic" else 2,
             "nominal_speed_m_s": c.speed, "impact_speed_m_s": med("v_in"), "rebound_speed_m_s": med("v_out"),
@@ -471,7 +491,7 @@ def _f(x, digits: int = 3) -> str:
 CSV_COLUMNS = ("impact", "law", "dt_s", "iterations", "stiffness_weights_per_delta", "model", "alpha", "scale",
                "length_m", "diameter_m", "gravity_m_s2", "vertices", "nominal_speed_m_s", "impact_speed_m_s",
                "rebound_speed_m_s", "e", "e_min", "e_max", "phases", "contact_time_s", "mean_dt_s", "steps",
-               "max_depth_over_d", "wall_s", "notes")
+               "max_depth_over_d", "wall_s", "notes", "restitution")
 
 
 def to_csv(rows: list[dict]) -> str:
@@ -480,7 +500,7 @@ def to_csv(rows: list[dict]) -> str:
     w = csv.DictWriter(buf, fieldnames=CSV_COLUMNS, lineterminator="\n", extrasaction="ignore")
     w.writeheader()
     for r in rows:
-        w.writerow({k: ("" if r[k] is None else r[k]) for k in CSV_COLUMNS})
+        w.writerow(r["_raw"] if "_raw" in r else {k: ("" if r[k] is None else r[k]) for k in CSV_COLUMNS})
     return buf.getvalue()
 
 
@@ -488,7 +508,8 @@ def _law_key(r: dict) -> str:
     step = "rodwarp's step" if r["dt_s"] == "adaptive" else f"dt {r['dt_s']:g} s"
     k = "" if r["stiffness_weights_per_delta"] == 1000.0 else f", k_c {r['stiffness_weights_per_delta']:g} mg/delta"
     it = "" if int(r["iterations"]) == ITERATIONS else f", {r['iterations']} sweeps"
-    return f"{r['law']}, {step}{k}{it}"
+    e = f", e = {float(r['restitution']):g}" if float(r.get("restitution") or 0) else ""
+    return f"{r['law']}{e}, {step}{k}{it}"
 
 
 def _rods_key(r: dict) -> str:
@@ -508,7 +529,9 @@ def markdown(rows: list[dict], meta: dict) -> str:
              f"(rodwarp {v['rodwarp']}, git {v['git']['commit']}, warp {v['warp']}, numpy {v['numpy']}, "
              f"Python {v['python']}; {meta['device']}). The engine this script uses (rodwarp/sim, kernels) was "
              + ("modified in the working tree: " + ", ".join(dirty) if dirty else "as committed")
-             + ". Deterministic: no random choice; the scenes are fixed and the CPU sweeps run in order.", "",
+             + ". Deterministic: no random choice; the scenes are fixed and the CPU sweeps run in order."
+             + (f" Rows other than the restitution option's (exact, e = ...) are kept from the results "
+                f"{meta['merged'][0].lower()}{meta['merged'][1:]}." if meta.get("merged") else ""), "",
              "e = max(v_out, 0) / v_in: v_in is the largest approach speed of the rod's mass centroid along the "
              "normal (for crossed rods, the upper rod's centroid relative to the lower's) before the rebound, v_out "
              "the largest separating normal speed of the same within the window after the impact starts (the first "
@@ -560,7 +583,7 @@ def chart(rows: list[dict], path: Path, title: str) -> None:
     laws = list(dict.fromkeys(_law_key(r) for r in rows))
     rods = list(dict.fromkeys(_rods_key(r) for r in rows))
     colors = dict(zip(laws, ("black", "tab:gray", "tab:blue", "tab:cyan", "tab:green", "tab:red", "tab:brown",
-                             "tab:orange")))
+                             "tab:orange", "tab:purple", "tab:olive", "tab:pink")))
     markers = dict(zip(rods, ("o", "s", "D", "^", "v", "P")))
     fig = Figure(figsize=(15, 5.2))
     axes = fig.subplots(1, len(KINDS), sharey=True)
@@ -607,6 +630,43 @@ def write_outputs(rows: list[dict], out: Path, meta: dict) -> None:
           f"({meta['device'].split(' (')[0]}, rodwarp {v['rodwarp']}, warp {v['warp']}; {meta['command']})")
 
 
+def read_csv(path: Path) -> list[dict]:
+    """Rows of a ``restitution.csv`` back as :func:`summarise` makes them (numbers as numbers,
+    empty cells as None; a file from before the restitution option: restitution 0)."""
+    rows = []
+    with open(path, newline="") as fh:
+        for r in csv.DictReader(fh):
+            row = {}
+            for k in CSV_COLUMNS:
+                v = r.get(k, "0" if k == "restitution" else "")
+                if v == "":
+                    row[k] = None
+                elif k in ("impact", "law", "model", "scale", "notes") or (k == "dt_s" and v == "adaptive"):
+                    row[k] = v
+                elif k in ("iterations", "vertices", "phases"):
+                    row[k] = int(float(v))
+                else:
+                    row[k] = float(v)
+            if row["notes"] is None:
+                row["notes"] = ""
+            # written back as read (a float read and written again would change its text)
+            row["_raw"] = {k: r.get(k, "0.0" if k == "restitution" else "") for k in CSV_COLUMNS}
+            rows.append(row)
+    return rows
+
+
+def merge_rows(old: list[dict], new: list[dict]) -> list[dict]:
+    """``old`` without its restitution-option rows, each configuration's new rows after its
+    own (rows keep the plan's order: rod configuration, impact, law)."""
+    kept = [r for r in old if not r.get("restitution")]
+    out = []
+    for rk in dict.fromkeys(_rods_key(r) for r in kept + new):
+        for kind in KINDS:
+            out += [r for r in kept if _rods_key(r) == rk and r["impact"] == kind]
+            out += [r for r in new if _rods_key(r) == rk and r["impact"] == kind]
+    return out
+
+
 def _engine_dirty() -> list[str]:
     """Files of the engine this script runs (rodwarp/sim, kernels) modified in the working tree."""
     import subprocess
@@ -617,6 +677,17 @@ def _engine_dirty() -> list[str]:
     except (OSError, subprocess.SubprocessError):
         return ["unknown (git did not answer)"]
     return [ln[3:] for ln in out.splitlines() if ln.strip()]
+
+
+def _merged_from(md: Path) -> str:
+    """The generation line of the results a merge keeps (their first 'Generated by' sentence)."""
+    try:
+        for line in md.read_text().splitlines():
+            if line.startswith("Generated by "):
+                return line.split(". The engine")[0].split(" (rodwarp")[0]
+    except OSError:
+        pass
+    return "an earlier run"
 
 
 def _fail(msg: str) -> int:
@@ -634,6 +705,9 @@ def main(argv=None) -> int:
     ap = _Parser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="a small subset, for tests (alpha 100 elastic, 2 speeds)")
     ap.add_argument("--out", default=str(OUT), help="output folder (default benchmarks/results/restitution)")
+    ap.add_argument("--only-restitution-option", action="store_true",
+                    help="measure only the exact law's restitution option rows (e = 0.5, 0.9; rigid rods) and "
+                         "merge them into the folder's restitution.csv (the other rows kept as they are)")
     a = ap.parse_args(argv)
     out = Path(a.out)
     if not a.out.strip():
@@ -647,12 +721,21 @@ def main(argv=None) -> int:
 
     wp.config.quiet = True
     cpu0 = time.process_time()
-    rows = run_plan(cases(a.quick))
-    cmd = "python scripts/restitution.py" + (" --quick" if a.quick else "")
+    only = a.only_restitution_option
+    if only and not (out / "restitution.csv").is_file():
+        return _fail(f"--only-restitution-option merges into {out / 'restitution.csv'}, which does not exist; run "
+                     "without it first")
+    rows = run_plan(cases(a.quick, only_restitution=only))
+    if only:
+        rows = merge_rows(read_csv(out / "restitution.csv"), rows)
+    cmd = "python scripts/restitution.py" + (" --quick" if a.quick else "") + (" --only-restitution-option"
+                                                                               if only else "")
     if a.out != str(OUT):
         cmd += f" --out {common.command_arg(a.out)}"
     meta = {"command": cmd, "date": common.utc_now(), "versions": common.versions(),
             "device": common.device_name("cpu"), "cpu_s": time.process_time() - cpu0, "engine_dirty": _engine_dirty()}
+    if only:
+        meta["merged"] = _merged_from(out / "restitution.md")
     write_outputs(rows, out, meta)
     print(f"wrote {out / 'restitution.csv'}, .md and .png ({meta['cpu_s']:.0f} s of CPU)")
     return 0

@@ -122,11 +122,11 @@ def test_the_registry_names_builds_and_refuses_laws():
     assert ContactLaw.from_tag("exact") == ExactLaw()
     assert (ExactLaw().tag, ImcLaw().tag) == (0, 1)
     assert ImcLaw(delta=1e-3, nu=0.01, stiffness=2.0).device_params() == (2.0, 15e3, 1.5e3, 1e-3, 0.01)
-    assert ImcLaw.parameters() == {"delta": None, "nu": 1e-3, "stiffness": None} and ExactLaw.parameters() == {}
+    assert ImcLaw.parameters() == {"delta": None, "nu": 1e-3, "stiffness": None} and ExactLaw.parameters() == {"restitution": 0.0}
     with pytest.raises(RodwarpError, match="exact or imc"):
         ContactLaw("hertz")
     with pytest.raises(TypeError):
-        ContactLaw("exact", nu=0.01)  # the exact law has no parameters
+        ContactLaw("exact", nu=0.01)  # the exact law's one parameter is restitution
     with pytest.raises(RodwarpError, match="already registered"):
 
         class Other(ExactLaw):

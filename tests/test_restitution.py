@@ -74,7 +74,10 @@ def test_outputs_and_plan(tmp_path):
     plan = rs.cases(quick=True)
     assert len(plan) == 3 * len(rs.QUICK_LAWS) * len(rs.QUICK_SPEEDS)
     assert all(len(g) == 1 for g in plan)
-    assert len(rs.cases()) == len(rs.RODS) * 3 * len(rs.LAWS) * len(rs.SPEEDS)
+    plain = [law for law in rs.LAWS if not law.restitution]
+    rigid = [rc for rc in rs.RODS if rc.model in rs.RESTITUTION_MODELS]
+    assert len(rs.cases()) == (len(rs.RODS) * len(plain) + len(rigid) * len(rs.RESTITUTION_LAWS)) * 3 * len(rs.SPEEDS)
+    assert len(rs.cases(only_restitution=True)) == len(rigid) * len(rs.RESTITUTION_LAWS) * 3 * len(rs.SPEEDS)
     # two cheap rows (rodwarp's step) through the writers
     plan = [[rs.Case("flat", RIGID, EXACT, 1.0, p) for p in rs.PHASES], [rs.Case("flat", RIGID, IMC, 1.0)]]
     rows = rs.run_plan(plan, progress=False)

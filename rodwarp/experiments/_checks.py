@@ -162,6 +162,9 @@ def _check_options(p, explicit: frozenset):
         for name in ("imc_delta", "imc_nu", "imc_stiffness"):
             if getattr(p, name) is not None:
                 fail(f"--{name.replace('_', '-')} only applies with --contact-law imc; add it or drop the option")
+    if p.contact_law == "imc" and p.restitution:
+        fail(f"--restitution {p.restitution:g} only applies with the exact contact law (IMC's penalty has its own "
+             "rebound); drop it or use --contact-law exact")
     if ("fill_height" in proto.fields and p.n_rods is not None
             and ("fill_height" in explicit or _changed(p, ["fill_height"]))):
         fail(f"--fill-height and --n-rods both set the lab protocol's rod count (--fill-height {p.fill_height:g} "

@@ -108,6 +108,11 @@ class RunParams:
     imc_stiffness: float | None = _param(None, "IMC contact stiffness k_c (N/m; default 1000 rod weights per "
                                                "delta).", "kc",
           range=Range(gt=0, le=1e15, unit="N/m", hint="also checked in rod weights per delta; leave it out for 1000 rod weights per delta"))
+    restitution: float | None = _param(None, "Coefficient of restitution e of the exact contact law (0: perfectly "
+                                             "inelastic, the default; e > 0: a contact approaching faster than "
+                                             "max(2 g dt, 1 mm/s) leaves at e times its approach speed; "
+                                             "docs/physics.md, 'Restitution'). Not with --contact-law imc.", "e",
+          range=Range(ge=0, le=1, hint="e is 0 (perfectly inelastic) to 1 (elastic)"))
     save_every: float = _param(0.1, "Metrics and frame interval (s of simulated time).", "save",
           range=Range(gt=0, le=1e5, unit="s"))
     checkpoint_every: float = _param(1.0, "Checkpoint interval (s of simulated time).", "ckpt",

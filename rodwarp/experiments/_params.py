@@ -64,7 +64,7 @@ class _Derived:
         from rodwarp.sim.contact_law import IMC_NU, ContactLaw
 
         if self.law != "imc":
-            return ContactLaw("exact")
+            return ContactLaw("exact", restitution=self.restitution or 0.0)
         delta = None if self.imc_delta is None else self.imc_delta * self.diameter
         return ContactLaw("imc", delta=delta, nu=self.imc_nu if self.imc_nu is not None else IMC_NU,
                           stiffness=self.imc_stiffness)
@@ -257,7 +257,7 @@ _NAME_ORDER = ("protocol", "alpha", "freq", "amplitude", "gravity", "duration", 
                "fill_height", "container_diameter", "container_height", "tube_diameter", "pour_duration", "strains",
                "press_duration", "lift_duration", "mu", "wall_mu", "young", "density", "dt", "iterations", "rod_model",
                "step_safety", "steps_per_period", "rolling", "contact_law", "imc_delta", "imc_nu", "imc_stiffness",
-               "save_every", "checkpoint_every", "fields_every", "seed", "device", "initial", "units",
+               "restitution", "save_every", "checkpoint_every", "fields_every", "seed", "device", "initial", "units",
                "initial_diameter", "entangle")
 
 

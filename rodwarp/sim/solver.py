@@ -48,6 +48,7 @@ from rodwarp.sim._bounds import STEPS_PER_PERIOD, StepBounds
 from rodwarp.sim._diagnostics import SolverChecks
 from rodwarp.sim._launches import SolveLaunches
 from rodwarp.sim.contacts import ContactPipeline, ContactPoints
+from rodwarp.sim.law_exact import bounce_speed
 from rodwarp.arguments import instance, optional_real, real, whole
 from rodwarp.sim._limits import MAX_LENGTH_M, MAX_SPEED
 from rodwarp.sim.model import Model
@@ -246,6 +247,11 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         law = model.contact_law
         self._law_tag = law.tag
         self._law_params = LawParams(*law.device_params(), *[0.0] * (8 - len(law.device_params())))
+        # Newton restitution of the exact law (0: off, the law as without the option); the
+        # velocities before the step's contact impulses, rigid rods as bodies, when it is on
+        self._restitution = float(getattr(law, "restitution", 0.0) or 0.0)
+        self._g_mag = float(math.sqrt(sum(float(g) ** 2 for g in model.gravity)))
+        self._v_before = self._spin_before = self._axial_before = None
         contact_laws.seal()  # the kernels built from here on dispatch over the laws registered now
         d = model.device
         V = model.n_vertices
@@ -463,10 +469,11 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         contacts_view = cur.view()
         self._predict(state_in, state_out, control, contacts, dt, theta, check)
         params = self._step_params(control, dt)
+        before = self._velocities_before(state_in, state_out) if (n_contacts or self.model.walls) else None
         if n_contacts:
-            self._prepare_rod_contacts(state_in, state_out, contacts, contacts_view, params)
+            self._prepare_rod_contacts(state_in, state_out, contacts, contacts_view, params, before)
         walls = self._walls(control, state_in.time, dt)
-        wc = self._prepare_wall_contacts(state_in, state_out, contacts, contacts_view, walls, params)
+        wc = self._prepare_wall_contacts(state_in, state_out, contacts, contacts_view, walls, params, before)
         self._factor_rods(state_in, dt, theta)
         res, sres, used = self._solve(state_in, state_out, contacts_view, walls, wc, params)
         passes = self._advance(state_in, state_out, contacts_view, walls, wc, params, dt)
@@ -539,13 +546,35 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         params.length_tolerance = wp.float64(self.length_tolerance)
         params.law = self._law_tag
         params.law_params = self._law_params
+        params.restitution = wp.float64(self._restitution)
+        params.bounce_speed = wp.float64(bounce_speed(self._g_mag, dt) if self._restitution > 0 else 0.0)
         return params
 
+    def _velocities_before(self, state_in: State, state_out: State):
+        """The velocities at the start of the step (``state_in``'s: before this step's contact
+        impulses and its gravity, so that a bounce at e = 1 returns the speed it came with and
+        repeated bounces gain nothing), rigid rods as bodies (``rigid_to_body``): what
+        restitution measures the approach on. Without restitution, ``state_out``'s arrays (the
+        kernels do not read them)."""
+        if self._restitution <= 0:
+            return state_out.v, state_out.spin
+        m = self.model
+        if self._v_before is None:
+            V = m.n_vertices
+            self._v_before = wp.zeros(V, dtype=wp.vec3d, device=m.device)
+            self._spin_before = wp.zeros(V, dtype=wp.float64, device=m.device)
+            self._axial_before = wp.zeros(V, dtype=wp.float64, device=m.device)
+        wp.copy(self._v_before, state_in.v)
+        wp.copy(self._spin_before, state_in.spin)
+        self._launch("friction", friction.rigid_bodies_to_sweeps, dim=m.n_rods, device=m.device, inputs=[
+            m.arrays, self.factors.tangent, self._v_before, self._spin_before, self._axial_before])
+        return self._v_before, self._spin_before
+
     def _prepare_rod_contacts(self, state_in: State, state_out: State, contacts: ContactPoints, contacts_view,
-                              params: StepParams) -> None:
+                              params: StepParams, before) -> None:
         """Phase 3: the rod-rod contact points' frames (sides, mobility, tangent basis, normal
         target), their warm-start impulses applied to ``state_out``, and their colours (parallel
-        devices)."""
+        devices). ``before``: :meth:`_velocities_before`."""
         m = self.model
         dev = m.device
         f = self.factors
@@ -554,7 +583,7 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         if self._frames.shape[0] < n_contacts:
             self._frames = wp.empty(2 * n_contacts, dtype=ContactFrame, device=dev)
         self._launch("friction", friction.prepare_rod_contacts, dim=n_contacts, device=dev, inputs=[
-            m.arrays, state_in.x, contacts_view, f.tangent, params, self._frames])
+            m.arrays, state_in.x, contacts_view, f.tangent, params, self._frames, *before])
         self.collision.warm_start(last, cur, n_contacts, self.warm_start)
         self._launch("friction", friction.apply_rod_impulses, dim=n_contacts, device=dev, inputs=[
             contacts_view, self._frames, state_in.x, f.tangent, state_out.v, state_out.spin])
@@ -562,7 +591,7 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
             self.collision.color(cur, n_contacts)
 
     def _prepare_wall_contacts(self, state_in: State, state_out: State, contacts: ContactPoints, contacts_view,
-                               walls, params: StepParams):
+                               walls, params: StepParams, before):
         """Phase 4: the wall contacts within reach of the walls in place, found, warm-started
         and framed in one pass per rod (the frame list grown when it overflows). Returns the
         wall contacts' view."""
@@ -577,7 +606,7 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
         if m.walls:
             cur.wall_impulse.assign(last.wall_impulse)
             self._launch("friction", wall_contacts.prepare_wall_contacts, dim=m.n_rods, device=dev, inputs=[
-                m.arrays, state_in.x, f.tangent, walls, params, wc, state_out.v, state_out.spin])
+                m.arrays, state_in.x, f.tangent, walls, params, wc, state_out.v, state_out.spin, *before])
             needed = int(self._n_wall_frames.numpy()[0])
             if needed > self._wall_frames.shape[0]:
                 # more wall contacts than ever before: grow the frame list and fill it
@@ -586,7 +615,7 @@ class RodSolver(StepBounds, SolverChecks, SolveLaunches):
                 wc = self._wall_contacts(cur)
                 self._last_solve = (contacts_view, params, walls, wc)
                 self._launch("friction", wall_contacts.fill_wall_frames, dim=int(self._n_active.numpy()[0]), device=dev,
-                             inputs=[m.arrays, state_in.x, f.tangent, walls, params, wc])
+                             inputs=[m.arrays, state_in.x, f.tangent, walls, params, wc, *before])
         return wc
 
     def _factor_rods(self, state_in: State, dt: float, theta: float) -> None:
