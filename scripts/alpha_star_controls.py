@@ -63,7 +63,10 @@ LARGE = ("l/20 a/g 2.5",)
 LAWS = {"exact": {}, "exact locked": {"rolling": False},
         "IMC nu 1e-3": {"contact_law": "imc", "imc_nu": 1e-3},
         "IMC nu 1e-4": {"contact_law": "imc", "imc_nu": 1e-4},
-        "IMC nu 1e-2": {"contact_law": "imc", "imc_nu": 1e-2}}
+        "IMC nu 1e-2": {"contact_law": "imc", "imc_nu": 1e-2},
+        # the exact law with a Newton restitution: IMC at DisMech's explicit 1e-5 s bounces with
+        # e 0.8-1.0 at l = 1 m and 0.5-0.9 for lab rods (docs/physics.md, "Restitution")
+        "exact e 0.9": {"restitution": 0.9}}
 
 
 @dataclass(frozen=True)
@@ -93,6 +96,15 @@ BLOCKS = (
           why="IMC under the drive that moves alpha*"),
     Block("lab-200", "drive", "lab", "exact", (200,), (0, 1, 2), ("l/20 a/g 2.5", "l/2 a/g 2.5"),
           why="alpha 200 (elastic at this scale too) where alpha 100 fails"),
+    Block("paper-bounce", "restitution", "paper", "exact e 0.9", (25, 50, 100), (0, 1, 2), ("l/1000 a/g 1",),
+          why="contacts that bounce as IMC's do at DisMech's step, at the paper's drive"),
+    Block("lab-bounce", "restitution", "lab", "exact e 0.9", (25, 50, 100), (0, 1, 2),
+          ("l/1000 a/g 1", "l/20 a/g 2.5"), why="contacts that bounce, at the lab's scale, small and large drive"),
+    Block("paper-large", "drive", "paper", "exact", (100,), (0, 1, 2), ("l/1000 a/g 1", "l/20 a/g 2.5"),
+          why="alpha 100 under the large drive at the paper's scale (elastic rods), against the lab scale's"),
+    Block("paper-imc-large", "contact law", "paper", "IMC nu 1e-3", (50, 100), (0, 1, 2), LARGE,
+          why="IMC under the large drive at the paper's scale (elastic rods), where IMC runs; at the lab scale "
+              "IMC with rigid rods blew up in the entangling (lab-imc)"),
     Block("paper-laws", "contact law", "paper", "exact locked", (15, 25, 50), (0, 1, 2), ("l/1000 a/g 1",),
           why="the exact law with the spin locked, at the baseline drive"),
     Block("paper-N540", "number of rods", "paper", "exact", (15, 25), (0, 1, 2), ("l/1000 a/g 1",),
@@ -101,8 +113,6 @@ BLOCKS = (
           why="five seeds at the alphas of the small drives' bracket"),
     Block("paper-imc", "contact law", "paper", "IMC nu 1e-3", (15, 25, 50), (0, 1, 2), ("l/1000 a/g 1",),
           why="IMC at the baseline drive, 50 cycles"),
-    Block("paper-large", "drive", "paper", "exact", (100,), (0, 1, 2), ("l/1000 a/g 1", "l/20 a/g 2.5"),
-          why="alpha 100 under the large drive at the paper's scale (elastic rods), against the lab scale's"),
     Block("lab-drives-100-5", "drive", "lab", "exact", (100,), (3, 4), ALL_DRIVES,
           why="five seeds at alpha 100"),
     Block("lab-200-5", "drive", "lab", "exact", (200,), (3, 4), ("l/20 a/g 2.5", "l/2 a/g 2.5"),
@@ -118,7 +128,7 @@ BLOCK_NAMES = {b.name: b for b in BLOCKS}
 #: blocks whose rows join another block's brackets (more seeds or alphas of the same level)
 LEVEL_OF = {"lab-drives-5": "lab-drives", "lab-drives-100-5": "lab-drives", "lab-200": "lab-drives",
             "lab-200-5": "lab-drives", "paper-baseline-5": "paper-baseline", "paper-large": "paper-baseline",
-            "lab-imc-200": "lab-imc"}
+            "lab-imc-200": "lab-imc", "paper-imc-large": "paper-imc-large"}
 
 
 def drive_freq(a_over_l: float, ag: float, length: float, gravity: float) -> float:
