@@ -368,17 +368,8 @@ def run_point(point: dict, outdir: str, entangled_from: str | None = None, donor
         if opts.device == "cpu" and "device" not in point.get("_analyze", {}) and str(dev).startswith("cuda"):
             opts = replace(opts, device=dev)
         a = analyze(out, out / "analysis", opts)
-        row.update({
-            "n_rods": summary["n_rods"], "a_over_g": summary["a_over_g"],
-            "largest_cluster_fraction": summary["largest_cluster_fraction"],
-            "height_kept": summary["height_kept"], "persistence": summary["persistence"],
-            "rods_left": summary["rods_left"],
-            "contacts_per_rod": summary["contacts_per_rod"], "stable": bool(summary["stable"]),
-            "max_penetration_over_d": summary.get("max_penetration_over_d"), "device": dev,
-            **_landed_columns(summary),
-            "cv_e": a.get("cv_e"), "mean_e": a.get("mean_e"), "std_e": a.get("std_e"),
-            "status": "ok",
-        })
+        row.update({**summary_columns(summary),
+                    "cv_e": a.get("cv_e"), "mean_e": a.get("mean_e"), "std_e": a.get("std_e"), "status": "ok"})
     except BaseException as e:  # noqa: BLE001 - a failed point is recorded, never raised
         if isinstance(e, (KeyboardInterrupt, SystemExit)):
             raise
@@ -387,6 +378,18 @@ def run_point(point: dict, outdir: str, entangled_from: str | None = None, donor
             row["status"] += " | " + traceback.format_exc().replace("\n", " ")
     row["wall_s"] = time.perf_counter() - t0
     return row
+
+
+def summary_columns(summary: dict) -> dict:
+    """results.csv's columns that a finished run's summary.json gives (all but the analysis's
+    cv_e, mean_e, std_e and the bookkeeping)."""
+    return {"n_rods": summary["n_rods"], "a_over_g": summary["a_over_g"],
+            "largest_cluster_fraction": summary["largest_cluster_fraction"],
+            "height_kept": summary["height_kept"], "persistence": summary["persistence"],
+            "rods_left": summary["rods_left"],
+            "contacts_per_rod": summary["contacts_per_rod"], "stable": bool(summary["stable"]),
+            "max_penetration_over_d": summary.get("max_penetration_over_d"),
+            "device": summary.get("device", "cpu"), **_landed_columns(summary)}
 
 
 def _landed_columns(summary: dict) -> dict:
