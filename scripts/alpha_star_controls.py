@@ -94,17 +94,19 @@ BLOCKS = (
           why="the paper scale's baseline and the large drive: ties the lab scale to the earlier rows"),
     Block("lab-imc", "contact law", "lab", "IMC nu 1e-3", (50, 100), (0, 1, 2), LARGE,
           why="IMC under the drive that moves alpha*"),
-    Block("lab-200", "drive", "lab", "exact", (200,), (0, 1, 2), ("l/20 a/g 2.5", "l/2 a/g 2.5"),
+    Block("lab-200", "drive", "lab", "exact", (200,), (0, 1), ("l/20 a/g 2.5", "l/2 a/g 2.5"),
           why="alpha 200 (elastic at this scale too) where alpha 100 fails"),
+    Block("paper-imc-large", "contact law", "paper", "IMC nu 1e-3", (50, 100), (0, 1, 2), LARGE,
+          why="IMC under the large drive at the paper's scale (elastic rods), where IMC runs; at the lab scale "
+              "IMC with rigid rods blew up in the entangling (lab-imc)"),
     Block("paper-bounce", "restitution", "paper", "exact e 0.9", (25, 50, 100), (0, 1, 2), ("l/1000 a/g 1",),
           why="contacts that bounce as IMC's do at DisMech's step, at the paper's drive"),
     Block("lab-bounce", "restitution", "lab", "exact e 0.9", (25, 50, 100), (0, 1, 2),
           ("l/1000 a/g 1", "l/20 a/g 2.5"), why="contacts that bounce, at the lab's scale, small and large drive"),
     Block("paper-large", "drive", "paper", "exact", (100,), (0, 1, 2), ("l/1000 a/g 1", "l/20 a/g 2.5"),
           why="alpha 100 under the large drive at the paper's scale (elastic rods), against the lab scale's"),
-    Block("paper-imc-large", "contact law", "paper", "IMC nu 1e-3", (50, 100), (0, 1, 2), LARGE,
-          why="IMC under the large drive at the paper's scale (elastic rods), where IMC runs; at the lab scale "
-              "IMC with rigid rods blew up in the entangling (lab-imc)"),
+    Block("lab-200-s2", "drive", "lab", "exact", (200,), (2,), ("l/20 a/g 2.5", "l/2 a/g 2.5"),
+          why="alpha 200, the third seed"),
     Block("paper-laws", "contact law", "paper", "exact locked", (15, 25, 50), (0, 1, 2), ("l/1000 a/g 1",),
           why="the exact law with the spin locked, at the baseline drive"),
     Block("paper-N540", "number of rods", "paper", "exact", (15, 25), (0, 1, 2), ("l/1000 a/g 1",),
@@ -126,7 +128,7 @@ BLOCKS = (
 )
 BLOCK_NAMES = {b.name: b for b in BLOCKS}
 #: blocks whose rows join another block's brackets (more seeds or alphas of the same level)
-LEVEL_OF = {"lab-drives-5": "lab-drives", "lab-drives-100-5": "lab-drives", "lab-200": "lab-drives",
+LEVEL_OF = {"lab-200-s2": "lab-drives", "lab-drives-5": "lab-drives", "lab-drives-100-5": "lab-drives", "lab-200": "lab-drives",
             "lab-200-5": "lab-drives", "paper-baseline-5": "paper-baseline", "paper-large": "paper-baseline",
             "lab-imc-200": "lab-imc", "paper-imc-large": "paper-imc-large"}
 
@@ -488,6 +490,11 @@ def _rod_model(runs: Path, row: dict) -> str:
         return ""
 
 
+#: the amplitudes, smallest first, and their markers on the a/g axis
+A_ORDER = (0.001, 0.05, 0.5)
+A_MARKERS = ("o", "^", "D")
+
+
 def _figures(plt, table, save_figure) -> None:
     """drive_map.png: the landed outcome of each alpha against the throw height and against a/g
     (exact law); brackets.png: alpha* per level."""
@@ -499,16 +506,25 @@ def _figures(plt, table, save_figure) -> None:
             k = sum(MEASURES["landed verdict"](r) for r in rs)
             frac = k / len(rs)
             f = sorted(float(r["cluster_landed"]) for r in rs if r.get("cluster_landed") is not None)
+            ia = A_ORDER.index(t["a_over_l"])
             for col, x in ((0, t["throw"]), (1, t["ag"])):
-                jitter = 1.0 + 0.06 * (list(markers).index(t["scale"]) - 0.5)
-                axes[0, col].scatter([x * jitter], [a], c=[[1 - frac, frac, 0.2]], marker=markers[t["scale"]],
-                                     s=90, edgecolors="k", linewidths=0.5)
-                axes[0, col].annotate(f"{k}/{len(rs)}", (x * jitter, a), textcoords="offset points", xytext=(6, 3),
-                                      fontsize=7)
+                # left: marker = scale; right: marker = amplitude, offset so that drives of one
+                # a/g sit side by side
+                if col == 0:
+                    jitter, mk = 1.0 + 0.06 * (list(markers).index(t["scale"]) - 0.5), markers[t["scale"]]
+                else:
+                    jitter = (1.0 + 0.1 * (ia - 1)) * (1.0 + 0.03 * (list(markers).index(t["scale"]) - 0.5))
+                    mk = A_MARKERS[ia]
+                edge = 1.6 if t["scale"] == "paper" else 0.5
+                axes[0, col].scatter([x * jitter], [a], c=[[1 - frac, frac, 0.2]], marker=mk,
+                                     s=90, edgecolors="k", linewidths=edge)
+                axes[0, col].annotate(f"{k}/{len(rs)}", (x * jitter, a), textcoords="offset points", xytext=(5, 4),
+                                      fontsize=6)
                 if f:
+                    colour = f"C{[25, 50, 100, 200].index(int(a))}" if int(a) in (25, 50, 100, 200) else "C5"
                     axes[1, col].errorbar([x * jitter], [f[len(f) // 2]], yerr=[[f[len(f) // 2] - f[0]],
                                                                                  [f[-1] - f[len(f) // 2]]],
-                                          fmt=markers[t["scale"]], color=f"C{[25, 50, 100, 200].index(int(a)) if int(a) in (25, 50, 100, 200) else 5}",
+                                          fmt=mk, color=colour, mec="k" if t["scale"] == "paper" else colour,
                                           capsize=3, ms=6)
     for col, label in ((0, "throw height (A omega)^2 / (g l) = (a/g)(A/l) [rod lengths]"), (1, "a/g [dimensionless]")):
         for row in (0, 1):
@@ -518,6 +534,8 @@ def _figures(plt, table, save_figure) -> None:
         axes[0, col].set_ylabel("alpha = l / d")
         axes[0, col].set_yticks([25, 50, 100, 200])
         axes[0, col].set_yticklabels(["25", "50", "100", "200"])
+        axes[0, col].yaxis.set_minor_formatter(plt.NullFormatter())
+        axes[0, col].set_ylim(20, 260)
         axes[1, col].set_ylabel("landed f, last 5 cycles (median, range over seeds)")
         axes[1, col].axhline(0.8, color="grey", ls="--", lw=1)
         axes[1, col].axhline(0.5, color="grey", ls=":", lw=1)
@@ -527,8 +545,12 @@ def _figures(plt, table, save_figure) -> None:
                                for s, m in markers.items()], fontsize=8, loc="lower right")
     axes[1, 0].legend(handles=[Line2D([], [], marker="o", ls="", color=f"C{i}", label=f"alpha {a}")
                                for i, a in enumerate((25, 50, 100, 200))], fontsize=8, loc="lower left")
-    axes[0, 0].set_title("stable seeds (landed verdict): green all, red none", fontsize=10)
-    axes[0, 1].set_title("the same against a/g", fontsize=10)
+    axes[1, 1].legend(handles=[Line2D([], [], marker=m, ls="", color="grey", label=f"A = l/{round(1 / a)}")
+                               for a, m in zip(A_ORDER, A_MARKERS)] +
+                      [Line2D([], [], marker="o", ls="", mfc="grey", mec="k", mew=1.6, label="paper scale (thick edge)")],
+                      fontsize=8, loc="lower left")
+    axes[0, 0].set_title("stable seeds (landed verdict): green all, red none; marker: scale", fontsize=10)
+    axes[0, 1].set_title("the same against a/g; marker: amplitude", fontsize=10)
     fig.suptitle(f"The drive map: exact law, {CYCLES} cycles per test, landed measures", fontsize=11)
     fig.tight_layout()
     save_figure(fig, OUT / "drive_map.png")

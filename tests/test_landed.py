@@ -178,3 +178,25 @@ def test_throw_height_and_scaled_entangling_of_the_controls_study():
     assert m.bracket({25: rows(0, 3), 50: rows(1, 3)}, lambda r: r["ok"])["text"] == "above 50"
     b = m.bracket({25: rows(3, 3), 50: rows(0, 3), 100: rows(3, 3)}, lambda r: r["ok"])
     assert b["text"] == "50-100 (not monotone)" and not b["monotone"]
+
+
+def test_the_study_keeps_a_finished_simulation_whose_analysis_refused_and_not_a_stopped_one(tmp_path):
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    import alpha_star_controls as m
+
+    summary = {"n_rods": 135, "a_over_g": 2.5, "largest_cluster_fraction": 0.03, "height_kept": 0.04,
+               "persistence": 0.0, "rods_left": 0.9, "contacts_per_rod": 0.5, "stable": False,
+               "max_penetration_over_d": 0.01, "freq": 5.0, "parameters": {"duration": 10.0},
+               "landed": {"height_kept": 0.037, "largest_cluster_fraction": 0.03, "persistence": 0.0, "stable": False}}
+    (tmp_path / "summary.json").write_text(json.dumps(summary))
+    refused = {"id": "p", "status": "error: no voxel of the grid lies inside the packing", "cv_e": None}
+    row = m.salvage(refused, tmp_path)
+    assert row["status"] == "ok" and row["analysis"].startswith("error: no voxel")
+    assert row["height_kept_landed"] == 0.037 and row["stable_landed"] is False and row["cycles_tested"] == 50
+    assert row["cv_e"] is None
+    stopped = {"id": "p", "status": "SimulationBlowUp: simulation blew up at step 3"}
+    assert m.salvage(stopped, tmp_path) is stopped  # a stopped run's results are not made up
+    assert m.salvage(refused, tmp_path / "missing") is refused  # nor a run that never finished
