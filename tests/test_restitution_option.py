@@ -154,3 +154,22 @@ def test_cli_refuses_restitution_with_imc(tmp_path):
     assert res.exit_code == 2 and "only applies with the exact contact law" in res.output
     res = CliRunner().invoke(app, ["simulate", "--restitution", "1.5", "--out", str(tmp_path / "o"), "--quiet"])
     assert res.exit_code == 2 and "restitution" in res.output
+
+
+
+def test_bouncing_contacts_in_a_dense_rigid_pile_stop_the_run_and_say_why(tmp_path):
+    """Where the option fails: the paper protocol's entangling (a_e / g = 19.7) of 135 rigid
+    lab-scale rods (l = 50 mm, alpha 25, seed 1) with e = 0.9 drives the rods into one another
+    faster than the step resolves, and the engine stops the run at 0.36 s naming the overlap
+    and the remedies (docs/transition.md, "What sets alpha*: the controls"); the same pile at
+    e = 0 entangles past that time."""
+    from rodwarp.errors import SimulationBlowUp
+    from rodwarp.experiments import ProtocolParams
+    from rodwarp.experiments._protocol import run_protocol
+
+    kw = dict(alpha=25, seed=1, length=0.05, gravity=9.81, freq=70.5, amplitude=5e-5, cycles=2, samples_per_cycle=8,
+              entangle_amplitude=0.0025, entangle_freq=44.27, entangle_duration=0.5, fields_every=0.0, device="cpu")
+    with pytest.raises(SimulationBlowUp, match=r"blew up at step \d+ \(t = 0\.\d+ s\): rods overlap by 0\.\d+ d"):
+        run_protocol(ProtocolParams(restitution=0.9, **kw), tmp_path / "bouncing", progress=False)
+    s = run_protocol(ProtocolParams(**kw), tmp_path / "inelastic", progress=False)
+    assert s["max_penetration_over_d"] < 0.25
