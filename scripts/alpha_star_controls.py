@@ -130,7 +130,7 @@ BLOCK_NAMES = {b.name: b for b in BLOCKS}
 #: blocks whose rows join another block's brackets (more seeds or alphas of the same level)
 LEVEL_OF = {"lab-200-s2": "lab-drives", "lab-drives-5": "lab-drives", "lab-drives-100-5": "lab-drives", "lab-200": "lab-drives",
             "lab-200-5": "lab-drives", "paper-baseline-5": "paper-baseline", "paper-large": "paper-baseline",
-            "lab-imc-200": "lab-imc", "paper-imc-large": "paper-imc-large"}
+            "lab-imc-200": "lab-imc"}
 
 
 def drive_freq(a_over_l: float, ag: float, length: float, gravity: float) -> float:
